@@ -1,0 +1,88 @@
+"""Helpers shared by the sub-commands: JSON output, tables, common options."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lfproc.errors import InputError
+
+__all__ = ["to_jsonable", "emit", "add_output", "add_json", "parse_floats", "parse_ints", "parse_size"]
+
+
+def to_jsonable(obj: Any) -> Any:
+    """Convert numpy scalars/arrays, paths and non-finite floats for ``json.dumps``."""
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return to_jsonable(obj.item())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, (list, tuple)) and len(value) <= 8 and all(not isinstance(x, (dict, list)) for x in value):
+        return " x ".join(_fmt(x) for x in value) if all(isinstance(x, int) for x in value) else ", ".join(_fmt(x) for x in value)
+    if isinstance(value, dict):
+        return json.dumps(to_jsonable(value))
+    return str(value)
+
+
+def emit(result: dict[str, Any], *, as_json: bool, file=None) -> None:
+    """Print ``result`` as one JSON object (``--json``) or as aligned ``key: value`` lines."""
+    file = file or sys.stdout
+    if as_json:
+        print(json.dumps(to_jsonable(result)), file=file)
+        return
+    width = max((len(k) for k in result), default=0)
+    for key, value in result.items():
+        print(f"{key:<{width}}  {_fmt(value)}", file=file)
+
+
+def add_json(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true", help="print one JSON object to stdout")
+
+
+def add_output(parser: argparse.ArgumentParser, *, required: bool = True, help: str = "output path") -> None:
+    parser.add_argument("-o", "--output", required=required, type=Path, help=help)
+    parser.add_argument("--force", action="store_true", help="overwrite an existing output")
+
+
+def parse_floats(text: str, *, option: str) -> list[float]:
+    """``"1,2.5,3"`` -> ``[1.0, 2.5, 3.0]`` with an error naming the option."""
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise InputError(f"{option}: expected comma-separated numbers, got {text!r}") from None
+
+
+def parse_ints(text: str, *, option: str) -> list[int]:
+    try:
+        return [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise InputError(f"{option}: expected comma-separated integers, got {text!r}") from None
+
+
+def parse_size(values: list[str], *, option: str) -> tuple[int, int]:
+    try:
+        h, w = (int(v) for v in values)
+    except ValueError:
+        raise InputError(f"{option}: expected two integers H W, got {' '.join(values)}") from None
+    if h < 1 or w < 1:
+        raise InputError(f"{option}: expected positive sizes, got {h} {w}")
+    return h, w

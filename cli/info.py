@@ -1,0 +1,24 @@
+"""``lfproc info PATH [--json]``: what a file holds."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from lfproc.info import describe
+
+from ._common import add_json, emit
+
+
+def register(sub, common) -> None:
+    p = sub.add_parser("info", parents=[common], help="describe a light field, image or capture file",
+                       description="Print the shape, value range, dynamic range, saturation and metadata of a file.")
+    p.add_argument("path", type=Path, help="light-field file or folder, image, Lytro file, capture or profile")
+    p.add_argument("--nonfinite", choices=("raise", "zero", "clip"), default="raise",
+                   help="what to do with NaN/Inf samples (default: refuse the file)")
+    add_json(p)
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    emit(describe(args.path, nonfinite=args.nonfinite), as_json=args.json)
+    return 0

@@ -1,0 +1,61 @@
+"""Small helpers shared by every module: random state, progress bars, validation."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["check_random_state", "progress", "check_choice", "check_positive"]
+
+
+def check_random_state(random_state: Any = None) -> np.random.Generator:
+    """Return a :class:`numpy.random.Generator` from a seed, a Generator or ``None``.
+
+    Every stochastic function of lfproc takes ``random_state`` and passes it here,
+    so a given integer seed always gives the same result.
+    """
+    if random_state is None or isinstance(random_state, (int, np.integer)):
+        if random_state is not None and int(random_state) < 0:
+            raise InputError(f"seed: expected a non-negative integer, got {random_state}")
+        return np.random.default_rng(random_state)
+    if isinstance(random_state, np.random.Generator):
+        return random_state
+    raise InputError(
+        f"random_state: expected None, an int seed or a numpy Generator, got {type(random_state).__name__}"
+    )
+
+
+def progress(iterable: Iterable | None = None, *, total: int | None = None, desc: str = "", disable: bool | None = None):
+    """A tqdm progress bar on stderr, off when ``LFPROC_PROGRESS=0`` or not asked for.
+
+    ``disable=None`` lets tqdm decide (it hides the bar when stderr is not a terminal).
+    """
+    from tqdm.auto import tqdm
+
+    if os.environ.get("LFPROC_PROGRESS", "1") == "0":
+        disable = True
+    return tqdm(iterable, total=total, desc=desc, disable=disable, leave=False, dynamic_ncols=True)
+
+
+def check_choice(name: str, value: str, choices: Sequence[str]) -> str:
+    """Validate a string option against its allowed values, listing them on error."""
+    if value not in choices:
+        raise InputError(f"{name}: expected one of {', '.join(map(str, choices))}; got {value!r}")
+    return value
+
+
+def check_positive(name: str, value: float, *, allow_zero: bool = False) -> float:
+    """Validate a finite positive (or non-negative) number."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected a number, got {value!r}") from None
+    ok = np.isfinite(v) and (v >= 0 if allow_zero else v > 0)
+    if not ok:
+        raise InputError(f"{name}: expected a {'non-negative' if allow_zero else 'positive'} finite number, got {value!r}")
+    return v

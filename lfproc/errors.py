@@ -1,0 +1,89 @@
+"""The one exception tree of lfproc.
+
+Every error lfproc raises on purpose derives from :class:`LfprocError`. Leaves also
+derive from the matching builtin (``ValueError``, ``FileNotFoundError``...), so code
+that catches builtins keeps working. The CLI turns any :class:`LfprocError` into a
+one-line message and exit code 2.
+
+Messages name the file or option, what was expected and what was found.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "LfprocError",
+    "InputError",
+    "ShapeError",
+    "FileFormatError",
+    "MissingFileError",
+    "LfpFormatError",
+    "ChecksumError",
+    "OutputExistsError",
+    "CalibrationError",
+    "ProfileError",
+    "NoWhiteImageError",
+    "DependencyError",
+    "LfprocWarning",
+    "SaturationWarning",
+    "ConvergenceWarning",
+]
+
+
+class LfprocError(Exception):
+    """Base class of every error lfproc raises on purpose."""
+
+
+class InputError(LfprocError, ValueError):
+    """A parameter or option has a value lfproc cannot use."""
+
+
+class ShapeError(InputError):
+    """An array or light field has the wrong shape, dtype or number of views."""
+
+
+class FileFormatError(LfprocError, ValueError):
+    """A file exists but is not in the format expected, or is corrupt or truncated."""
+
+
+class MissingFileError(LfprocError, FileNotFoundError):
+    """An input file or folder does not exist."""
+
+
+class LfpFormatError(FileFormatError):
+    """A Lytro LFP/LFR container or raw image is malformed."""
+
+
+class ChecksumError(LfpFormatError):
+    """A section of a Lytro container does not match its SHA-1."""
+
+
+class OutputExistsError(LfprocError, FileExistsError):
+    """An output exists and overwriting was not asked for (``force=True``/``--force``)."""
+
+
+class CalibrationError(LfprocError, RuntimeError):
+    """Calibration frames cannot give the quantity asked for."""
+
+
+class ProfileError(InputError):
+    """A camera profile is missing a field, or a field has a wrong value."""
+
+
+class NoWhiteImageError(LfprocError, LookupError):
+    """No white image in the database matches a capture."""
+
+
+class DependencyError(LfprocError, ImportError):
+    """An optional dependency needed by this function is not installed."""
+
+
+class LfprocWarning(UserWarning):
+    """Base class of lfproc's warnings."""
+
+
+class SaturationWarning(LfprocWarning):
+    """Input data are clipped (saturated) in a way that affects the result."""
+
+
+class ConvergenceWarning(LfprocWarning):
+    """An iterative solver stopped before reaching its tolerance."""

@@ -1,0 +1,59 @@
+"""Describe any file lfproc understands: light fields, images (and, as they come, Lytro
+captures, camera profiles and coded captures).
+
+:func:`describe` looks at the file and hands it to the describer of its kind; each
+returns a JSON-serialisable dict whose first key is ``kind``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import MissingFileError
+from .io.images import exr_parts
+from .io.lightfield_files import read_lightfield
+from .lightfield import LightField
+
+__all__ = ["describe", "describe_lightfield"]
+
+
+def describe_lightfield(lf: LightField) -> dict[str, Any]:
+    """Figures of a light field: shape, value range, dynamic range, saturation, metadata."""
+    data = lf.data
+    kind = "image" if lf.views == (1, 1) else "lightfield"
+    return {
+        "kind": kind,
+        "views": list(lf.views),
+        "size": list(lf.size),
+        "channels": lf.channels,
+        "min": float(data.min()),
+        "max": float(data.max()),
+        "mean": float(data.mean(dtype=np.float64)),
+        "dynamic_range_stops": lf.dynamic_range_stops(),
+        "saturated_fraction": lf.saturated_fraction(),
+        "units": lf.units,
+        "colour_space": lf.colour_space,
+        "exposure_s": lf.exposure_s,
+        "iso": lf.iso,
+        "has_variance": lf.variance is not None,
+        "has_disparity": lf.disparity is not None,
+        "source": lf.source,
+        "attrs": dict(lf.attrs),
+    }
+
+
+def describe(path: str | os.PathLike, **read_options) -> dict[str, Any]:
+    """Describe the file or folder at ``path`` (see the module documentation)."""
+    path = Path(path)
+    if not path.exists():
+        raise MissingFileError(f"{path}: no such file or folder")
+    lf = read_lightfield(path, **read_options)
+    out = describe_lightfield(lf)
+    out["path"] = str(path)
+    if path.is_file() and path.suffix.lower() == ".exr":
+        out["exr_parts"] = len(exr_parts(path))
+    return out

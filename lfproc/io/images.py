@@ -1,0 +1,298 @@
+"""Single images: OpenEXR (any part and channel layout), Radiance ``.hdr``, PNG/TIFF/JPEG.
+
+OpenEXR goes through the ``OpenEXR`` bindings, Radiance and 8/16-bit formats
+through OpenCV, sRGB decoding through colour-science. All readers return a
+float32 ``(H, W, C)`` array (C = 3 for colour, 1 for a single channel) and a dict
+of what the file says about itself.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from ..errors import FileFormatError, InputError, MissingFileError
+from ..lightfield import clean_nonfinite
+from ._atomic import atomic_file
+
+__all__ = [
+    "read_image",
+    "write_image",
+    "exr_parts",
+    "srgb_decode",
+    "srgb_encode",
+    "IMAGE_SUFFIXES",
+    "LDR_SUFFIXES",
+    "HDR_SUFFIXES",
+]
+
+HDR_SUFFIXES = (".exr", ".hdr", ".pic")
+LDR_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
+IMAGE_SUFFIXES = HDR_SUFFIXES + LDR_SUFFIXES
+
+Transfer = Literal["auto", "srgb", "linear"]
+
+
+def srgb_decode(values: np.ndarray) -> np.ndarray:
+    """sRGB-encoded values in [0, 1] to linear (IEC 61966-2-1, via colour-science)."""
+    import colour
+
+    return np.asarray(colour.cctf_decoding(values, function="sRGB"), dtype=np.float32)
+
+
+def srgb_encode(values: np.ndarray) -> np.ndarray:
+    """Linear values to sRGB encoding (values are clipped to [0, 1] first)."""
+    import colour
+
+    return np.asarray(colour.cctf_encoding(np.clip(values, 0, 1), function="sRGB"), dtype=np.float32)
+
+
+def _require_file(path: Path) -> None:
+    if not path.exists():
+        raise MissingFileError(f"{path}: no such file")
+    if path.is_dir():
+        raise FileFormatError(f"{path}: expected an image file, found a folder")
+
+
+# -- OpenEXR ---------------------------------------------------------------------------
+
+def exr_parts(path: str | os.PathLike) -> list[dict[str, Any]]:
+    """Describe the parts of an OpenEXR file: name, view, channels, size (header only)."""
+    import OpenEXR
+
+    path = Path(path)
+    _require_file(path)
+    try:
+        f = OpenEXR.File(str(path), header_only=True)
+    except Exception as exc:  # the bindings raise plain RuntimeError on any failure
+        raise FileFormatError(f"{path}: not a readable OpenEXR file ({exc})") from None
+    out = []
+    for i, part in enumerate(f.parts):
+        h = part.header
+        (x0, y0), (x1, y1) = h["dataWindow"]
+        out.append(
+            {
+                "index": i,
+                "name": part.name() or "",
+                "view": h.get("view"),
+                "multiView": list(h["multiView"]) if "multiView" in h else None,
+                "channels": sorted(h["channels"]) if "channels" in h else None,
+                "size": [int(y1 - y0 + 1), int(x1 - x0 + 1)],
+            }
+        )
+    return out
+
+
+_COLOUR_SETS = (("R", "G", "B"), ("Y",))
+
+
+def _pick_channels(names: list[str], prefix: str) -> tuple[str, ...] | None:
+    """The colour channels of a layer or view prefix ('' for the default)."""
+    for group in _COLOUR_SETS:
+        full = tuple(prefix + c for c in group)
+        if all(n in names for n in full):
+            return full
+    return None
+
+
+def _read_exr(path: Path, part: int | str | None, view: str | None) -> tuple[np.ndarray, dict[str, Any]]:
+    import OpenEXR
+
+    try:
+        f = OpenEXR.File(str(path), separate_channels=True)
+    except Exception as exc:
+        raise FileFormatError(f"{path}: not a readable OpenEXR file ({exc})") from None
+    parts = f.parts
+    # choose the part
+    if part is None and view is not None and any(p.header.get("view") == view for p in parts):
+        index = next(i for i, p in enumerate(parts) if p.header.get("view") == view and _pick_channels(list(p.channels), ""))
+    elif part is None:
+        candidates = [i for i, p in enumerate(parts) if _pick_channels(list(p.channels), "")]
+        if not candidates:
+            # single-part multi-view, or a layer: accept any one colour layer
+            candidates = [i for i, p in enumerate(parts) if any(c.endswith((".R", ".Y")) for c in p.channels)]
+        if not candidates:
+            found = ", ".join(sorted({c for p in parts for c in p.channels}))
+            raise FileFormatError(f"{path}: expected R,G,B or Y channels in some part, found channels {found}")
+        index = candidates[0]
+    elif isinstance(part, int) or (isinstance(part, str) and part.isdigit()):
+        index = int(part)
+        if not 0 <= index < len(parts):
+            raise InputError(f"{path}: part index {index} out of range; the file has {len(parts)} parts")
+    else:
+        names = [p.name() for p in parts]
+        if part not in names:
+            raise InputError(f"{path}: no part named {part!r}; parts are {', '.join(names)}")
+        index = names.index(part)
+    p = parts[index]
+    names = list(p.channels)
+    header = p.header
+    # choose the view / layer within the part
+    prefix = ""
+    multiview = list(header["multiView"]) if "multiView" in header else None
+    if view is not None and multiview:
+        if view not in multiview:
+            raise InputError(f"{path}: no view named {view!r}; views are {', '.join(multiview)}")
+        prefix = "" if view == multiview[0] else f"{view}."
+    chans = _pick_channels(names, prefix)
+    if chans is None:
+        layers = sorted({n.rsplit(".", 1)[0] + "." for n in names if "." in n})
+        chans = next((c for lay in layers if (c := _pick_channels(names, lay))), None)
+    if chans is None:
+        raise FileFormatError(
+            f"{path}: part {index} has channels {', '.join(sorted(names))}; expected R,G,B or Y (optionally in a layer)"
+        )
+    array = np.stack([p.channels[c].pixels.astype(np.float32) for c in chans], axis=-1)
+    (x0, y0), (x1, y1) = header["dataWindow"]
+    (dx0, dy0), (dx1, dy1) = header["displayWindow"]
+    meta = {
+        "format": "exr",
+        "part": index,
+        "n_parts": len(parts),
+        "part_name": p.name() or None,
+        "view": header.get("view") or (view if multiview else None),
+        "channels_read": list(chans),
+        "pixel_type": str(p.channels[chans[0]].pixels.dtype),
+        "data_window": [int(x0), int(y0), int(x1), int(y1)],
+        "display_window": [int(dx0), int(dy0), int(dx1), int(dy1)],
+        "compression": str(header.get("compression", "")).split(".")[-1],
+        "header": header,
+    }
+    return array, meta
+
+
+# -- OpenCV formats ---------------------------------------------------------------------
+
+def _read_cv(path: Path, transfer: Transfer) -> tuple[np.ndarray, dict[str, Any]]:
+    import cv2
+
+    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
+    if raw is None:
+        raise FileFormatError(f"{path}: not a readable image (OpenCV could not decode it)")
+    if raw.ndim == 3:
+        if raw.shape[2] == 4:
+            raw = raw[..., :3]
+        raw = raw[..., ::-1]  # OpenCV is BGR
+    else:
+        raw = raw[..., None]
+    meta: dict[str, Any] = {"format": path.suffix.lower().lstrip("."), "bit_depth": None}
+    if np.issubdtype(raw.dtype, np.floating):  # Radiance .hdr (or float TIFF): linear already
+        return np.ascontiguousarray(raw, dtype=np.float32), meta | {"transfer": "linear"}
+    if raw.dtype == np.uint8:
+        meta["bit_depth"] = 8
+    elif raw.dtype == np.uint16:
+        meta["bit_depth"] = 16
+    else:
+        raise FileFormatError(f"{path}: expected 8- or 16-bit integer or float samples, found {raw.dtype}")
+    scaled = raw.astype(np.float32) / np.float32(np.iinfo(raw.dtype).max)
+    if transfer == "auto":
+        transfer = "srgb"
+    if transfer == "srgb":
+        scaled = srgb_decode(scaled)
+    elif transfer != "linear":
+        raise InputError(f"transfer: expected auto, srgb or linear; got {transfer!r}")
+    meta["transfer"] = transfer
+    meta["saturation_level"] = 1.0
+    return np.ascontiguousarray(scaled, dtype=np.float32), meta
+
+
+def read_image(
+    path: str | os.PathLike,
+    *,
+    part: int | str | None = None,
+    view: str | None = None,
+    transfer: Transfer = "auto",
+    nonfinite: Literal["raise", "zero", "clip"] = "raise",
+    negative: Literal["raise", "clip", "keep"] = "clip",
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Read one image as linear float32 ``(H, W, C)``.
+
+    Parameters
+    ----------
+    path : path to ``.exr``, ``.hdr``, ``.png``, ``.tif(f)`` or ``.jpg``.
+    part : OpenEXR part index or name (default: the first part with R,G,B or Y channels).
+    view : OpenEXR view name (multi-part ``view`` attribute, or single-part ``multiView``).
+    transfer : how 8/16-bit values are decoded: ``"srgb"`` (default for ``"auto"``) or ``"linear"``.
+    nonfinite : NaN/Inf policy, see :func:`lfproc.lightfield.clean_nonfinite` (default: refuse).
+    negative : negative-value policy (default ``"clip"``: lossy EXR compression leaves tiny negatives;
+        the number clipped is reported in the metadata as ``clipped_negative``).
+
+    Returns
+    -------
+    image : ndarray of shape (H, W, C), float32, linear
+    meta : dict (``format``, ``transfer``, ``saturation_level`` for integer formats, EXR part details...)
+    """
+    path = Path(path)
+    _require_file(path)
+    suffix = path.suffix.lower()
+    if suffix == ".exr":
+        image, meta = _read_exr(path, part, view)
+    elif suffix in (".hdr", ".pic") + LDR_SUFFIXES:
+        image, meta = _read_cv(path, transfer)
+    else:
+        raise FileFormatError(f"{path}: unknown image type {suffix!r}; expected one of {', '.join(IMAGE_SUFFIXES)}")
+    image, counts = clean_nonfinite(image, policy=nonfinite, negative=negative, name=str(path))
+    meta["clipped_negative"] = counts["negative"]
+    meta["replaced_nonfinite"] = counts["nan"] + counts["inf"]
+    return image, meta
+
+
+def write_image(
+    path: str | os.PathLike,
+    image: np.ndarray,
+    *,
+    force: bool = False,
+    dtype: Literal["float32", "half"] = "float32",
+    bit_depth: Literal[8, 16] | None = None,
+    transfer: Literal["srgb", "linear"] = "srgb",
+    attributes: dict[str, Any] | None = None,
+) -> Path:
+    """Write ``(H, W, C)`` linear data atomically; the format follows the suffix.
+
+    EXR: float32 or half, ZIP (lossless) compression, ``attributes`` added to the header.
+    ``.hdr``: Radiance RGBE. PNG/TIFF: ``bit_depth`` 8 or 16 (default 16 for TIFF, 8 for
+    PNG), values clipped to [0, 1] and sRGB-encoded unless ``transfer="linear"``.
+    """
+    import cv2
+
+    path = Path(path)
+    image = np.asarray(image)
+    if image.ndim == 2:
+        image = image[..., None]
+    if image.ndim != 3 or image.shape[2] not in (1, 3):
+        raise InputError(f"{path}: expected an image of shape (H, W, 1 or 3), got {image.shape}")
+    suffix = path.suffix.lower()
+    with atomic_file(path, force=force) as tmp:
+        if suffix == ".exr":
+            import OpenEXR
+
+            np_dtype = {"float32": np.float32, "half": np.float16}.get(dtype)
+            if np_dtype is None:
+                raise InputError(f"dtype: expected float32 or half, got {dtype!r}")
+            names = ("R", "G", "B") if image.shape[2] == 3 else ("Y",)
+            channels = {n: np.ascontiguousarray(image[..., i], dtype=np_dtype) for i, n in enumerate(names)}
+            header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+            header.update(attributes or {})
+            OpenEXR.File(header, channels).write(str(tmp))
+        elif suffix in (".hdr", ".pic"):
+            bgr = np.ascontiguousarray(np.repeat(image, 3, axis=2) if image.shape[2] == 1 else image[..., ::-1])
+            if not cv2.imwrite(str(tmp), bgr.astype(np.float32)):
+                raise FileFormatError(f"{path}: OpenCV could not write a Radiance file")
+        elif suffix in LDR_SUFFIXES:
+            depth = bit_depth or (16 if suffix in (".tif", ".tiff") else 8)
+            if depth not in (8, 16) or (depth == 16 and suffix in (".jpg", ".jpeg")):
+                raise InputError(f"{path}: bit depth {depth} is not available for {suffix} (8 or 16; JPEG only 8)")
+            values = np.clip(image, 0, 1)
+            if transfer == "srgb":
+                values = srgb_encode(values)
+            maxval = 255 if depth == 8 else 65535
+            ints = np.round(values * maxval).astype(np.uint8 if depth == 8 else np.uint16)
+            ints = ints[..., 0] if ints.shape[2] == 1 else ints[..., ::-1]
+            if not cv2.imwrite(str(tmp), np.ascontiguousarray(ints)):
+                raise FileFormatError(f"{path}: OpenCV could not write this image")
+        else:
+            raise InputError(f"{path}: unknown image type {suffix!r}; expected one of {', '.join(IMAGE_SUFFIXES)}")
+    return path

@@ -1,0 +1,304 @@
+"""Light-field files.
+
+Layouts lfproc reads and writes:
+
+* **One OpenEXR file** (``.exr``), one part per view named ``view_RR_CC`` (RR angular
+  row, CC angular column, from 01), channels ``R, G, B`` (or ``Y``), optional variance
+  channels ``var.R, var.G, var.B`` and a ``disparity`` channel in the centre view; ZIP
+  (lossless) compression; every part carries the string attribute ``lfproc`` (JSON:
+  lfproc version, angular shape, view index, units, colour space, exposure, ISO, source
+  and free attributes) and ``lfproc_version``.
+* **A folder of views** ``view_RR_CC.<ext>`` with ext ``exr``, ``png``, ``tif``/``tiff``
+  or ``hdr`` (the layout of ``shared/data/lightfields``). 8/16-bit views are sRGB
+  decoded to linear. lfproc also writes ``lightfield.json`` (the same metadata) next to
+  them; folders without it get defaults.
+* **A single image** (any format of :func:`lfproc.io.read_image`): a 1 x 1 light field.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from .._version import __version__
+from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
+from ..lightfield import LightField
+from ._atomic import atomic_dir, atomic_file, check_output
+from .images import IMAGE_SUFFIXES, read_image, write_image
+
+__all__ = ["read_lightfield", "write_lightfield", "view_name", "parse_view_name", "lightfield_metadata", "SIDECAR"]
+
+SIDECAR = "lightfield.json"
+_VIEW_RE = re.compile(r"^view_(\d{2,})_(\d{2,})$")
+
+
+def view_name(v: int, u: int) -> str:
+    """File or part name of view ``(v, u)`` (0-based indices): ``view_RR_CC`` from 01."""
+    return f"view_{v + 1:02d}_{u + 1:02d}"
+
+
+def parse_view_name(stem: str) -> tuple[int, int] | None:
+    """0-based ``(v, u)`` from ``view_RR_CC``, or None when the name is not a view name."""
+    m = _VIEW_RE.match(stem)
+    if not m:
+        return None
+    v, u = int(m.group(1)) - 1, int(m.group(2)) - 1
+    return (v, u) if v >= 0 and u >= 0 else None
+
+
+def lightfield_metadata(lf: LightField) -> dict[str, Any]:
+    """The JSON-serialisable metadata lfproc stores with a light field."""
+    return {
+        "lfproc_version": __version__,
+        "views": list(lf.views),
+        "size": list(lf.size),
+        "channels": lf.channels,
+        "units": lf.units,
+        "colour_space": lf.colour_space,
+        "exposure_s": lf.exposure_s,
+        "iso": lf.iso,
+        "saturation_level": lf.saturation_level,
+        "source": lf.source,
+        "attrs": dict(lf.attrs),
+    }
+
+
+def _meta_kwargs(meta: dict[str, Any]) -> dict[str, Any]:
+    keys = ("units", "colour_space", "exposure_s", "iso", "saturation_level", "source", "attrs")
+    return {k: meta[k] for k in keys if meta.get(k) is not None}
+
+
+# -- reading ---------------------------------------------------------------------------
+
+def _read_exr_lightfield(path: Path, nonfinite: str) -> LightField | None:
+    """Read a multi-part lfproc EXR; None when the file is not one (then it is an image)."""
+    import OpenEXR
+
+    try:
+        head = OpenEXR.File(str(path), header_only=True)
+    except Exception as exc:
+        raise FileFormatError(f"{path}: not a readable OpenEXR file ({exc})") from None
+    if not any("lfproc" in p.header for p in head.parts):
+        return None
+    f = OpenEXR.File(str(path), separate_channels=True)
+    views: dict[tuple[int, int], Any] = {}
+    meta: dict[str, Any] | None = None
+    for part in f.parts:
+        idx = parse_view_name(part.name() or "")
+        if idx is None or "lfproc" not in part.header:
+            raise FileFormatError(f"{path}: part {part.name()!r} is not a view_RR_CC part of an lfproc light field")
+        views[idx] = part
+        if meta is None:
+            try:
+                meta = json.loads(part.header["lfproc"])
+            except (TypeError, ValueError):
+                raise FileFormatError(f"{path}: the 'lfproc' attribute is not valid JSON") from None
+    assert meta is not None  # noqa: S101 (internal invariant: the loop ran at least once)
+    nv, nu = (int(x) for x in meta.get("views", (0, 0)))
+    missing = [view_name(v, u) for v in range(nv) for u in range(nu) if (v, u) not in views]
+    if missing or len(views) != nv * nu:
+        raise FileFormatError(f"{path}: expected {nv}x{nu} view parts, missing {', '.join(missing) or 'none'} "
+                              f"(found {len(views)} parts)")
+    first = views[(0, 0)]
+    names = list(first.channels)
+    colour = ["R", "G", "B"] if "R" in names else ["Y"]
+    has_var = all(f"var.{c}" in names for c in colour)
+    data = np.stack([np.stack([np.stack([views[(v, u)].channels[c].pixels for c in colour], -1) for u in range(nu)])
+                     for v in range(nv)]).astype(np.float32, copy=False)
+    variance = None
+    if has_var:
+        variance = np.stack([np.stack([np.stack([views[(v, u)].channels[f"var.{c}"].pixels for c in colour], -1)
+                                       for u in range(nu)]) for v in range(nv)]).astype(np.float32, copy=False)
+    centre = views[(nv // 2, nu // 2)]
+    disparity = centre.channels["disparity"].pixels if "disparity" in centre.channels else None
+    from ..lightfield import clean_nonfinite
+
+    data, _ = clean_nonfinite(data, policy=nonfinite, negative="keep", name=str(path))
+    return LightField(data=data, variance=variance, disparity=disparity, **_meta_kwargs(meta))
+
+
+def _view_files(folder: Path) -> dict[tuple[int, int], Path]:
+    found: dict[tuple[int, int], Path] = {}
+    for p in sorted(folder.iterdir()):
+        if p.suffix.lower() not in IMAGE_SUFFIXES:
+            continue
+        idx = parse_view_name(p.stem)
+        if idx is None:
+            continue
+        if idx in found:
+            raise FileFormatError(f"{folder}: two files for view {p.stem}: {found[idx].name} and {p.name}")
+        found[idx] = p
+    return found
+
+
+def _read_folder(folder: Path, nonfinite: str, negative: str, transfer: str) -> LightField:
+    files = _view_files(folder)
+    if not files:
+        raise FileFormatError(
+            f"{folder}: expected view files named view_RR_CC.<ext> ({', '.join(IMAGE_SUFFIXES)}), found none"
+        )
+    nv = max(v for v, _ in files) + 1
+    nu = max(u for _, u in files) + 1
+    missing = [view_name(v, u) for v in range(nv) for u in range(nu) if (v, u) not in files]
+    if missing:
+        raise FileFormatError(f"{folder}: the {nv}x{nu} grid of views is incomplete; missing {', '.join(missing[:6])}"
+                              + (" ..." if len(missing) > 6 else ""))
+    meta: dict[str, Any] = {}
+    sidecar = folder / SIDECAR
+    if sidecar.exists():
+        try:
+            meta = json.loads(sidecar.read_text())
+        except ValueError:
+            raise FileFormatError(f"{sidecar}: not valid JSON") from None
+    if transfer == "auto" and meta.get("transfer") in ("srgb", "linear"):
+        transfer = meta["transfer"]
+    images = {}
+    shape = None
+    sat = None
+    for idx, p in files.items():
+        img, m = read_image(p, nonfinite=nonfinite, negative=negative, transfer=transfer)  # type: ignore[arg-type]
+        if shape is None:
+            shape, first = img.shape, p
+            sat = m.get("saturation_level")
+        elif img.shape != shape:
+            raise ShapeError(f"{p}: view size {img.shape} differs from {first.name} {shape}")
+        images[idx] = img
+    data = np.stack([np.stack([images[(v, u)] for u in range(nu)]) for v in range(nv)])
+    kwargs = _meta_kwargs(meta)
+    kwargs.setdefault("saturation_level", sat)
+    kwargs.setdefault("source", str(folder))
+    return LightField(data=data, **kwargs)
+
+
+def read_lightfield(
+    path: str | os.PathLike,
+    *,
+    nonfinite: Literal["raise", "zero", "clip"] = "raise",
+    negative: Literal["raise", "clip", "keep"] = "clip",
+    transfer: Literal["auto", "srgb", "linear"] = "auto",
+    part: int | str | None = None,
+) -> LightField:
+    """Read a light field from an lfproc EXR, a folder of views or a single image.
+
+    Parameters
+    ----------
+    path : file or folder (see the module documentation for the layouts).
+    nonfinite, negative : value policies (see :func:`lfproc.lightfield.clean_nonfinite`).
+    transfer : decoding of 8/16-bit views (``"auto"`` = sRGB).
+    part : for a single multi-part EXR image, which part to read.
+
+    Returns
+    -------
+    LightField
+    """
+    path = Path(path)
+    if not path.exists():
+        raise MissingFileError(f"{path}: no such file or folder")
+    if path.is_dir():
+        return _read_folder(path, nonfinite, negative, transfer)
+    if path.suffix.lower() == ".exr" and part is None:
+        lf = _read_exr_lightfield(path, nonfinite)
+        if lf is not None:
+            return lf
+    if path.suffix.lower() not in IMAGE_SUFFIXES:
+        raise FileFormatError(
+            f"{path}: not a light field or image; expected a folder of view_RR_CC files, "
+            f"or a file ending in {', '.join(IMAGE_SUFFIXES)}"
+        )
+    image, meta = read_image(path, part=part, nonfinite=nonfinite, negative=negative, transfer=transfer)
+    attrs = {k: meta[k] for k in ("format", "part_name", "view") if meta.get(k) is not None}
+    return LightField(
+        data=image[None, None],
+        saturation_level=meta.get("saturation_level"),
+        source=str(path),
+        attrs=attrs,
+    )
+
+
+# -- writing ---------------------------------------------------------------------------
+
+FolderFormat = Literal["exr", "png", "png16", "tiff", "hdr"]
+_FOLDER_SUFFIX = {"exr": (".exr", None), "png": (".png", 8), "png16": (".png", 16), "tiff": (".tif", 16),
+                  "hdr": (".hdr", None)}
+
+
+def _exr_parts(lf: LightField, dtype: str) -> list:
+    import OpenEXR
+
+    np_dtype = {"float32": np.float32, "half": np.float16}.get(dtype)
+    if np_dtype is None:
+        raise InputError(f"dtype: expected float32 or half, got {dtype!r}")
+    if lf.channels not in (1, 3):
+        raise ShapeError(f"EXR light fields hold 1 or 3 channels, this one has {lf.channels}")
+    names = ("R", "G", "B") if lf.channels == 3 else ("Y",)
+    meta = lightfield_metadata(lf)
+    parts = []
+    nv, nu = lf.views
+    for v in range(nv):
+        for u in range(nu):
+            chans = {n: np.ascontiguousarray(lf.data[v, u, :, :, i], dtype=np_dtype) for i, n in enumerate(names)}
+            if lf.variance is not None:
+                chans.update({f"var.{n}": np.ascontiguousarray(lf.variance[v, u, :, :, i], dtype=np_dtype)
+                              for i, n in enumerate(names)})
+            if lf.disparity is not None and (v, u) == lf.centre_index:
+                chans["disparity"] = np.ascontiguousarray(lf.disparity, dtype=np.float32)
+            header = {
+                "compression": OpenEXR.ZIP_COMPRESSION,
+                "type": OpenEXR.scanlineimage,
+                "lfproc": json.dumps(meta | {"view": [v, u]}),
+                "lfproc_version": __version__,
+            }
+            parts.append(OpenEXR.Part(header, chans, view_name(v, u)))
+    return parts
+
+
+def write_lightfield(
+    lf: LightField,
+    path: str | os.PathLike,
+    *,
+    force: bool = False,
+    dtype: Literal["float32", "half"] = "float32",
+    folder_format: FolderFormat = "exr",
+    transfer: Literal["srgb", "linear"] = "srgb",
+) -> Path:
+    """Write a light field atomically.
+
+    ``path`` ending in ``.exr``: one multi-part OpenEXR file. Any other path: a folder of
+    ``view_RR_CC`` files in ``folder_format`` (``exr``, ``png`` (8-bit), ``png16``, ``tiff``
+    (16-bit) or ``hdr``) plus ``lightfield.json``. 8/16-bit views are clipped to [0, 1]
+    and sRGB-encoded (``transfer="linear"`` keeps them linear). float32 EXR round-trips
+    bit-exactly.
+    """
+    if not isinstance(lf, LightField):
+        raise InputError(f"write_lightfield: expected a LightField, got {type(lf).__name__}")
+    path = Path(path)
+    if path.suffix.lower() == ".exr":
+        import OpenEXR
+
+        parts = _exr_parts(lf, dtype)
+        with atomic_file(path, force=force) as tmp:
+            OpenEXR.File(parts).write(str(tmp))
+        return path
+    if path.suffix:
+        raise InputError(f"{path}: expected a path ending in .exr (one file) or a folder name without a suffix")
+    if folder_format not in _FOLDER_SUFFIX:
+        raise InputError(f"format: expected one of {', '.join(_FOLDER_SUFFIX)}; got {folder_format!r}")
+    suffix, depth = _FOLDER_SUFFIX[folder_format]
+    check_output(path, force=force)
+    meta = lightfield_metadata(lf) | {"folder_format": folder_format, "transfer": transfer if depth else "linear"}
+    if depth:  # values are clipped to [0, 1] by the 8/16-bit encoding
+        meta["saturation_level"] = 1.0
+    with atomic_dir(path, force=force) as tmp:
+        nv, nu = lf.views
+        for v in range(nv):
+            for u in range(nu):
+                attrs = {"lfproc": json.dumps(meta | {"view": [v, u]}), "lfproc_version": __version__}
+                write_image(tmp / f"{view_name(v, u)}{suffix}", lf.data[v, u], dtype=dtype, bit_depth=depth,
+                            transfer=transfer, attributes=attrs if suffix == ".exr" else None)
+        (tmp / SIDECAR).write_text(json.dumps(meta, indent=2))
+    return path
