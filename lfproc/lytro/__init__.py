@@ -1,0 +1,1 @@
+"""Lytro Illum and F01 captures: containers, raw images, calibration data, decoding."""
