@@ -1,0 +1,330 @@
+"""Camera profiles: the sensor figures that tie lfproc together.
+
+A profile holds, for one sensor, its ADC and levels and, per ISO, the gain, read noise,
+dark current and full well. It sets the noise model of the simulators
+(:mod:`lfproc.sensor`), the weights of the HDR merge and those of the reconstruction.
+
+File format: versioned JSON (``schema: "lfproc.camera_profile"``, ``schema_version: 1``)
+with units in the field names; an optional bias frame lives in a sidecar ``.npz`` named in
+``bias_frame_file`` (relative to the JSON). A figure the calibration could not determine
+is ``null`` and its reason is in ``unknown``. Loading checks the schema and names the
+field that is wrong.
+
+Shipped profiles (``load_profile(NAME)``): ``illum`` (a nominal Lytro Illum) and
+``paper-none``, ``paper-low``, ``paper-medium``, ``paper-high`` (the simulated sensor of
+the paper, Table VI noise levels; method.md section 2).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lfproc._version import __version__
+from lfproc.errors import FileFormatError, MissingFileError, ProfileError
+from lfproc.io._atomic import atomic_file
+
+__all__ = [
+    "CameraProfile",
+    "IsoFigures",
+    "load_profile",
+    "save_profile",
+    "paper_gain_dn_per_e",
+    "SHIPPED_PROFILES",
+    "SCHEMA",
+    "SCHEMA_VERSION",
+]
+
+SCHEMA = "lfproc.camera_profile"
+SCHEMA_VERSION = 1
+_PROFILE_DIR = Path(__file__).resolve().parent / "profiles"
+SHIPPED_PROFILES = ("illum", "paper-none", "paper-low", "paper-medium", "paper-high")
+_CFA = ("RGGB", "GRBG", "GBRG", "BGGR")
+
+
+def paper_gain_dn_per_e(iso: float, *, adc_bits: int, full_well_e: float) -> float:
+    """The paper's theoretical gain ``h = (ISO / 100) * (2^bits - 1) / FWD`` in DN per electron."""
+    return (float(iso) / 100.0) * (2**adc_bits - 1) / float(full_well_e)
+
+
+@dataclass(frozen=True)
+class IsoFigures:
+    """Figures of one ISO setting. ``None`` means unknown (see the profile's ``unknown``)."""
+
+    gain_dn_per_e: float | None
+    read_noise_e: float | None
+    read_noise_dn: float | None = None
+    dark_current_e_per_s: float | None = None
+    black_level_dn: float | None = None
+    full_well_e: float | None = None
+    dsnu_dn: float | None = None
+    prnu: float | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True)
+class CameraProfile:
+    """A sensor's calibration (see the module documentation).
+
+    Parameters
+    ----------
+    name : str
+    adc_bits : int
+        ADC resolution; ``white_level_dn`` defaults to ``2**adc_bits - 1``.
+    white_level_dn : float
+        Largest output code ``I_max`` (DN).
+    black_level_dn : float
+        Offset ``I_0`` added to every pixel (DN), unless an ISO gives its own.
+    full_well_e : float
+        Full-well depth (electrons) where electrons saturate.
+    gamma : float
+        Power-law response exponent (1 = linear raw).
+    cfa_pattern : str
+        Bayer layout as a row-major string from the top-left pixel, e.g. ``"RGGB"``.
+    isos : dict
+        ISO (int) -> :class:`IsoFigures`.
+    dark_current_e_per_s : float
+        Default dark current for ISOs that do not give one.
+    prnu, dsnu_e : float
+        Photo-response non-uniformity (relative std of the per-pixel gain) and dark-signal
+        non-uniformity (std of the per-pixel offset, electrons). 0 = uniform sensor.
+    fixed_pattern_seed : int
+        Seed of the sensor's fixed-pattern maps (the same sensor always has the same maps).
+    bias_frame : ndarray, optional
+        Master bias frame (DN) keyed by ISO in ``bias_frames``.
+    unknown : dict
+        Field name -> reason, for figures the calibration could not determine.
+    """
+
+    name: str
+    adc_bits: int
+    white_level_dn: float
+    black_level_dn: float
+    full_well_e: float
+    isos: dict[int, IsoFigures]
+    gamma: float = 1.0
+    cfa_pattern: str = "RGGB"
+    dark_current_e_per_s: float = 0.0
+    prnu: float = 0.0
+    dsnu_e: float = 0.0
+    fixed_pattern_seed: int = 0
+    description: str = ""
+    bias_frames: dict[int, np.ndarray] = field(default_factory=dict)
+    unknown: dict[str, str] = field(default_factory=dict)
+    source: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        _check_number(self.adc_bits, "adc_bits", integer=True, low=1, high=32)
+        _check_number(self.white_level_dn, "white_level_dn", low=1)
+        _check_number(self.black_level_dn, "black_level_dn", low=0)
+        if self.black_level_dn >= self.white_level_dn:
+            raise ProfileError(
+                f"profile {self.name}: black_level_dn ({self.black_level_dn}) must be below white_level_dn "
+                f"({self.white_level_dn})"
+            )
+        _check_number(self.full_well_e, "full_well_e", low=0, strict=True)
+        _check_number(self.gamma, "gamma", low=1)
+        _check_number(self.dark_current_e_per_s, "dark_current_e_per_s", low=0)
+        _check_number(self.prnu, "prnu", low=0)
+        _check_number(self.dsnu_e, "dsnu_e", low=0)
+        if self.cfa_pattern not in _CFA:
+            raise ProfileError(f"profile {self.name}: cfa_pattern: expected one of {', '.join(_CFA)}, got {self.cfa_pattern!r}")
+        if not self.isos:
+            raise ProfileError(f"profile {self.name}: isos: expected at least one ISO")
+        for iso, figs in self.isos.items():
+            if not isinstance(figs, IsoFigures):
+                raise ProfileError(f"profile {self.name}: isos.{iso}: expected ISO figures")
+            for f in fields(IsoFigures):
+                value = getattr(figs, f.name)
+                if value is not None:
+                    _check_number(value, f"isos.{iso}.{f.name}", low=0, strict=f.name == "gain_dn_per_e")
+
+    # -- lookups ---------------------------------------------------------------------
+    @property
+    def iso_values(self) -> list[int]:
+        return sorted(self.isos)
+
+    def iso_figures(self, iso: float) -> IsoFigures:
+        """Figures of one ISO; :class:`ProfileError` naming the available ISOs otherwise."""
+        key = int(round(float(iso)))
+        if key not in self.isos or abs(key - float(iso)) > 1e-6:
+            raise ProfileError(
+                f"ISO {iso:g} is not in camera profile {self.name!r}; it has ISO {', '.join(map(str, self.iso_values))}"
+            )
+        return self.isos[key]
+
+    def require(self, iso: float, *names: str) -> dict[str, float]:
+        """The named per-ISO figures, falling back to profile-wide ones; error if unknown."""
+        figs = self.iso_figures(iso)
+        out = {}
+        for name in names:
+            value = getattr(figs, name, None)
+            if value is None and name == "dark_current_e_per_s":
+                value = self.dark_current_e_per_s
+            if value is None and name == "black_level_dn":
+                value = self.black_level_dn
+            if value is None and name == "full_well_e":
+                value = self.full_well_e
+            if value is None and name == "read_noise_e" and figs.read_noise_dn is not None and figs.gain_dn_per_e:
+                value = figs.read_noise_dn / figs.gain_dn_per_e
+            if value is None:
+                why = self.unknown.get(f"isos.{int(iso)}.{name}") or self.unknown.get(name) or "not in the profile"
+                raise ProfileError(f"camera profile {self.name!r}: ISO {iso:g} has no {name} ({why})")
+            out[name] = float(value)
+        return out
+
+    def saturation_dn(self, iso: float) -> float:
+        """Output code where a pixel of this ISO saturates: full well or ADC, whichever first."""
+        figs = self.require(iso, "gain_dn_per_e", "black_level_dn", "full_well_e")
+        signal = figs["gain_dn_per_e"] * figs["full_well_e"]
+        if self.gamma != 1:
+            signal = self.white_level_dn * (min(signal, self.white_level_dn) / self.white_level_dn) ** (1 / self.gamma)
+        return float(min(self.white_level_dn, round(signal) + figs["black_level_dn"]))
+
+    def with_noise(self, *, read_noise_e: float, dark_current_e_per_s: float, name: str | None = None) -> "CameraProfile":
+        """A copy with the same read noise (e-) and dark current (e-/s) at every ISO."""
+        isos = {
+            iso: replace(
+                f,
+                read_noise_e=read_noise_e,
+                read_noise_dn=read_noise_e * f.gain_dn_per_e if f.gain_dn_per_e else None,
+                dark_current_e_per_s=dark_current_e_per_s,
+            )
+            for iso, f in self.isos.items()
+        }
+        return replace(self, isos=isos, dark_current_e_per_s=dark_current_e_per_s, name=name or self.name)
+
+    # -- serialisation -----------------------------------------------------------------
+    def to_json(self) -> dict[str, Any]:
+        """The profile as a JSON-serialisable dict (bias frames excluded: see :func:`save_profile`)."""
+        return {
+            "schema": SCHEMA,
+            "schema_version": SCHEMA_VERSION,
+            "lfproc_version": __version__,
+            "name": self.name,
+            "description": self.description,
+            "adc_bits": self.adc_bits,
+            "white_level_dn": self.white_level_dn,
+            "black_level_dn": self.black_level_dn,
+            "full_well_e": self.full_well_e,
+            "gamma": self.gamma,
+            "cfa_pattern": self.cfa_pattern,
+            "dark_current_e_per_s": self.dark_current_e_per_s,
+            "prnu": self.prnu,
+            "dsnu_e": self.dsnu_e,
+            "fixed_pattern_seed": self.fixed_pattern_seed,
+            "isos": {str(iso): self.isos[iso].to_json() for iso in self.iso_values},
+            "unknown": dict(self.unknown),
+            "source": dict(self.source),
+        }
+
+    @classmethod
+    def from_json(cls, doc: dict[str, Any], *, where: str = "profile", bias_frames=None) -> "CameraProfile":
+        """Build and validate a profile from its JSON dict; errors name the field."""
+        if not isinstance(doc, dict):
+            raise ProfileError(f"{where}: expected a JSON object")
+        if doc.get("schema") != SCHEMA:
+            raise ProfileError(f"{where}: field 'schema': expected {SCHEMA!r}, found {doc.get('schema')!r}")
+        version = doc.get("schema_version")
+        if version != SCHEMA_VERSION:
+            raise ProfileError(f"{where}: field 'schema_version': expected {SCHEMA_VERSION}, found {version!r}")
+        required = ("name", "adc_bits", "white_level_dn", "black_level_dn", "full_well_e", "isos")
+        for key in required:
+            if key not in doc or doc[key] is None:
+                raise ProfileError(f"{where}: missing field {key!r}")
+        if not isinstance(doc["isos"], dict) or not doc["isos"]:
+            raise ProfileError(f"{where}: field 'isos': expected an object from ISO to figures")
+        isos = {}
+        names = {f.name for f in fields(IsoFigures)}
+        for key, figs in doc["isos"].items():
+            try:
+                iso = int(key)
+            except ValueError:
+                raise ProfileError(f"{where}: field 'isos': key {key!r} is not an ISO number") from None
+            if not isinstance(figs, dict):
+                raise ProfileError(f"{where}: field 'isos.{key}': expected an object")
+            extra = set(figs) - names
+            if extra:
+                raise ProfileError(f"{where}: field 'isos.{key}': unknown keys {', '.join(sorted(extra))}")
+            isos[iso] = IsoFigures(**{n: figs.get(n) for n in names})
+        kwargs = {k: doc[k] for k in ("gamma", "cfa_pattern", "dark_current_e_per_s", "prnu", "dsnu_e",
+                                      "fixed_pattern_seed", "description") if doc.get(k) is not None}
+        try:
+            return cls(
+                name=str(doc["name"]),
+                adc_bits=doc["adc_bits"],
+                white_level_dn=doc["white_level_dn"],
+                black_level_dn=doc["black_level_dn"],
+                full_well_e=doc["full_well_e"],
+                isos=isos,
+                unknown=dict(doc.get("unknown") or {}),
+                source=dict(doc.get("source") or {}),
+                bias_frames=bias_frames or {},
+                **kwargs,
+            )
+        except ProfileError as exc:
+            raise ProfileError(f"{where}: {exc}") from None
+
+
+def _check_number(value, name: str, *, integer: bool = False, low=None, high=None, strict: bool = False) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ProfileError(f"field {name!r}: expected a number, found {value!r}")
+    if integer and int(value) != value:
+        raise ProfileError(f"field {name!r}: expected an integer, found {value!r}")
+    if not math.isfinite(float(value)):
+        raise ProfileError(f"field {name!r}: expected a finite number, found {value!r}")
+    if low is not None and (value < low or (strict and value == low)):
+        raise ProfileError(f"field {name!r}: expected a value {'>' if strict else '>='} {low}, found {value!r}")
+    if high is not None and value > high:
+        raise ProfileError(f"field {name!r}: expected a value <= {high}, found {value!r}")
+
+
+def load_profile(name_or_path: str | os.PathLike | CameraProfile) -> CameraProfile:
+    """Load a shipped profile by name (see :data:`SHIPPED_PROFILES`) or a profile JSON file."""
+    if isinstance(name_or_path, CameraProfile):
+        return name_or_path
+    text = str(name_or_path)
+    if text in SHIPPED_PROFILES:
+        path = _PROFILE_DIR / f"{text}.json"
+    else:
+        path = Path(text)
+        if not path.exists():
+            raise MissingFileError(
+                f"{path}: no such camera profile file (shipped profiles: {', '.join(SHIPPED_PROFILES)})"
+            )
+    try:
+        doc = json.loads(path.read_text())
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise FileFormatError(f"{path}: not a JSON camera profile ({exc})") from None
+    bias = {}
+    sidecar = doc.get("bias_frame_file") if isinstance(doc, dict) else None
+    if sidecar:
+        side = path.parent / sidecar
+        if not side.exists():
+            raise ProfileError(f"{path}: field 'bias_frame_file': {side} does not exist")
+        with np.load(side) as npz:
+            bias = {int(k.removeprefix("iso_")): npz[k] for k in npz.files}
+    return CameraProfile.from_json(doc, where=str(path), bias_frames=bias)
+
+
+def save_profile(profile: CameraProfile, path: str | os.PathLike, *, force: bool = False) -> Path:
+    """Write a profile as JSON (atomically), its bias frames in a sidecar ``<stem>.bias.npz``."""
+    path = Path(path)
+    doc = profile.to_json()
+    if profile.bias_frames:
+        side = path.with_name(f"{path.stem}.bias.npz")
+        with atomic_file(side, force=force) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(fh, **{f"iso_{iso}": frame for iso, frame in profile.bias_frames.items()})
+        doc["bias_frame_file"] = side.name
+    with atomic_file(path, force=force) as tmp:
+        tmp.write_text(json.dumps(doc, indent=2))
+    return path
