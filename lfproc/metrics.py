@@ -1,0 +1,636 @@
+"""HDR image and light-field quality metrics: PU21, PU2, PU-PSNR/SSIM, log-PSNR, relative error.
+
+All metrics compare a *result* (test) with a *reference* of the same shape. They follow the
+conventions of the reference implementation of PU21, ``pu21_metric.m`` of ``gfxdisp/pu21``
+(Mantiuk and Azimi, PCS 2021):
+
+* **Luminance.** Colour values are reduced to luminance with
+  ``Y = 0.212656 R + 0.715158 G + 0.072186 B`` (:data:`PU21_LUMA`, the weights of
+  ``pu21_metric.m``; :func:`lfproc.lightfield.luminance` uses the rounded Rec. 709 weights).
+  One-channel data are taken as luminance.
+* **Absolute scale.** PU encodings need absolute luminance in cd/m^2. Both images are
+  multiplied by the *same* factor ``peak_luminance / max(reference)`` (the README recipe
+  ``I = I / max(I) * L_peak`` with the maximum taken over every sample, all colour channels
+  and, for light fields, all views of the *reference*). The reference peak therefore maps to
+  the display peak, and the result keeps its scale relative to the reference: a result that
+  is 2x too bright stays 2x too bright. ``peak_luminance=None`` skips the scaling for data
+  that are already absolute cd/m^2.
+* **PU21-PSNR** uses the peak 256 (``psnr(T, R, 256)`` in ``pu21_metric.m``): PU21 maps
+  100 cd/m^2 to about 256. **PU21-SSIM** is :func:`skimage.metrics.structural_similarity`
+  with ``data_range=256, gaussian_weights=True, sigma=1.5, use_sample_covariance=False``
+  on PU21-encoded luminance (MATLAB's ``ssim(T, R, 'DynamicRange', 256)`` up to the border
+  handling: scikit-image drops a 5-pixel border, MATLAB pads by replication).
+* **PU2-PSNR** (PU2 = the HDR-VDP-2 CSF version of the perceptually uniform encoding of
+  Aydin, Mantiuk and Seidel 2008, as in HDR Toolbox's ``pu2_encode.m``) uses the peak
+  ``pu2_encode(max(scaled reference))``, which is ``pu2_encode(peak_luminance)`` after
+  scaling (about 419.6 for 1000 cd/m^2). This is HDR Toolbox's ``PSNR(ref, dist, 'pu')``
+  with its default ``max_value`` whenever the result does not exceed the reference peak.
+  The convention of the paper's PU2-PSNR tables is not published; compare across papers
+  with care.
+* **log-PSNR** is PSNR in the log10 domain of the scaled luminance:
+  ``l = log10(clip(Y, 0.005, 1e4))`` (the PU21 luminance range), peak
+  ``log10(max(scaled reference) / 0.005)`` (5.30 for 1000 cd/m^2, the decades between the
+  display peak and PU21's black level), ``log_psnr = 20 log10(peak / RMSE(l_result, l_ref))``.
+* **Mean relative error** is computed on the linear values themselves (every colour sample,
+  no luminance, no PU): ``mean(|result - reference| / (reference + eps))`` with
+  ``eps = epsilon_relative * max(reference)`` and ``epsilon_relative = 1e-3`` by default
+  (10 stops below the reference peak), so that black or nearly black reference samples do not
+  dominate. It is independent of ``peak_luminance``.
+* Identical images give PSNR ``inf`` and SSIM 1. Light fields are evaluated view by view;
+  view-averaged figures are the means of the per-view figures (an ``inf`` view makes the
+  average PSNR ``inf``). The array functions (:func:`pu21_psnr`...) instead treat their whole
+  input as one signal (one MSE over every sample; SSIM averaged over the 2-D images).
+
+PU encodings are computed in float64 over whole arrays at once (every view of a light field
+in one call); SSIM runs per 2-D view.
+
+Perceptual metrics that are not provided
+----------------------------------------
+**HDR-VDP-2 / HDR-VDP-3** (Mantiuk et al.) are MATLAB only (hdrvdp.sourceforge.net, the
+HDR-VDP-3 GitHub repository). There is no Python release on PyPI (``hdrvdp``, ``pyhdrvdp``,
+``hdr-vdp`` do not exist); the unofficial ports are not packaged. Scores from the paper's
+HDR-VDP-2 Q cannot be reproduced here without MATLAB or Octave.
+
+**ColorVideoVDP** (``cvvdp`` 0.5.7 on PyPI, the SIGGRAPH 2024 metric) is not used and not a
+dependency, for these reasons (checked on this project's machines):
+
+* It requires ``torch`` and ``torchvision``, and ``import pycvvdp`` imports
+  ``torchvision.transforms`` at module level (``cvvdp_metric.py``, ``cvvdp_ml_metric.py``),
+  so even its PSNR/SSIM metrics need torchvision. The package index here offers a CPU torch
+  only as ``torch==2.13.0`` (``2.13.0+cpu``) and no CPU build of torchvision. Tried in a
+  throw-away virtual environment (not lfproc's): ``torch==2.13.0`` (CPU, 754 MB) plus
+  ``torchvision==0.28.0`` (its matching version, a CUDA build) and ``cvvdp`` 0.5.7 install,
+  but ``import torchvision`` (hence ``import pycvvdp``) fails with
+  ``RuntimeError: operator torchvision::nms does not exist``: the compiled operators of the
+  CUDA torchvision link against ``libtorch_cuda.so``/``libc10_cuda.so``, which the CPU torch
+  does not ship. So cvvdp cannot run on the CPU here.
+* Its other requirements include ``ffmpeg-python`` plus an ``ffmpeg`` binary (for video
+  files), ``huggingface_hub`` (the ``cvvdp-ml-*`` variants download checkpoints, so they do
+  not run offline), ``einops`` and ``PyEXR``.
+* Its JOD scores are not comparable with the paper's HDR-VDP-2 Q, and its own PU-PSNR
+  differs from ``pu21_metric.m``: ``pu_psnr_y`` (0.5.x) uses the peak PU21(100) = 256.4,
+  older ``pycvvdp/pupsnr.py`` used PU21(10000) = 595.4.
+
+Use the PU21/PU2 figures of this module; run cvvdp separately (its own environment, torch
+with torchvision) on views exported with ``lfproc convert`` if a JOD score is needed.
+
+References
+----------
+.. [1] R. K. Mantiuk and M. Azimi, "PU21: A novel perceptually uniform encoding for adapting
+   existing quality metrics for HDR", Picture Coding Symposium 2021,
+   doi:10.1109/PCS50896.2021.9477471. Code: https://github.com/gfxdisp/pu21
+.. [2] T. O. Aydin, R. Mantiuk and H.-P. Seidel, "Extending quality metrics to full luminance
+   range images", Proc. SPIE 6806, 2008, doi:10.1117/12.765095.
+.. [3] R. Mantiuk, K. J. Kim, A. G. Rempel and W. Heidrich, "HDR-VDP-2", ACM TOG 30(4), 2011,
+   doi:10.1145/2010324.1964935 (the CSF ``csf_sa`` used by PU2).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import Any, Literal
+
+import numpy as np
+
+from ._util import check_choice, check_positive
+from .errors import InputError, ShapeError
+from .lightfield import LightField
+
+__all__ = [
+    "PU21_PARAMETERS",
+    "PU21_VARIANTS",
+    "PU21_L_MIN",
+    "PU21_L_MAX",
+    "PU21_PSNR_PEAK",
+    "PU21_LUMA",
+    "metric_luminance",
+    "pu21_encode",
+    "pu21_decode",
+    "pu2_encode",
+    "psnr",
+    "pu21_psnr",
+    "pu21_ssim",
+    "pu2_psnr",
+    "log_psnr",
+    "mean_relative_error",
+    "evaluate",
+]
+
+Pu21Variant = Literal["banding_glare", "banding", "peaks", "peaks_glare"]
+
+#: Parameters p1..p7 of the PU21 variants (``pu21_encoder.m``, updated 06/02/2020).
+PU21_PARAMETERS: dict[str, tuple[float, ...]] = {
+    "banding_glare": (0.353487901, 0.3734658629, 8.277049286e-05, 0.9062562627, 0.09150303166,
+                      0.9099517204, 596.3148142),
+    "banding": (1.070275272, 0.4088273932, 0.153224308, 0.2520326168, 1.063512885, 1.14115047, 521.4527484),
+    "peaks": (1.043882782, 0.6459495343, 0.3194584211, 0.374025247, 1.114783422, 1.095360363, 384.9217577),
+    "peaks_glare": (816.885024, 1479.463946, 0.001253215609, 0.9329636822, 0.06746643971, 1.573435413,
+                    419.6006374),
+}
+PU21_VARIANTS = tuple(PU21_PARAMETERS)
+#: Luminance range of PU21 in cd/m^2; inputs are clamped to it.
+PU21_L_MIN = 0.005
+PU21_L_MAX = 10000.0
+#: PSNR peak of PU21 values (``pu21_metric.m``).
+PU21_PSNR_PEAK = 256.0
+#: Luminance weights of linear R, G, B used by ``pu21_metric.m``.
+PU21_LUMA = np.array([0.212656, 0.715158, 0.072186])
+
+# PU2 (HDR Toolbox pu2_encode.m): HDR-VDP-2 joint rod-cone sensitivity, LUT and normalisation.
+_PU2_CSF_SA = (30.162, 4.0627, 1.6596, 0.2712)
+_PU2_LOG_RANGE = (-5.0, 10.0)
+_PU2_LUT_SIZE = 4096
+_PU2_LOW, _PU2_HIGH = 31.9270, 149.9244
+
+_SSIM_OPTIONS = dict(gaussian_weights=True, sigma=1.5, use_sample_covariance=False, data_range=PU21_PSNR_PEAK)
+_SSIM_MIN_SIZE = 11  # window of gaussian_weights=True, sigma=1.5 (truncate 3.5): 2 * 5 + 1
+
+
+# -- encodings -----------------------------------------------------------------------------
+
+def _as_float64(values: Any, name: str) -> np.ndarray:
+    arr = np.asarray(values)
+    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise InputError(f"{name}: expected a numeric array, got dtype {arr.dtype}")
+    arr = arr.astype(np.float64, copy=False)
+    if not np.isfinite(arr).all():
+        raise InputError(f"{name}: contains NaN or Inf values; expected finite values")
+    return arr
+
+
+def _pu21_params(variant: str) -> tuple[float, ...]:
+    return PU21_PARAMETERS[check_choice("variant", variant, PU21_VARIANTS)]
+
+
+def pu21_encode(luminance_cd_m2: Any, *, variant: Pu21Variant = "banding_glare") -> np.ndarray:
+    """PU21 perceptually uniform encoding of absolute luminance.
+
+    ``V = p7 * (((p1 + p2 Y^p4) / (1 + p3 Y^p4))^p5 - p6)`` with ``Y`` clamped to
+    [0.005, 10000] cd/m^2 (the reference warns outside that range; this function clamps
+    silently: dark pixels below 0.005 cd/m^2 are common and all encode to the same value).
+
+    Parameters
+    ----------
+    luminance_cd_m2 : array_like, any shape
+        Absolute luminance in cd/m^2 (not relative values: scale first, see the module notes).
+    variant : {"banding_glare", "banding", "peaks", "peaks_glare"}
+        Parameter set; the PU21 authors recommend ``"banding_glare"``.
+
+    Returns
+    -------
+    ndarray of the same shape, float64
+        PU21 values: about 0 at 0.005, 256.4 at 100 and 595.4 at 10000 cd/m^2
+        (``banding_glare``).
+
+    Raises
+    ------
+    InputError
+        Unknown variant, non-numeric or non-finite input.
+    """
+    p1, p2, p3, p4, p5, p6, p7 = _pu21_params(variant)
+    arr = _as_float64(luminance_cd_m2, "luminance_cd_m2")
+    y = np.clip(arr.reshape(-1), PU21_L_MIN, PU21_L_MAX)  # a new 1-d array, updated in place below
+    np.power(y, p4, out=y)
+    num = p2 * y
+    num += p1
+    y *= p3
+    y += 1.0
+    num /= y
+    np.power(num, p5, out=num)
+    num -= p6
+    num *= p7
+    return num.reshape(arr.shape)
+
+
+@functools.lru_cache(maxsize=None)
+def _pu21_encoded_range(variant: str) -> tuple[float, float]:
+    lo, hi = pu21_encode(np.array([PU21_L_MIN, PU21_L_MAX]), variant=variant)  # type: ignore[arg-type]
+    return float(lo), float(hi)
+
+
+def pu21_decode(pu_values: Any, *, variant: Pu21Variant = "banding_glare") -> np.ndarray:
+    """Inverse of :func:`pu21_encode`: PU21 values to absolute luminance in cd/m^2.
+
+    ``Vp = max(V/p7 + p6, 0)^(1/p5)``, ``Y = (max(Vp - p1, 0) / (p2 - p3 Vp))^(1/p4)``.
+    ``V`` is first clipped to ``[pu21_encode(0.005), pu21_encode(10000)]``, the range of
+    the encoding, so the result lies in [0.005, 10000] cd/m^2 and
+    ``pu21_decode(pu21_encode(Y)) == clip(Y, 0.005, 10000)`` to rounding.
+
+    Parameters
+    ----------
+    pu_values : array_like, any shape
+    variant : {"banding_glare", "banding", "peaks", "peaks_glare"}
+
+    Returns
+    -------
+    ndarray of the same shape, float64, luminance in cd/m^2.
+    """
+    p1, p2, p3, p4, p5, p6, p7 = _pu21_params(variant)
+    lo, hi = _pu21_encoded_range(variant)
+    arr = _as_float64(pu_values, "pu_values")
+    v = np.clip(arr.reshape(-1), lo, hi)
+    v /= p7
+    v += p6
+    np.maximum(v, 0.0, out=v)
+    np.power(v, 1.0 / p5, out=v)
+    den = p2 - p3 * v
+    v -= p1
+    np.maximum(v, 0.0, out=v)
+    v /= den
+    np.power(v, 1.0 / p4, out=v)
+    np.clip(v, PU21_L_MIN, PU21_L_MAX, out=v)
+    return v.reshape(arr.shape)
+
+
+@functools.lru_cache(maxsize=1)
+def _pu2_lut() -> tuple[np.ndarray, np.ndarray]:
+    from scipy.integrate import cumulative_trapezoid
+
+    l_lut = np.linspace(*_PU2_LOG_RANGE, _PU2_LUT_SIZE)
+    s1, s2, s3, s4 = _PU2_CSF_SA
+    sensitivity = s1 * ((s2 / 10.0**l_lut) ** s3 + 1.0) ** (-s4)
+    # dL/threshold integrated in the log10 domain: (S / L) * L * ln 10 = S ln 10
+    jnd = cumulative_trapezoid(sensitivity * math.log(10.0), l_lut, initial=0.0)
+    p_lut = 255.0 * (jnd - _PU2_LOW) / (_PU2_HIGH - _PU2_LOW)
+    l_lut.setflags(write=False)
+    p_lut.setflags(write=False)
+    return l_lut, p_lut
+
+
+def pu2_encode(luminance_cd_m2: Any) -> np.ndarray:
+    """PU2 encoding (the HDR-VDP-2 CSF version of Aydin et al. 2008, HDR Toolbox ``pu2_encode.m``).
+
+    The sensitivity ``S(L) = 30.162 ((4.0627 / L)^1.6596 + 1)^-0.2712`` is integrated
+    (``cumtrapz``) over ``log10 L`` in [-5, 10] on 4096 points; the JND count is
+    interpolated linearly at ``log10(clip(L, 1e-5, 1e10))`` and normalised so that
+    0.8 cd/m^2 maps to 0 and 80 cd/m^2 to 255. Values can be negative or above 255.
+
+    Parameters
+    ----------
+    luminance_cd_m2 : array_like, any shape
+        Absolute luminance in cd/m^2.
+
+    Returns
+    -------
+    ndarray of the same shape, float64 (100 -> 269.5, 1000 -> 419.6, 10000 -> 569.6).
+    """
+    lo, hi = 10.0 ** _PU2_LOG_RANGE[0], 10.0 ** _PU2_LOG_RANGE[1]
+    arr = _as_float64(luminance_cd_m2, "luminance_cd_m2")
+    y = np.clip(arr.reshape(-1), lo, hi)
+    np.log10(y, out=y)
+    l_lut, p_lut = _pu2_lut()
+    return np.interp(y, l_lut, p_lut).reshape(arr.shape)
+
+
+# -- preparation: luminance, scale -------------------------------------------------------------
+
+def metric_luminance(values: np.ndarray, *, channel_axis: int | None = -1) -> np.ndarray:
+    """Luminance with the weights of ``pu21_metric.m`` (:data:`PU21_LUMA`), float64.
+
+    Parameters
+    ----------
+    values : ndarray
+        Linear values; with ``channel_axis`` set, that axis holds 1 or 3 channels (RGB).
+    channel_axis : int or None
+        ``None``: ``values`` already are luminance and are returned as float64.
+
+    Returns
+    -------
+    ndarray without the channel axis, float64.
+    """
+    arr = np.asarray(values)
+    if channel_axis is None:
+        return arr.astype(np.float64, copy=False)
+    arr = np.moveaxis(arr, channel_axis, -1)
+    if arr.shape[-1] == 1:
+        return arr[..., 0].astype(np.float64)
+    if arr.shape[-1] != 3:
+        raise ShapeError(f"luminance: expected 1 or 3 colour channels on axis {channel_axis}, got {arr.shape[-1]}")
+    return np.tensordot(arr.astype(np.float64, copy=False), PU21_LUMA, axes=([-1], [0]))
+
+
+def _check_pair(result: Any, reference: Any) -> tuple[np.ndarray, np.ndarray]:
+    res = _as_float64(result, "result")
+    ref = _as_float64(reference, "reference")
+    if res.shape != ref.shape:
+        raise ShapeError(f"result and reference: expected the same shape, got {res.shape} and {ref.shape}")
+    if ref.size == 0:
+        raise ShapeError("reference: expected at least one sample, got an empty array")
+    return res, ref
+
+
+def _scale_factor(ref: np.ndarray, peak_luminance: float | None) -> float:
+    """The factor applied to both images: ``peak_luminance / max(reference)`` (1 when None)."""
+    if peak_luminance is None:
+        return 1.0
+    peak_luminance = check_positive("peak_luminance", peak_luminance)
+    top = float(ref.max())
+    if not top > 0:
+        raise InputError(
+            f"reference: maximum value is {top:.4g}; expected a positive peak to scale to {peak_luminance:g} cd/m^2 "
+            "(an all-black reference cannot be evaluated)"
+        )
+    return peak_luminance / top
+
+
+def _scaled_luminance(result: Any, reference: Any, peak_luminance: float | None,
+                      channel_axis: int | None) -> tuple[np.ndarray, np.ndarray, float]:
+    """Scaled luminance of both (cd/m^2, float64) and the display peak ``max(scaled reference)``."""
+    res, ref = _check_pair(result, reference)
+    if peak_luminance is None and not ref.max() > 0:
+        raise InputError(f"reference: maximum value is {float(ref.max()):.4g}; expected positive absolute luminance")
+    factor = _scale_factor(ref, peak_luminance)
+    display_peak = float(ref.max()) * factor
+    y_res = metric_luminance(res, channel_axis=channel_axis)
+    y_ref = metric_luminance(ref, channel_axis=channel_axis)
+    if factor != 1.0:  # new arrays: never scale the caller's arrays in place
+        y_res = y_res * factor
+        y_ref = y_ref * factor
+    return y_res, y_ref, display_peak
+
+
+# -- PSNR and SSIM kernels -----------------------------------------------------------------------
+
+def _psnr_from_mse(mse: np.ndarray | float, peak: float) -> np.ndarray:
+    mse = np.asarray(mse, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        return np.where(mse > 0, 10.0 * np.log10(peak * peak / np.where(mse > 0, mse, 1.0)), np.inf)
+
+
+def psnr(result: Any, reference: Any, *, data_range: float) -> float:
+    """PSNR in dB: ``10 log10(data_range^2 / MSE)`` over every sample; ``inf`` when identical.
+
+    Parameters
+    ----------
+    result, reference : array_like of the same shape
+    data_range : float
+        The peak value (required: no guess from the dtype).
+    """
+    data_range = check_positive("data_range", data_range)
+    res, ref = _check_pair(result, reference)
+    return float(_psnr_from_mse(np.mean(np.square(res - ref)), data_range))
+
+
+def _ssim_images(p_res: np.ndarray, p_ref: np.ndarray) -> np.ndarray:
+    """SSIM of each 2-D image over the last two axes; returns an array of the leading shape."""
+    from skimage.metrics import structural_similarity
+
+    h, w = p_ref.shape[-2:]
+    if min(h, w) < _SSIM_MIN_SIZE:
+        raise ShapeError(
+            f"SSIM: images must be at least {_SSIM_MIN_SIZE}x{_SSIM_MIN_SIZE} pixels (Gaussian window, sigma 1.5), "
+            f"got {h}x{w}"
+        )
+    lead = p_ref.shape[:-2]
+    flat_res = p_res.reshape(-1, h, w)
+    flat_ref = p_ref.reshape(-1, h, w)
+    out = np.empty(flat_ref.shape[0])
+    for i in range(flat_ref.shape[0]):
+        if np.array_equal(flat_res[i], flat_ref[i]):
+            out[i] = 1.0  # identical images: SSIM is exactly 1 by definition
+        else:
+            out[i] = structural_similarity(flat_res[i], flat_ref[i], **_SSIM_OPTIONS)
+    return out.reshape(lead)
+
+
+# -- public array metrics ----------------------------------------------------------------------
+
+_SHARED_PARAMS_DOC = """
+    Parameters
+    ----------
+    result, reference : array_like of the same shape
+        Linear values: luminance of shape (..., H, W), or colour of shape (..., H, W, C) with
+        ``channel_axis=-1``.
+    peak_luminance : float or None, default 1000
+        Display peak in cd/m^2; both arrays are multiplied by ``peak_luminance / max(reference)``.
+        ``None``: the values already are absolute cd/m^2.
+    channel_axis : int or None, default None
+        Axis holding 1 or 3 channels (converted with :data:`PU21_LUMA`); ``None`` for luminance.
+"""
+
+
+def pu21_psnr(result: Any, reference: Any, *, peak_luminance: float | None = 1000.0,
+              channel_axis: int | None = None, variant: Pu21Variant = "banding_glare") -> float:
+    """PU21-PSNR in dB on luminance (peak 256, ``pu21_metric.m``); ``inf`` for identical images.
+    """
+    y_res, y_ref, _ = _scaled_luminance(result, reference, peak_luminance, channel_axis)
+    mse = np.mean(np.square(pu21_encode(y_res, variant=variant) - pu21_encode(y_ref, variant=variant)))
+    return float(_psnr_from_mse(mse, PU21_PSNR_PEAK))
+
+
+def pu21_ssim(result: Any, reference: Any, *, peak_luminance: float | None = 1000.0,
+              channel_axis: int | None = None, variant: Pu21Variant = "banding_glare") -> float:
+    """PU21-SSIM on luminance: scikit-image SSIM (Gaussian window, sigma 1.5, data range 256).
+
+    Arrays with more than two (luminance) axes are taken as a stack of 2-D images over the
+    last two axes; the mean SSIM of the images is returned. Images must be at least 11x11.
+    """
+    y_res, y_ref, _ = _scaled_luminance(result, reference, peak_luminance, channel_axis)
+    if y_ref.ndim < 2:
+        raise ShapeError(f"SSIM: expected images of shape (..., H, W), got shape {y_ref.shape}")
+    ssim = _ssim_images(pu21_encode(y_res, variant=variant), pu21_encode(y_ref, variant=variant))
+    return float(np.mean(ssim))
+
+
+def pu2_psnr(result: Any, reference: Any, *, peak_luminance: float | None = 1000.0,
+             channel_axis: int | None = None) -> float:
+    """PU2-PSNR in dB on luminance with the peak ``pu2_encode(max(scaled reference))``.
+
+    After scaling the peak is ``pu2_encode(peak_luminance)`` (419.6 for 1000 cd/m^2); see the
+    module notes for why this convention.
+    """
+    y_res, y_ref, display_peak = _scaled_luminance(result, reference, peak_luminance, channel_axis)
+    mse = np.mean(np.square(pu2_encode(y_res) - pu2_encode(y_ref)))
+    return float(_psnr_from_mse(mse, float(pu2_encode(display_peak))))
+
+
+def _log_luminance(y: np.ndarray) -> np.ndarray:
+    return np.log10(np.clip(y, PU21_L_MIN, PU21_L_MAX))
+
+
+def _log_peak(display_peak: float) -> float:
+    return math.log10(min(max(display_peak, PU21_L_MIN), PU21_L_MAX) / PU21_L_MIN)
+
+
+def log_psnr(result: Any, reference: Any, *, peak_luminance: float | None = 1000.0,
+             channel_axis: int | None = None) -> float:
+    """Log-domain PSNR in dB: PSNR of ``log10(clip(Y, 0.005, 1e4))`` with peak ``log10(Y_peak / 0.005)``.
+
+    ``Y`` is the scaled luminance (cd/m^2) and ``Y_peak`` the scaled reference peak
+    (``peak_luminance``), so the peak is the number of decades the display spans above
+    PU21's black level (5.30 for 1000 cd/m^2). A uniform error of ``d`` decades gives
+    ``20 log10(peak / d)``.
+    """
+    y_res, y_ref, display_peak = _scaled_luminance(result, reference, peak_luminance, channel_axis)
+    mse = np.mean(np.square(_log_luminance(y_res) - _log_luminance(y_ref)))
+    return float(_psnr_from_mse(mse, _log_peak(display_peak)))
+
+
+def mean_relative_error(result: Any, reference: Any, *, epsilon_relative: float = 1e-3) -> float:
+    """Mean relative error of linear values: ``mean(|result - reference| / (reference + eps))``.
+
+    Computed on every sample (every colour channel), without luminance, PU or scaling.
+    ``eps = epsilon_relative * max(reference)`` keeps black reference samples from dominating
+    (default ``1e-3``: 10 stops below the reference peak). 0 for identical arrays.
+
+    Parameters
+    ----------
+    result, reference : array_like of the same shape
+        Linear radiance in the same units.
+    epsilon_relative : float, default 1e-3
+        Regulariser relative to the reference peak (positive).
+    """
+    epsilon_relative = check_positive("epsilon_relative", epsilon_relative)
+    res, ref = _check_pair(result, reference)
+    eps = epsilon_relative * float(ref.max())
+    if not eps > 0:
+        raise InputError(f"reference: maximum value is {float(ref.max()):.4g}; expected a positive peak")
+    return float(np.mean(np.abs(res - ref) / (np.abs(ref) + eps)))
+
+
+for _f in (pu21_psnr, pu21_ssim, pu2_psnr, log_psnr):
+    _f.__doc__ = (_f.__doc__ or "").rstrip() + "\n" + _SHARED_PARAMS_DOC
+del _f
+
+
+# -- light fields ----------------------------------------------------------------------------------
+
+def _describe(lf: LightField) -> str:
+    v, u, h, w, c = lf.shape
+    return f"{v}x{u} views of {h}x{w}x{c}"
+
+
+def _check_lightfields(result: LightField, reference: LightField, scale_tolerance_stops: float | None) -> None:
+    for name, lf in (("result", result), ("reference", reference)):
+        if not isinstance(lf, LightField):
+            raise InputError(f"evaluate: {name} must be a LightField, got {type(lf).__name__}")
+    if result.views != reference.views:
+        raise ShapeError(
+            f"evaluate: result has {result.views[0]}x{result.views[1]} views, reference "
+            f"{reference.views[0]}x{reference.views[1]}; expected the same views"
+        )
+    if result.shape != reference.shape:
+        raise ShapeError(
+            f"evaluate: result has {_describe(result)}, reference {_describe(reference)}; expected the same shape"
+        )
+    if result.units != reference.units:
+        raise InputError(
+            f"evaluate: result is in {result.units!r}, reference in {reference.units!r}; expected the same units "
+            "(both images are scaled by one factor)"
+        )
+    ref_max = float(reference.data.max())
+    if not ref_max > 0:
+        raise InputError(
+            f"evaluate: reference maximum is {ref_max:.4g}; an all-black reference cannot be scaled to the display peak"
+        )
+    if scale_tolerance_stops is not None:
+        tol = check_positive("scale_tolerance_stops", scale_tolerance_stops)
+        mean_res = float(np.mean(result.data, dtype=np.float64))
+        mean_ref = float(np.mean(reference.data, dtype=np.float64))
+        stops = math.log2(mean_res / mean_ref) if mean_res > 0 else -math.inf
+        if abs(stops) > tol:
+            raise InputError(
+                f"evaluate: result mean {mean_res:.4g} and reference mean {mean_ref:.4g} ({result.units}) differ by "
+                f"{abs(stops):.3g} stops, more than {tol:g}; expected the same scale (are the units or exposure "
+                "different? raise scale_tolerance_stops / --scale-tolerance-stops to compare anyway)"
+            )
+
+
+def evaluate(result: LightField, reference: LightField, *, peak_luminance: float | None = 1000.0,
+             variant: Pu21Variant = "banding_glare", epsilon_relative: float = 1e-3,
+             scale_tolerance_stops: float | None = 4.0) -> dict[str, Any]:
+    """All metrics of a result light field against a reference, per view and averaged over views.
+
+    Luminance (:data:`PU21_LUMA`) of every view is scaled by one factor,
+    ``peak_luminance / max(reference.data)`` (maximum over all views and channels; the same
+    factor for the result), PU-encoded in one batch over the ``(V, U, H, W)`` array, and
+    compared view by view. See the module notes for every convention.
+
+    Parameters
+    ----------
+    result, reference : LightField
+        Same views, size and channels, same ``units``.
+    peak_luminance : float or None, default 1000
+        Display peak in cd/m^2 the reference peak is mapped to; ``None`` when both are
+        already absolute luminance (``units="cd/m2"``).
+    variant : PU21 variant (default ``"banding_glare"``).
+    epsilon_relative : regulariser of :func:`mean_relative_error`.
+    scale_tolerance_stops : float or None, default 4
+        Refuse pairs whose mean values differ by more than this many stops (different units or
+        exposure); ``None`` disables the check.
+
+    Returns
+    -------
+    dict
+        ``pu21_psnr_db``, ``pu21_ssim``, ``pu2_psnr_db``, ``log_psnr_db``,
+        ``mean_relative_error``: means over views (PSNR ``inf`` when identical);
+        ``views``: list of dicts with ``v``, ``u`` and the same five figures, row-major;
+        ``peak_luminance_cd_m2``, ``scale_factor`` (cd/m^2 per unit of the data),
+        ``pu21_psnr_peak`` (256), ``pu2_psnr_peak``, ``log_psnr_peak``, ``angular_shape``,
+        ``size``, ``channels``, ``units``, ``pu21_variant``.
+
+    Raises
+    ------
+    ShapeError
+        Different views, size or channels; views smaller than 11x11 (SSIM window).
+    InputError
+        Different units, all-black reference, scales more than ``scale_tolerance_stops`` apart,
+        ``peak_luminance=None`` with data not in cd/m2.
+    """
+    _check_lightfields(result, reference, scale_tolerance_stops)
+    check_choice("variant", variant, PU21_VARIANTS)
+    epsilon_relative = check_positive("epsilon_relative", epsilon_relative)
+    if peak_luminance is None and reference.units != "cd/m2":
+        raise InputError(
+            f"evaluate: peak_luminance=None needs absolute luminance (units 'cd/m2'), the data are in "
+            f"{reference.units!r}; give a display peak in cd/m^2"
+        )
+    nv, nu, h, w, _ = reference.shape
+    if min(h, w) < _SSIM_MIN_SIZE:
+        raise ShapeError(
+            f"evaluate: views must be at least {_SSIM_MIN_SIZE}x{_SSIM_MIN_SIZE} pixels for SSIM, got {h}x{w}"
+        )
+    factor = _scale_factor(reference.data, peak_luminance)
+    y_res, y_ref, display_peak = _scaled_luminance(result.data, reference.data, peak_luminance, -1)
+
+    axes = (-2, -1)
+    p_res, p_ref = pu21_encode(y_res, variant=variant), pu21_encode(y_ref, variant=variant)
+    pu21_psnr_v = _psnr_from_mse(np.mean(np.square(p_res - p_ref), axis=axes), PU21_PSNR_PEAK)
+    pu21_ssim_v = _ssim_images(p_res, p_ref)
+    del p_res, p_ref
+    pu2_peak = float(pu2_encode(display_peak))
+    pu2_psnr_v = _psnr_from_mse(np.mean(np.square(pu2_encode(y_res) - pu2_encode(y_ref)), axis=axes), pu2_peak)
+    log_peak = _log_peak(display_peak)
+    log_psnr_v = _psnr_from_mse(np.mean(np.square(_log_luminance(y_res) - _log_luminance(y_ref)), axis=axes),
+                                log_peak)
+    del y_res, y_ref
+    res = result.data.astype(np.float64)
+    ref = reference.data.astype(np.float64)
+    eps = epsilon_relative * float(ref.max())
+    mre_v = np.mean(np.abs(res - ref) / (ref + eps), axis=(2, 3, 4))
+
+    figures = {
+        "pu21_psnr_db": pu21_psnr_v,
+        "pu21_ssim": pu21_ssim_v,
+        "pu2_psnr_db": pu2_psnr_v,
+        "log_psnr_db": log_psnr_v,
+        "mean_relative_error": mre_v,
+    }
+    views = [{"v": v, "u": u} | {k: float(a[v, u]) for k, a in figures.items()} for v in range(nv) for u in range(nu)]
+    out: dict[str, Any] = {k: float(np.mean(a)) for k, a in figures.items()}
+    out |= {
+        "views": views,
+        "peak_luminance_cd_m2": display_peak,
+        "scale_factor": factor,
+        "pu21_variant": variant,
+        "pu21_psnr_peak": PU21_PSNR_PEAK,
+        "pu2_psnr_peak": pu2_peak,
+        "log_psnr_peak": log_peak,
+        "epsilon_relative": epsilon_relative,
+        "angular_shape": [nv, nu],
+        "size": [h, w],
+        "channels": reference.channels,
+        "units": reference.units,
+    }
+    return out
