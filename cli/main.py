@@ -18,6 +18,7 @@ from lfproc.errors import LfprocError
 COMMANDS = (
     "info",
     "convert",
+    "evaluate",
 )
 
 
