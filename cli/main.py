@@ -23,13 +23,15 @@ COMMANDS = (
 
 
 def build_parser() -> argparse.ArgumentParser:
+    # --debug is accepted before and after the sub-command; SUPPRESS keeps the
+    # sub-parser from resetting a value given before it.
     common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("--debug", action="store_true", help="show tracebacks of errors")
+    common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks of errors")
     parser = argparse.ArgumentParser(
         prog="lfproc",
         description="High-dynamic-range light fields: decode, merge, calibrate, simulate, evaluate.",
-        parents=[common],
     )
+    parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     parser.add_argument("--version", action="version", version=f"lfproc {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:

@@ -87,19 +87,18 @@ def clean_nonfinite(
         out[np.isnan(out)] = 0
         out[np.isneginf(out)] = 0
         out[np.isposinf(out)] = top if policy == "clip" else 0
-    if negative != "keep":
-        neg = out < 0
-        n_neg = int(neg.sum())
-        if n_neg:
-            counts["negative"] = n_neg
-            if negative == "raise":
-                raise InputError(
-                    f"{name}: contains {n_neg} negative values (min {float(out.min()):.4g}); expected non-negative "
-                    "radiance (use negative='clip')"
-                )
-            if negative != "clip":
-                raise InputError(f"negative: expected one of raise, clip, keep; got {negative!r}")
-            out = np.where(neg, 0, out).astype(array.dtype, copy=False)
+    if negative not in ("raise", "clip", "keep"):
+        raise InputError(f"negative: expected one of raise, clip, keep; got {negative!r}")
+    neg = out < 0
+    n_neg = int(neg.sum())
+    counts["negative"] = n_neg
+    if n_neg and negative == "raise":
+        raise InputError(
+            f"{name}: contains {n_neg} negative values (min {float(out.min()):.4g}); expected non-negative "
+            "radiance (use negative='clip')"
+        )
+    if n_neg and negative == "clip":
+        out = np.where(neg, 0, out).astype(array.dtype, copy=False)
     return out, counts
 
 

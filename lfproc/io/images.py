@@ -79,7 +79,7 @@ def exr_parts(path: str | os.PathLike) -> list[dict[str, Any]]:
                 "name": part.name() or "",
                 "view": h.get("view"),
                 "multiView": list(h["multiView"]) if "multiView" in h else None,
-                "channels": sorted(h["channels"]) if "channels" in h else None,
+                "channels": sorted(c.name for c in h["channels"]) if "channels" in h else None,
                 "size": [int(y1 - y0 + 1), int(x1 - x0 + 1)],
             }
         )
@@ -90,11 +90,19 @@ _COLOUR_SETS = (("R", "G", "B"), ("Y",))
 
 
 def _pick_channels(names: list[str], prefix: str) -> tuple[str, ...] | None:
-    """The colour channels of a layer or view prefix ('' for the default)."""
+    """The colour channels of a layer or view prefix ('' for the default).
+
+    R,G,B (3 channels) or Y (1) first; else a lone unprefixed channel other than alpha or
+    depth (e.g. the single ``G`` of ``TestImages_WideFloatRange.exr``) is read as one channel.
+    """
     for group in _COLOUR_SETS:
         full = tuple(prefix + c for c in group)
         if all(n in names for n in full):
             return full
+    if not prefix:
+        lone = [n for n in names if "." not in n and n not in ("A", "Z")]
+        if len(lone) == 1 and lone[0] in ("R", "G", "B", "L"):
+            return (lone[0],)
     return None
 
 
