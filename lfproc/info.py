@@ -46,11 +46,21 @@ def describe_lightfield(lf: LightField) -> dict[str, Any]:
     }
 
 
+def _is_lfp(path: Path) -> bool:
+    from .lytro.container import is_lfp
+
+    return is_lfp(path)
+
+
 def describe(path: str | os.PathLike, **read_options) -> dict[str, Any]:
     """Describe the file or folder at ``path`` (see the module documentation)."""
     path = Path(path)
     if not path.exists():
         raise MissingFileError(f"{path}: no such file or folder")
+    if path.is_file() and (path.suffix.lower() in (".lfr", ".lfp", ".raw") or _is_lfp(path)):
+        from .lytro.capture import describe_lytro
+
+        return describe_lytro(path)
     lf = read_lightfield(path, **read_options)
     out = describe_lightfield(lf)
     out["path"] = str(path)
