@@ -1,0 +1,485 @@
+"""The projection operator ``Phi`` of the coded-mask camera (method.md section 1).
+
+One shot ``s`` maps a light field ``L`` of shape ``(V, U, H, W, C)`` to one sensor image:
+
+``y_s(p) = sum over views (v, u) of  M_s(v, u, p, c(p)) * L(v, u, p, c(p))``
+
+where ``c(p)`` is the colour of the Bayer CFA at pixel ``p`` and ``M_s`` is the mask
+transmittance (in [0, 1]) of shot ``s``. ``Phi`` stacks the shots: it maps
+``(V, U, H, W, C)`` to ``(S, H, W)``. It is applied through its *weights*
+``A[s, v, u, y, x] = M_s(v, u, y, x, c(y, x))`` (the mask seen through the CFA) and the CFA
+colour map ``c``; it is never a dense matrix.
+
+Mask models (:class:`MaskCode`):
+
+``random``
+    i.i.d. transmittance (uniform in [0, 1]) per pixel, view, colour and shot (the paper's
+    model). Codes of shape ``(S, V, U, Ph, Pw, C)``; ``(Ph, Pw)`` is the tiling period, or
+    the full sensor size when the mask is not periodic.
+``shifted``
+    one 2-D colour mask per shot, at a distance from the sensor, so each view sees it
+    shifted by ``shift`` pixels per angular step: view ``(v, u)`` at pixel ``(y, x)`` sees
+    ``base[s, y + shift * v, x + shift * u, c]``. Codes of shape ``(S, Bh, Bw, C)``: with a
+    period ``P`` the base is ``P x P`` and indices wrap modulo ``P``; without, the base is
+    ``(H + shift (V - 1), W + shift (U - 1))``.
+
+Patch vectorisation (used by :meth:`ProjectionOperator.patch_matrix` and the
+reconstruction): a patch of ``size x size`` pixels at ``(top, left)`` has
+
+* measurement index ``row = (s * size + i) * size + j`` (C order of ``(S, size, size)``),
+* unknown index ``col = (((v * U + u) * size + i) * size + j) * C + c`` (C order of
+  ``(V, U, size, size, C)``, i.e. ``L[:, :, top:top+size, left:left+size, :].reshape(-1)``).
+
+Sampling rate: ``S / (C V U)`` measurements per unknown (1.33 % for one shot of 5 x 5
+RGB views, 2.67 % for two).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._util import check_choice, check_random_state
+from .errors import InputError, ShapeError
+
+__all__ = [
+    "MASK_KINDS",
+    "CFA_PATTERNS",
+    "MaskCode",
+    "ProjectionOperator",
+    "make_mask",
+    "cfa_index_map",
+    "build_operator",
+    "sampling_rate",
+]
+
+MASK_KINDS = ("random", "shifted")
+CFA_PATTERNS = ("RGGB", "GRBG", "GBRG", "BGGR")
+_COLOUR_INDEX = {"R": 0, "G": 1, "B": 2}
+
+
+def sampling_rate(*, shots: int, views: tuple[int, int], channels: int = 3) -> float:
+    """Measurements per unknown: ``shots / (channels * V * U)`` (a fraction, not percent)."""
+    return shots / (channels * views[0] * views[1])
+
+
+def cfa_index_map(pattern: str, size: tuple[int, int], *, offset: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """Colour index (0 = R, 1 = G, 2 = B) of every pixel of a Bayer sensor.
+
+    Parameters
+    ----------
+    pattern : str
+        Row-major 2 x 2 layout from the top-left pixel, one of ``RGGB, GRBG, GBRG, BGGR``.
+    size : (H, W)
+    offset : (row, column) of the top-left pixel of the returned window on the sensor.
+
+    Returns
+    -------
+    ndarray of shape (H, W), int8
+    """
+    pattern = check_choice("cfa_pattern", str(pattern).upper(), CFA_PATTERNS)
+    tile = np.array([_COLOUR_INDEX[ch] for ch in pattern], dtype=np.int8).reshape(2, 2)
+    rows = (np.arange(size[0]) + offset[0]) % 2
+    cols = (np.arange(size[1]) + offset[1]) % 2
+    return tile[rows[:, None], cols[None, :]]
+
+
+@dataclass(frozen=True, eq=False)
+class MaskCode:
+    """The mask codes of all shots (see the module documentation for the layouts).
+
+    Parameters
+    ----------
+    kind : {"random", "shifted"}
+    codes : ndarray
+        ``(S, V, U, Ph, Pw, C)`` for ``random``; ``(S, Bh, Bw, C)`` for ``shifted``;
+        transmittances in [0, 1], float32.
+    period : int or None
+        Tiling period in pixels (the codes hold one tile), or None (codes cover the sensor).
+    shift : int
+        Pixels of mask shift per angular step (``shifted`` only).
+    """
+
+    kind: str
+    codes: np.ndarray
+    period: int | None = None
+    shift: int = 1
+
+    def __post_init__(self):
+        check_choice("mask kind", self.kind, MASK_KINDS)
+        codes = np.asarray(self.codes, dtype=np.float32)
+        want = 6 if self.kind == "random" else 4
+        if codes.ndim != want:
+            raise ShapeError(f"mask codes ({self.kind}): expected {want} dimensions, got shape {codes.shape}")
+        if not np.isfinite(codes).all() or codes.min(initial=0) < 0 or codes.max(initial=0) > 1:
+            raise InputError("mask codes: expected finite transmittances in [0, 1]")
+        if self.period is not None:
+            p = int(self.period)
+            if p < 1 or p != self.period:
+                raise InputError(f"mask period: expected a positive integer, got {self.period!r}")
+            if codes.shape[-3:-1] != (p, p):
+                raise ShapeError(f"mask codes: a period of {p} needs {p} x {p} tiles, got {codes.shape[-3:-1]}")
+        if int(self.shift) < 0:
+            raise InputError(f"mask shift: expected a non-negative integer, got {self.shift}")
+        object.__setattr__(self, "codes", codes)
+
+    @property
+    def shots(self) -> int:
+        return int(self.codes.shape[0])
+
+    @property
+    def channels(self) -> int:
+        return int(self.codes.shape[-1])
+
+    def expand(self, *, views: tuple[int, int], size: tuple[int, int], cfa_index: np.ndarray | None = None) -> np.ndarray:
+        """Transmittance of every shot, view, pixel and colour: ``(S, V, U, H, W, C)`` float32.
+
+        With ``cfa_index`` (``(H, W)`` colour indices) only each pixel's CFA colour is kept:
+        ``(S, V, U, H, W)``, without building the full array.
+        """
+        nv, nu = views
+        h, w = size
+        if cfa_index is not None:
+            cfa_index = np.asarray(cfa_index, dtype=np.intp)
+            if cfa_index.shape != (h, w):
+                raise ShapeError(f"cfa_index: expected shape {(h, w)}, got {cfa_index.shape}")
+        colour = slice(None) if cfa_index is None else cfa_index
+        if self.kind == "random":
+            if self.codes.shape[1:3] != (nv, nu):
+                raise ShapeError(f"random mask: codes are for {self.codes.shape[1:3]} views, the light field has {views}")
+            if self.period is None and self.codes.shape[3:5] != (h, w):
+                raise ShapeError(f"random mask: codes cover {self.codes.shape[3:5]} pixels, the sensor is {size}")
+            rows = np.arange(h) if self.period is None else np.arange(h) % self.period
+            cols = np.arange(w) if self.period is None else np.arange(w) % self.period
+            if cfa_index is None:
+                return self.codes[:, :, :, rows[:, None], cols[None, :], :]
+            return self.codes[:, :, :, rows[:, None], cols[None, :], colour]
+        # shifted: view (v, u) sees base[y + shift v, x + shift u]
+        sh = int(self.shift)
+        rows = np.arange(nv)[:, None] * sh + np.arange(h)[None, :]  # (V, H)
+        cols = np.arange(nu)[:, None] * sh + np.arange(w)[None, :]  # (U, W)
+        bh, bw = self.codes.shape[1:3]
+        if self.period is None:
+            if rows.max() >= bh or cols.max() >= bw:
+                raise ShapeError(
+                    f"shifted mask: base of {bh} x {bw} is too small for {views} views of {size} with shift {sh}; "
+                    f"expected at least {rows.max() + 1} x {cols.max() + 1}"
+                )
+        else:
+            rows, cols = rows % self.period, cols % self.period
+        r = rows[:, None, :, None]
+        c = cols[None, :, None, :]
+        if cfa_index is None:
+            return self.codes[:, r, c, :]
+        return self.codes[:, r, c, colour[None, None]]
+
+    def to_json(self) -> dict:
+        return {"kind": self.kind, "period": self.period, "shift": int(self.shift), "codes_shape": list(self.codes.shape)}
+
+
+def make_mask(
+    kind: str = "random",
+    *,
+    shots: int,
+    views: tuple[int, int],
+    size: tuple[int, int],
+    channels: int = 3,
+    period: int | None = None,
+    shift: int = 1,
+    random_state=None,
+) -> MaskCode:
+    """Draw mask codes for ``shots`` shots (each its own code), transmittance uniform in [0, 1].
+
+    Parameters
+    ----------
+    kind : {"random", "shifted"}
+    shots : int (>= 1)
+    views : (V, U)
+    size : (H, W) sensor size in pixels
+    channels : int
+    period : int, optional
+        Tile the mask with this period (pixels); None: no repetition.
+    shift : int
+        Mask shift per angular step for ``shifted``.
+    random_state : int, Generator or None
+
+    Returns
+    -------
+    MaskCode
+    """
+    check_choice("mask", kind, MASK_KINDS)
+    if int(shots) < 1 or int(shots) != shots:
+        raise InputError(f"shots: expected an integer >= 1, got {shots!r}")
+    if period is not None and (int(period) != period or int(period) < 1):
+        raise InputError(f"mask period: expected a positive integer, got {period!r}")
+    rng = check_random_state(random_state)
+    nv, nu = views
+    if kind == "random":
+        tile = (period, period) if period is not None else tuple(size)
+        codes = rng.random((shots, nv, nu, *tile, channels), dtype=np.float32)
+    else:
+        if period is not None:
+            base = (period, period)
+        else:
+            base = (size[0] + shift * (nv - 1), size[1] + shift * (nu - 1))
+        codes = rng.random((shots, *base, channels), dtype=np.float32)
+    return MaskCode(kind=kind, codes=codes, period=None if period is None else int(period), shift=int(shift))
+
+
+class ProjectionOperator:
+    """The linear map ``Phi``: light field ``(V, U, H, W, C)`` -> sensor images ``(S, H, W)``.
+
+    Parameters
+    ----------
+    weights : ndarray of shape (S, V, U, H, W)
+        Transmittance of the mask at each pixel's CFA colour (``A`` in the module notes).
+    cfa_index : ndarray of shape (H, W)
+        Colour index of each pixel (0..C-1).
+    channels : int
+        Number of colours ``C`` of the light field.
+    period : (int, int) or None
+        Spatial period of the operator (mask and CFA together), when it has one.
+    offset : (int, int)
+        Position of this operator's top-left pixel on the full sensor (for restrictions).
+
+    Notes
+    -----
+    Use :func:`build_operator` to make one from a :class:`MaskCode` and a CFA pattern.
+    """
+
+    def __init__(self, weights, cfa_index, *, channels: int = 3, period=None, offset=(0, 0)):
+        weights = np.asarray(weights)
+        if weights.dtype not in (np.float32, np.float64):
+            weights = weights.astype(np.float32)
+        cfa_index = np.asarray(cfa_index)
+        if weights.ndim != 5:
+            raise ShapeError(f"projection weights: expected shape (S, V, U, H, W), got {weights.shape}")
+        if cfa_index.shape != weights.shape[3:]:
+            raise ShapeError(f"cfa_index: expected shape {weights.shape[3:]}, got {cfa_index.shape}")
+        if cfa_index.size and (cfa_index.min() < 0 or cfa_index.max() >= channels):
+            raise InputError(f"cfa_index: expected colour indices in 0..{channels - 1}")
+        self.weights = weights
+        self.cfa_index = cfa_index.astype(np.intp)
+        self.channels = int(channels)
+        self.period = None if period is None else (int(period[0]), int(period[1]))
+        self.offset = (int(offset[0]), int(offset[1]))
+        self._onehot = None
+
+    # -- shapes ------------------------------------------------------------------------
+    @property
+    def shots(self) -> int:
+        return self.weights.shape[0]
+
+    @property
+    def views(self) -> tuple[int, int]:
+        return self.weights.shape[1], self.weights.shape[2]
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.weights.shape[3], self.weights.shape[4]
+
+    @property
+    def in_shape(self) -> tuple[int, int, int, int, int]:
+        return (*self.views, *self.size, self.channels)
+
+    @property
+    def out_shape(self) -> tuple[int, int, int]:
+        return (self.shots, *self.size)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(m, n)`` of the matrix ``Phi``."""
+        return math.prod(self.out_shape), math.prod(self.in_shape)
+
+    @property
+    def sampling_rate(self) -> float:
+        """``S / (C V U)`` (a fraction; multiply by 100 for percent)."""
+        return sampling_rate(shots=self.shots, views=self.views, channels=self.channels)
+
+    def __repr__(self) -> str:
+        return (f"ProjectionOperator(shots={self.shots}, views={self.views}, size={self.size}, "
+                f"channels={self.channels}, period={self.period}, offset={self.offset})")
+
+    # -- application -------------------------------------------------------------------
+    def _onehot_map(self, dtype) -> np.ndarray:
+        if self._onehot is None:
+            self._onehot = np.eye(self.channels, dtype=np.float32)[self.cfa_index]  # (H, W, C)
+        return self._onehot.astype(dtype, copy=False)
+
+    def forward(self, lf: np.ndarray) -> np.ndarray:
+        """``Phi L``: sensor images ``(S, H, W)`` (noise-free, in the units of ``lf``).
+
+        Parameters
+        ----------
+        lf : ndarray of shape (V, U, H, W, C)
+
+        Returns
+        -------
+        ndarray of shape (S, H, W); float64 for float64 input, else float32
+        """
+        lf = np.asarray(lf)
+        if lf.shape != self.in_shape:
+            raise ShapeError(f"forward: expected a light field of shape {self.in_shape}, got {lf.shape}")
+        dtype = np.result_type(lf.dtype, np.float32)
+        sel = np.take_along_axis(lf, self.cfa_index[None, None, :, :, None], axis=-1)[..., 0]  # (V, U, H, W)
+        return np.einsum("svuhw,vuhw->shw", self.weights.astype(dtype, copy=False), sel.astype(dtype, copy=False))
+
+    def adjoint(self, y: np.ndarray) -> np.ndarray:
+        """``Phi^T y``: light field ``(V, U, H, W, C)`` from sensor images ``(S, H, W)``."""
+        y = np.asarray(y)
+        if y.shape != self.out_shape:
+            raise ShapeError(f"adjoint: expected sensor images of shape {self.out_shape}, got {y.shape}")
+        dtype = np.result_type(y.dtype, np.float32)
+        z = np.einsum("svuhw,shw->vuhw", self.weights.astype(dtype, copy=False), y.astype(dtype, copy=False))
+        return z[..., None] * self._onehot_map(dtype)
+
+    def normal_diagonal(self) -> np.ndarray:
+        """Diagonal of ``Phi^T Phi`` as a light field ``(V, U, H, W, C)`` (useful for preconditioning)."""
+        z = np.einsum("svuhw,svuhw->vuhw", self.weights, self.weights)
+        return z[..., None] * self._onehot_map(self.weights.dtype)
+
+    def as_linear_operator(self):
+        """A :class:`scipy.sparse.linalg.LinearOperator` on flattened (C-order) vectors, float64."""
+        from scipy.sparse.linalg import LinearOperator
+
+        def matvec(x):
+            return self.forward(np.asarray(x, dtype=np.float64).reshape(self.in_shape)).reshape(-1)
+
+        def rmatvec(y):
+            return self.adjoint(np.asarray(y, dtype=np.float64).reshape(self.out_shape)).reshape(-1)
+
+        def matmat(x):
+            return np.stack([matvec(col) for col in np.asarray(x).T], axis=1)
+
+        def rmatmat(y):
+            return np.stack([rmatvec(col) for col in np.asarray(y).T], axis=1)
+
+        return LinearOperator(self.shape, matvec=matvec, rmatvec=rmatvec, matmat=matmat, rmatmat=rmatmat,
+                              dtype=np.float64)
+
+    # -- patches -----------------------------------------------------------------------
+    def _check_window(self, top: int, left: int, size: int) -> None:
+        h, w = self.size
+        if int(size) < 1:
+            raise InputError(f"patch size: expected a positive integer, got {size}")
+        if not (0 <= top and 0 <= left and top + size <= h and left + size <= w):
+            raise InputError(f"patch at ({top}, {left}) of size {size} does not fit in the sensor of {h} x {w}")
+
+    def restrict(self, top: int, left: int, size: int = 9) -> "ProjectionOperator":
+        """The operator of one ``size x size`` window at ``(top, left)`` (a view, no copy of the mask)."""
+        self._check_window(top, left, size)
+        return ProjectionOperator(
+            self.weights[:, :, :, top:top + size, left:left + size],
+            self.cfa_index[top:top + size, left:left + size],
+            channels=self.channels,
+            period=self.period,
+            offset=(self.offset[0] + top, self.offset[1] + left),
+        )
+
+    def patch_sparse(self, tops, lefts, size: int = 9) -> tuple[np.ndarray, np.ndarray]:
+        """Gather form of the patch matrices of many patches (vectorised).
+
+        Each row of a patch matrix has one non-zero per view. For ``B`` patches at
+        ``(tops[b], lefts[b])`` this returns
+
+        * ``cols`` of shape ``(B, m, V*U)`` (int64): column indices (they depend on the
+          patch only through its CFA phase);
+        * ``vals`` of shape ``(B, m, V*U)``: the mask transmittances,
+
+        with ``m = S * size * size`` and the vectorisation orders of the module notes, so
+        ``Phi_p @ x == (vals * x[cols]).sum(-1)`` and ``Phi_p @ D == (vals[..., None] * D[cols]).sum(-2)``.
+        """
+        tops = np.atleast_1d(np.asarray(tops, dtype=np.intp))
+        lefts = np.atleast_1d(np.asarray(lefts, dtype=np.intp))
+        if tops.shape != lefts.shape or tops.ndim != 1:
+            raise ShapeError(f"patch_sparse: tops and lefts must be 1-D of equal length, got {tops.shape}, {lefts.shape}")
+        h, w = self.size
+        size = int(size)
+        if tops.size and (tops.min() < 0 or lefts.min() < 0 or tops.max() + size > h or lefts.max() + size > w):
+            raise InputError(f"patch_sparse: patches of size {size} must lie inside the sensor of {h} x {w}")
+        s_n, (nv, nu), c_n = self.shots, self.views, self.channels
+        ii = np.arange(size)
+        rows = tops[:, None] + ii[None, :]  # (B, size)
+        cols_ = lefts[:, None] + ii[None, :]
+        # vals[b, s, i, j, v, u] = weights[s, v, u, top+i, left+j]
+        wv = self.weights[:, :, :, rows[:, :, None], cols_[:, None, :]]  # (S, V, U, B, size, size)
+        vals = wv.transpose(3, 0, 4, 5, 1, 2).reshape(len(tops), s_n * size * size, nv * nu)
+        colour = self.cfa_index[rows[:, :, None], cols_[:, None, :]]  # (B, size, size)
+        view = np.arange(nv * nu)
+        pix = (ii[:, None] * size + ii[None, :])  # (size, size)
+        col = ((view[None, None, None, :] * size * size + pix[None, :, :, None]) * c_n + colour[..., None])
+        col = np.broadcast_to(col[:, None], (len(tops), s_n, size, size, nv * nu)).reshape(len(tops), -1, nv * nu)
+        return col.astype(np.int64), vals
+
+    def patch_matrix(self, top: int, left: int, size: int = 9) -> np.ndarray:
+        """Dense matrix ``Phi_p`` of one patch, shape ``(S size^2, V U size^2 C)`` (orders: module notes).
+
+        ``patch_matrix(t, l, n) @ L[:, :, t:t+n, l:l+n, :].reshape(-1)`` equals
+        ``forward(L)[:, t:t+n, l:l+n].reshape(-1)`` for a light field ``L`` that is zero
+        outside the patch (and in general, since a pixel only sees its own position).
+        """
+        self._check_window(top, left, size)
+        cols, vals = self.patch_sparse([top], [left], size)
+        m = self.shots * size * size
+        n = self.views[0] * self.views[1] * size * size * self.channels
+        out = np.zeros((m, n), dtype=self.weights.dtype)
+        np.put_along_axis(out, cols[0], vals[0], axis=1)
+        return out
+
+    # -- shared operators by phase -------------------------------------------------------
+    def phase(self, top: int, left: int) -> tuple[int, int] | None:
+        """Phase of a patch at ``(top, left)``: patches with equal phase have equal patch matrices.
+
+        ``None`` when the operator is not periodic (every position is its own phase).
+        """
+        if self.period is None:
+            return None
+        return ((self.offset[0] + top) % self.period[0], (self.offset[1] + left) % self.period[1])
+
+    def n_phases(self, stride: int) -> int | None:
+        """Number of distinct patch operators for patches on a grid of ``stride``; None if not periodic.
+
+        ``(P / gcd(P, stride))`` per axis, with ``P`` the operator's period (mask period and the
+        CFA's 2, combined by their least common multiple).
+        """
+        if self.period is None:
+            return None
+        stride = int(stride)
+        if stride < 1:
+            raise InputError(f"stride: expected a positive integer, got {stride}")
+        return (self.period[0] // math.gcd(self.period[0], stride)) * (self.period[1] // math.gcd(self.period[1], stride))
+
+    def shares_operator(self, stride: int) -> bool:
+        """True when all patches on a grid of ``stride`` pixels have the same patch matrix."""
+        return self.n_phases(stride) == 1
+
+
+def build_operator(mask: MaskCode, *, views: tuple[int, int], size: tuple[int, int], cfa_pattern: str = "RGGB",
+                   dtype=np.float32) -> ProjectionOperator:
+    """Make the projection operator of a mask and a Bayer CFA.
+
+    Parameters
+    ----------
+    mask : MaskCode
+    views : (V, U)
+    size : (H, W) of the sensor (and of each view)
+    cfa_pattern : str
+        Row-major Bayer layout from the top-left pixel (``RGGB``...).
+    dtype : float32 (default) or float64, the dtype of the weights.
+
+    Returns
+    -------
+    ProjectionOperator
+        With ``period = lcm(mask period, 2)`` per axis when the mask is periodic.
+    """
+    if mask.channels != 3:
+        raise ShapeError(f"a Bayer CFA needs a 3-colour mask, this one has {mask.channels} colours")
+    cfa = cfa_index_map(cfa_pattern, size)
+    weights = mask.expand(views=views, size=size, cfa_index=cfa)  # (S, V, U, H, W)
+    period = None
+    if mask.period is not None:
+        p = math.lcm(int(mask.period), 2)
+        period = (p, p)
+    return ProjectionOperator(np.ascontiguousarray(weights, dtype=dtype), cfa, channels=3, period=period)
