@@ -1,0 +1,345 @@
+"""Previews of HDR light fields: tone-mapped views, contact sheets, EPIs, histograms.
+
+Tone mapping is the global photographic operator of Reinhard et al. (2002), applied to
+luminance with colour ratios preserved, then sRGB encoding (:func:`lfproc.io.srgb_encode`).
+
+Preview kinds live in a registry (:data:`PREVIEWS`): kind -> (type of input, renderer).
+:func:`render_preview` checks the input type and dispatches, so previews of other inputs
+(a sensor image, an ISO map, a mask...) are added with :func:`register_preview` without
+touching the light-field ones.
+
+References
+----------
+.. [1] E. Reinhard, M. Stark, P. Shirley, J. Ferwerda, "Photographic tone reproduction
+   for digital images", ACM Transactions on Graphics 21(3), 267-276, 2002.
+   https://doi.org/10.1145/566654.566575
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._version import __version__
+from .errors import InputError, ShapeError
+from .lightfield import LightField, luminance
+
+__all__ = [
+    "tonemap",
+    "reinhard_parameters",
+    "render_preview",
+    "write_preview",
+    "register_preview",
+    "preview_kinds",
+    "epi_stretch",
+    "PREVIEWS",
+    "PREVIEW_SUFFIXES",
+]
+
+PREVIEW_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff")
+
+#: Background grey (sRGB code) of gaps between tiles.
+_GAP_GREY = 40
+
+
+# -- tone mapping --------------------------------------------------------------------------------
+
+def reinhard_parameters(image: np.ndarray, *, key: float = 0.18, white_percentile: float = 99.9,
+                        exposure_ev: float = 0.0) -> dict[str, float]:
+    """Statistics of the Reinhard global operator for ``image`` (linear, last axis colour).
+
+    Returns
+    -------
+    dict with ``log_average`` (``exp(mean(log L))`` over the positive luminances ``L``),
+    ``scale`` (``key * 2**exposure_ev / log_average``: scene luminance to the operator's
+    ``L_s``) and ``white`` (``L_white``: the ``white_percentile`` of ``L_s``, mapped to 1).
+    """
+    if not (0 < key < 1):
+        raise InputError(f"key: expected a number in (0, 1) (0.18 is middle grey), got {key!r}")
+    if not (0 < white_percentile <= 100):
+        raise InputError(f"white_percentile: expected a number in (0, 100], got {white_percentile!r}")
+    if not math.isfinite(exposure_ev):
+        raise InputError(f"exposure: expected a finite number of EV, got {exposure_ev!r}")
+    lum = _luminance_of(image).ravel()
+    positive = lum[lum > 0]
+    if positive.size == 0:
+        return {"log_average": 0.0, "scale": 0.0, "white": 1.0}
+    log_average = float(np.exp(np.mean(np.log(positive.astype(np.float64)))))
+    scale = key * 2.0**exposure_ev / log_average
+    white = float(np.percentile(positive, white_percentile)) * scale
+    return {"log_average": log_average, "scale": scale, "white": max(white, 1e-6)}
+
+
+def _luminance_of(image: np.ndarray) -> np.ndarray:
+    image = np.asarray(image)
+    if image.ndim == 0 or image.shape[-1] not in (1, 3):
+        raise ShapeError(f"tonemap: expected linear values with 1 or 3 colour channels on the last axis, got shape "
+                         f"{image.shape}")
+    return luminance(image)
+
+
+def tonemap(image: np.ndarray, *, key: float = 0.18, white_percentile: float = 99.9, exposure_ev: float = 0.0,
+            reference: np.ndarray | None = None, encoding: str = "srgb") -> np.ndarray:
+    """Tone-map linear HDR values to display values in [0, 1] (Reinhard et al. 2002, global).
+
+    With ``L`` the luminance (Rec. 709) and ``L_avg`` its log-average over positive pixels,
+    ``L_s = key * 2**exposure_ev * L / L_avg`` and (eq. 4 of [1]_)
+    ``L_d = L_s * (1 + L_s / L_white**2) / (1 + L_s)``, with ``L_white`` the
+    ``white_percentile`` of ``L_s`` (so that percentile maps to 1). Colours keep their ratios:
+    ``rgb_d = rgb * L_d / L``, clipped to [0, 1]; then sRGB encoding.
+
+    A pixel at the log-average luminance (with ``exposure_ev=0``) maps to the linear display
+    value ``key * (1 + key / L_white**2) / (1 + key)`` (about 0.153 for ``key=0.18``).
+
+    Parameters
+    ----------
+    image : ndarray of shape (..., C), C in {1, 3}
+        Linear, non-negative values (any number of leading axes: a view, all views...).
+    key : float
+        Display value of the log-average (the "key" of the scene), in (0, 1).
+    white_percentile : float
+        Percentile of the luminance that maps to white.
+    exposure_ev : float
+        Extra exposure in stops (applied before the curve; the white point follows).
+    reference : ndarray, optional
+        Values the statistics come from (default: ``image``), so several images can share
+        one tone curve.
+    encoding : {"srgb", "linear"}
+        Output encoding.
+
+    Returns
+    -------
+    ndarray of the shape of ``image``, float32 in [0, 1].
+
+    References
+    ----------
+    .. [1] E. Reinhard, M. Stark, P. Shirley, J. Ferwerda, "Photographic tone reproduction
+       for digital images", ACM TOG 21(3), 2002. https://doi.org/10.1145/566654.566575
+    """
+    from .io import srgb_encode
+
+    if encoding not in ("srgb", "linear"):
+        raise InputError(f"encoding: expected srgb or linear; got {encoding!r}")
+    image = np.asarray(image, dtype=np.float32)
+    params = reinhard_parameters(image if reference is None else reference, key=key,
+                                 white_percentile=white_percentile, exposure_ev=exposure_ev)
+    lum = _luminance_of(image).astype(np.float64)
+    ls = lum * params["scale"]
+    ld = ls * (1 + ls / params["white"] ** 2) / (1 + ls)
+    ratio = np.divide(ld, lum, out=np.zeros_like(lum), where=lum > 0)
+    out = np.clip(image * ratio[..., None].astype(np.float32), 0, 1)
+    return srgb_encode(out) if encoding == "srgb" else out.astype(np.float32)
+
+
+def _to_uint8(display: np.ndarray) -> np.ndarray:
+    """[0, 1] display values (any C in {1, 3}) to uint8 RGB."""
+    rgb = np.repeat(display, 3, axis=-1) if display.shape[-1] == 1 else display
+    return np.round(np.clip(rgb, 0, 1) * 255).astype(np.uint8)
+
+
+# -- renderers -----------------------------------------------------------------------------------
+
+def _gap(h: int, w: int) -> int:
+    return max(2, min(h, w) // 64)
+
+
+def _preview_centre(lf: LightField, *, exposure_ev: float = 0.0) -> np.ndarray:
+    """The centre view, tone-mapped with its own statistics."""
+    return _to_uint8(tonemap(lf.centre(), exposure_ev=exposure_ev))
+
+
+def _preview_sheet(lf: LightField, *, exposure_ev: float = 0.0) -> np.ndarray:
+    """All V x U views as tiles separated by gaps of ``max(2, min(H, W) // 64)`` pixels, one tone curve."""
+    nv, nu = lf.views
+    h, w = lf.size
+    g = _gap(h, w)
+    tiles = _to_uint8(tonemap(lf.data, exposure_ev=exposure_ev))
+    sheet = np.full((nv * h + (nv - 1) * g, nu * w + (nu - 1) * g, 3), _GAP_GREY, np.uint8)
+    for v in range(nv):
+        for u in range(nu):
+            sheet[v * (h + g):v * (h + g) + h, u * (w + g):u * (w + g) + w] = tiles[v, u]
+    return sheet
+
+
+def epi_stretch(lf: LightField) -> int:
+    """Rows (or columns) each view gets in an EPI preview: EPIs about a quarter of the view tall."""
+    h, w = lf.size
+    return max(1, math.ceil(min(h, w) / (4 * max(lf.views))))
+
+
+def _preview_epi(lf: LightField, *, exposure_ev: float = 0.0, row: int | None = None,
+                 column: int | None = None) -> np.ndarray:
+    """Centre view with the EPI lines marked, the horizontal EPI below it, the vertical EPI to its right.
+
+    Each view is one row (column) of an EPI, repeated ``epi_stretch(lf)`` times so that the
+    slopes (disparities) are visible; the tone curve is the centre view's. Layout::
+
+        [ centre view, row and column marked ] [gap] [ vertical EPI (H x V*s)   ]
+        [ horizontal EPI (U*s x W)           ] [gap] [ empty                    ]
+    """
+    nv, nu = lf.views
+    h, w = lf.size
+    row = h // 2 if row is None else row
+    column = w // 2 if column is None else column
+    s = epi_stretch(lf)
+    g = _gap(h, w)
+    ref = lf.centre()
+    centre = _to_uint8(tonemap(ref, exposure_ev=exposure_ev))
+    ehor = _to_uint8(tonemap(lf.epi(axis="horizontal", index=row), exposure_ev=exposure_ev, reference=ref))
+    ever = _to_uint8(tonemap(lf.epi(axis="vertical", index=column), exposure_ev=exposure_ev, reference=ref))
+    ehor = np.repeat(ehor, s, axis=0)  # (U*s, W, 3)
+    ever = np.repeat(np.transpose(ever, (1, 0, 2)), s, axis=1)  # (H, V*s, 3)
+    marked = centre.copy()
+    marker = np.array([255, 40, 40], np.uint8)
+    dashes = (np.arange(max(h, w)) // 4) % 2 == 0  # dashed lines keep the content visible
+    marked[row, dashes[:w]] = marker
+    marked[dashes[:h], column] = marker
+    out = np.full((h + g + nu * s, w + g + nv * s, 3), _GAP_GREY, np.uint8)
+    out[:h, :w] = marked
+    out[h + g:, :w] = ehor
+    out[:h, w + g:] = ever
+    return out
+
+
+def _preview_histogram(lf: LightField, *, exposure_ev: float = 0.0, width_px: int = 800,
+                       height_px: int = 500) -> np.ndarray:
+    """Histogram of log2 luminance (all views), with the robust dynamic range and saturation."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    lum = lf.luminance().ravel()
+    positive = lum[lum > 0]
+    n_zero = int(lum.size - positive.size)
+    dpi = 100
+    fig = Figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    dr = lf.dynamic_range_stops()
+    sat = lf.saturated_fraction()
+    if positive.size:
+        stops = np.log2(positive.astype(np.float64))
+        lo, hi = math.floor(stops.min()), math.ceil(stops.max())
+        hi = max(hi, lo + 1)
+        bins = np.linspace(lo, hi, int(min(400, max(20, 8 * (hi - lo)))) + 1)
+        counts, edges = np.histogram(stops, bins=bins)
+        ax.stairs(counts / lum.size, edges, fill=True, color="#4c72b0")
+        ax.set_yscale("log")
+        p_lo, p_hi = np.percentile(stops, [0.1, 99.9])
+        for p in (p_lo, p_hi):
+            ax.axvline(p, color="#c44e52", linestyle="--", linewidth=1)
+        ax.axvspan(p_lo, p_hi, color="#c44e52", alpha=0.06)
+        ax.set_xlim(lo, hi)
+    else:
+        ax.text(0.5, 0.5, "no positive luminance", transform=ax.transAxes, ha="center")
+    ax.set_xlabel("log2 luminance (stops)")
+    ax.set_ylabel("fraction of pixels")
+    sat_text = "unknown (no saturation level)" if sat is None else f"{100 * sat:.3g} %"
+    text = (f"dynamic range (0.1-99.9 %): {dr:.1f} stops\n"
+            f"saturated: {sat_text}\nzero pixels: {100 * n_zero / max(lum.size, 1):.3g} %")
+    ax.text(0.98, 0.97, text, transform=ax.transAxes, ha="right", va="top", fontsize=9,
+            bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": "#999999"})
+    nv, nu = lf.views
+    h, w = lf.size
+    title = f"{lf.source or 'light field'}: {nv}x{nu} views of {h}x{w}, units {lf.units}"
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, which="major", alpha=0.3)
+    fig.tight_layout()
+    fig.canvas.draw()
+    return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+
+
+@dataclass(frozen=True)
+class PreviewKind:
+    """A preview: the input type it accepts, its renderer and a one-line description."""
+
+    accepts: type
+    render: Callable[..., np.ndarray]
+    description: str
+
+
+#: Preview kinds: name -> PreviewKind. Renderers take the input and keyword options and
+#: return a uint8 RGB array (H, W, 3).
+PREVIEWS: dict[str, PreviewKind] = {}
+
+
+def register_preview(kind: str, render: Callable[..., np.ndarray], *, accepts: type = LightField,
+                     description: str = "") -> None:
+    """Add a preview kind (e.g. a capture's sensor image): ``render(obj, **options) -> uint8 (H, W, 3)``."""
+    if kind in PREVIEWS:
+        raise InputError(f"preview kind {kind!r} is already registered")
+    PREVIEWS[kind] = PreviewKind(accepts=accepts, render=render, description=description)
+
+
+register_preview("centre", _preview_centre, description="tone-mapped centre view")
+register_preview("sheet", _preview_sheet, description="contact sheet of all views, one tone curve")
+register_preview("epi", _preview_epi, description="centre view with horizontal and vertical epipolar-plane images")
+register_preview("histogram", _preview_histogram, description="histogram of log2 luminance with the dynamic range")
+
+
+def preview_kinds(input_type: type | None = None) -> list[str]:
+    """Preview kinds (those accepting inputs of ``input_type`` when given)."""
+    return [k for k, p in PREVIEWS.items() if input_type is None or issubclass(input_type, p.accepts)]
+
+
+def render_preview(obj: Any, kind: str = "centre", **options) -> np.ndarray:
+    """Render a preview as a uint8 RGB array of shape (H, W, 3).
+
+    Parameters
+    ----------
+    obj : LightField (or the input type a registered kind accepts)
+    kind : str
+        ``"centre"`` (H x W), ``"sheet"`` (``V*H + (V-1)*g`` by ``U*W + (U-1)*g`` with gap
+        ``g = max(2, min(H, W) // 64)``), ``"epi"`` (``H + g + U*s`` by ``W + g + V*s``,
+        ``s = epi_stretch(lf)``) or ``"histogram"`` (800 x 500 plot).
+    **options
+        Passed to the renderer (``exposure_ev`` for all light-field kinds).
+    """
+    if kind not in PREVIEWS:
+        raise InputError(f"preview kind: expected one of {', '.join(PREVIEWS)}; got {kind!r}")
+    spec = PREVIEWS[kind]
+    if not isinstance(obj, spec.accepts):
+        raise InputError(f"preview kind {kind!r}: expected a {spec.accepts.__name__}, got {type(obj).__name__}")
+    image = spec.render(obj, **options)
+    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+        raise ShapeError(f"preview kind {kind!r}: renderer returned {image.dtype} {image.shape}, expected uint8 (H, W, 3)")
+    return image
+
+
+def write_preview(obj: Any, path: str | os.PathLike, *, kind: str = "centre", force: bool = False,
+                  **options) -> Path:
+    """Render a preview and write it atomically (PNG with lfproc version and kind in text chunks; JPEG, TIFF).
+
+    Raises :class:`lfproc.errors.OutputExistsError` when ``path`` exists and ``force`` is false.
+    """
+    from PIL import Image
+    from PIL.PngImagePlugin import PngInfo
+
+    from .io import atomic_file, check_output
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in PREVIEW_SUFFIXES:
+        raise InputError(f"{path}: expected a preview file ending in {', '.join(PREVIEW_SUFFIXES)}")
+    check_output(path, force=force)
+    image = render_preview(obj, kind, **options)
+    with atomic_file(path, force=force) as tmp:
+        pil = Image.fromarray(image)
+        if suffix == ".png":
+            info = PngInfo()
+            info.add_text("Software", f"lfproc {__version__}")
+            info.add_text("lfproc_preview", kind)
+            info.add_text("lfproc_options", repr(sorted(options.items())))
+            if isinstance(obj, LightField) and obj.source:
+                info.add_text("Source", obj.source)
+            pil.save(tmp, format="PNG", pnginfo=info)
+        elif suffix in (".jpg", ".jpeg"):
+            pil.save(tmp, format="JPEG", quality=92)
+        else:
+            pil.save(tmp, format="TIFF")
+    return path
