@@ -18,6 +18,8 @@ from lfproc.errors import LfprocError
 COMMANDS = (
     "info",
     "convert",
+    "synth",
+    "preview",
     "evaluate",
 )
 
