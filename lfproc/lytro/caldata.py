@@ -93,7 +93,7 @@ class WhiteFrame:
         Row-major Bayer pattern from the top-left pixel.
     """
 
-    raw: np.ndarray | None = field(repr=False)
+    raw: np.ndarray | None = field(repr=False, compare=False)
     metadata: dict[str, Any] = field(repr=False)
     name: str = "MOD_0000"
     camera_model: str = "B01"

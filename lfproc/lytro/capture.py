@@ -94,7 +94,7 @@ class LytroCapture:
         For containers: whether every section's SHA-1 was checked (None for ``.RAW`` files).
     """
 
-    raw: np.ndarray = field(repr=False)
+    raw: np.ndarray = field(repr=False, compare=False)
     camera_model: str
     serial: str | None
     black_level: dict[str, float]

@@ -411,6 +411,10 @@ def build_lfp(toc: dict[str, Any], payloads: list[bytes], *, toc_first: bool = T
     then the table of contents).
     """
     toc_bytes = json.dumps(toc, indent=4).encode("ascii")
+    if toc_first:
+        # imageio's F01 reader expects exactly 5 NUL bytes after a leading table of contents;
+        # trailing JSON whitespace makes that true without changing the document.
+        toc_bytes += b" " * ((11 - len(toc_bytes)) % 16)
     content = [_section_bytes("LFC", p) for p in payloads]
     lfm = _section_bytes("LFM", toc_bytes)
     parts = [LFP_MAGIC, b"\x00\x00\x00\x00"] + ([lfm] + content if toc_first else content + [lfm])
