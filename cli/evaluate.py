@@ -56,8 +56,9 @@ def format_table(figures: dict) -> str:
              f"(x{figures['scale_factor']:.4g}), PU21 {figures['pu21_variant']}"]
     header = ["view    "] + [f"{title:>13}" for _, title, _ in _COLUMNS]
     lines.append("".join(header))
-    rows = [("mean", figures)] + [(f"{r['v']:>2},{r['u']:<2}", r) for r in figures["views"]] if nv * nu > 1 \
-        else [("mean", figures)]
+    rows = [("mean", figures)]
+    if nv * nu > 1:
+        rows += [(f"{r['v']:>2},{r['u']:<2}", r) for r in figures["views"]]
     for label, row in rows:
         lines.append(f"{label:<8}" + "".join(f"{_cell(fmt, row[key]):>13}" for key, _, fmt in _COLUMNS))
     return "\n".join(lines)

@@ -149,14 +149,18 @@ _SSIM_MIN_SIZE = 11  # window of gaussian_weights=True, sigma=1.5 (truncate 3.5)
 
 # -- encodings -----------------------------------------------------------------------------
 
-def _as_float64(values: Any, name: str) -> np.ndarray:
+def _as_numeric(values: Any, name: str) -> np.ndarray:
+    """``values`` as a finite numeric array (not converted: callers convert what they need)."""
     arr = np.asarray(values)
     if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
         raise InputError(f"{name}: expected a numeric array, got dtype {arr.dtype}")
-    arr = arr.astype(np.float64, copy=False)
-    if not np.isfinite(arr).all():
+    if np.issubdtype(arr.dtype, np.floating) and not np.isfinite(arr).all():
         raise InputError(f"{name}: contains NaN or Inf values; expected finite values")
     return arr
+
+
+def _as_float64(values: Any, name: str) -> np.ndarray:
+    return _as_numeric(values, name).astype(np.float64, copy=False)
 
 
 def _pu21_params(variant: str) -> tuple[float, ...]:
@@ -307,12 +311,17 @@ def metric_luminance(values: np.ndarray, *, channel_axis: int | None = -1) -> np
         return arr[..., 0].astype(np.float64)
     if arr.shape[-1] != 3:
         raise ShapeError(f"luminance: expected 1 or 3 colour channels on axis {channel_axis}, got {arr.shape[-1]}")
-    return np.tensordot(arr.astype(np.float64, copy=False), PU21_LUMA, axes=([-1], [0]))
+    # channel by channel: float64 temporaries of the luminance size only, not of the colour array
+    y = arr[..., 0].astype(np.float64)
+    y *= PU21_LUMA[0]
+    for i in (1, 2):
+        y += arr[..., i].astype(np.float64) * PU21_LUMA[i]
+    return y
 
 
 def _check_pair(result: Any, reference: Any) -> tuple[np.ndarray, np.ndarray]:
-    res = _as_float64(result, "result")
-    ref = _as_float64(reference, "reference")
+    res = _as_numeric(result, "result")
+    ref = _as_numeric(reference, "reference")
     if res.shape != ref.shape:
         raise ShapeError(f"result and reference: expected the same shape, got {res.shape} and {ref.shape}")
     if ref.size == 0:
@@ -369,7 +378,7 @@ def psnr(result: Any, reference: Any, *, data_range: float) -> float:
     """
     data_range = check_positive("data_range", data_range)
     res, ref = _check_pair(result, reference)
-    return float(_psnr_from_mse(np.mean(np.square(res - ref)), data_range))
+    return float(_psnr_from_mse(np.mean(np.square(res.astype(np.float64) - ref)), data_range))
 
 
 def _ssim_images(p_res: np.ndarray, p_ref: np.ndarray) -> np.ndarray:
@@ -486,7 +495,16 @@ def mean_relative_error(result: Any, reference: Any, *, epsilon_relative: float 
     eps = epsilon_relative * float(ref.max())
     if not eps > 0:
         raise InputError(f"reference: maximum value is {float(ref.max()):.4g}; expected a positive peak")
-    return float(np.mean(np.abs(res - ref) / (np.abs(ref) + eps)))
+    return float(np.mean(_relative_error(res, ref, eps)))
+
+
+def _relative_error(res: np.ndarray, ref: np.ndarray, eps: float) -> np.ndarray:
+    ref = ref.astype(np.float64)
+    err = np.abs(res.astype(np.float64) - ref)
+    np.abs(ref, out=ref)
+    ref += eps
+    err /= ref
+    return err
 
 
 for _f in (pu21_psnr, pu21_ssim, pu2_psnr, log_psnr):
@@ -592,7 +610,13 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
             f"evaluate: views must be at least {_SSIM_MIN_SIZE}x{_SSIM_MIN_SIZE} pixels for SSIM, got {h}x{w}"
         )
     factor = _scale_factor(reference.data, peak_luminance)
-    y_res, y_ref, display_peak = _scaled_luminance(result.data, reference.data, peak_luminance, -1)
+    display_peak = float(reference.data.max()) * factor
+    # luminance of every view at once, float64 (V, U, H, W), scaled by the one factor
+    y_res = metric_luminance(result.data, channel_axis=-1)
+    y_ref = metric_luminance(reference.data, channel_axis=-1)
+    if factor != 1.0:
+        y_res *= factor
+        y_ref *= factor
 
     axes = (-2, -1)
     p_res, p_ref = pu21_encode(y_res, variant=variant), pu21_encode(y_ref, variant=variant)
@@ -605,10 +629,10 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
     log_psnr_v = _psnr_from_mse(np.mean(np.square(_log_luminance(y_res) - _log_luminance(y_ref)), axis=axes),
                                 log_peak)
     del y_res, y_ref
-    res = result.data.astype(np.float64)
-    ref = reference.data.astype(np.float64)
-    eps = epsilon_relative * float(ref.max())
-    mre_v = np.mean(np.abs(res - ref) / (ref + eps), axis=(2, 3, 4))
+    # relative error of the colour samples, one row of views at a time (bounds float64 temporaries)
+    eps = epsilon_relative * float(reference.data.max())
+    mre_v = np.stack([np.mean(_relative_error(result.data[v], reference.data[v], eps), axis=(1, 2, 3))
+                      for v in range(nv)])
 
     figures = {
         "pu21_psnr_db": pu21_psnr_v,

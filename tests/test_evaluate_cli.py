@@ -1,0 +1,112 @@
+"""``lfproc evaluate``: output formats, noise ordering on real light fields, error paths."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from lfproc.cli.main import main
+from lfproc.io import read_lightfield, write_image, write_lightfield
+
+BEDROOM = "lightfields/lowres_5x5/hci_bedroom"
+
+
+@pytest.fixture(scope="module")
+def bedroom(shared_data):
+    return read_lightfield(shared_data / BEDROOM)
+
+
+def _write_noisy(lf, sigma, seed, path):
+    rng = np.random.default_rng(seed)
+    data = np.clip(lf.data * (1 + sigma * rng.standard_normal(lf.shape, dtype=np.float32)), 0, None)
+    return write_lightfield(lf.replace(data=data), path)
+
+
+def _json(capsys, argv):
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert out.count("\n") == 1  # exactly one JSON object
+    return json.loads(out)
+
+
+def test_identical_json_is_valid_with_inf(shared_data, capsys):
+    path = str(shared_data / BEDROOM)
+    out = _json(capsys, ["evaluate", path, path, "--json"])
+    assert out["pu21_psnr_db"] == "inf" and out["log_psnr_db"] == "inf" and out["pu2_psnr_db"] == "inf"
+    assert out["pu21_ssim"] == 1.0 and out["mean_relative_error"] == 0.0
+    assert len(out["views"]) == 25 and {"v", "u", "pu21_psnr_db", "pu21_ssim"} <= set(out["views"][0])
+    assert out["peak_luminance_cd_m2"] == pytest.approx(1000.0)
+
+
+def test_more_noise_lower_psnr_through_files(bedroom, shared_data, tmp_path, capsys):
+    ref = str(shared_data / BEDROOM)
+    figures = []
+    for i, sigma in enumerate((0.01, 0.05, 0.2)):
+        path = _write_noisy(bedroom, sigma, seed=10 + i, path=tmp_path / f"noisy{i}.exr")
+        figures.append(_json(capsys, ["evaluate", str(path), ref, "--json", "--peak-luminance", "4000"]))
+    for key in ("pu21_psnr_db", "pu21_ssim", "pu2_psnr_db", "log_psnr_db"):
+        values = [f[key] for f in figures]
+        assert all(isinstance(v, float) for v in values)
+        assert values[0] > values[1] > values[2], (key, values)
+    assert figures[0]["mean_relative_error"] < figures[2]["mean_relative_error"]
+    assert figures[0]["peak_luminance_cd_m2"] == pytest.approx(4000.0)
+
+
+def test_table_output(bedroom, shared_data, tmp_path, capsys):
+    path = _write_noisy(bedroom, 0.05, seed=1, path=tmp_path / "noisy.exr")
+    assert main(["evaluate", str(path), str(shared_data / BEDROOM)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("5x5 views of 128x128, reference peak -> 1000 cd/m^2")
+    assert "PU21-PSNR dB" in lines[1] and "PU21-SSIM" in lines[1]
+    assert lines[2].split()[0] == "mean" and len(lines) == 3 + 25
+    psnr_mean = float(lines[2].split()[1])
+    assert 35 < psnr_mean < 50
+
+
+def test_single_images(bedroom, tmp_path, capsys):
+    ref = write_image(tmp_path / "ref.exr", bedroom.centre())
+    res = write_image(tmp_path / "res.exr", bedroom.centre() * 1.02)
+    out = _json(capsys, ["evaluate", str(res), str(ref), "--json"])
+    assert len(out["views"]) == 1 and out["angular_shape"] == [1, 1]
+    assert 30 < out["pu21_psnr_db"] < 80 and 0.9 < out["pu21_ssim"] < 1
+    assert main(["evaluate", str(res), str(ref)]) == 0
+    assert len(capsys.readouterr().out.splitlines()) == 3  # header, columns, mean only
+
+
+def _error(capsys, argv):
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("lfproc evaluate: error: ")
+    return lines[0]
+
+
+def test_shape_mismatch_is_one_line_error(shared_data, capsys):
+    line = _error(capsys, ["evaluate", str(shared_data / BEDROOM),
+                           str(shared_data / "lightfields/lowres_5x5/inria_hublais")])
+    assert "result has 5x5 views of 128x128x3, reference 5x5 views of 108x156x3" in line
+
+
+def test_view_count_mismatch(bedroom, tmp_path, shared_data, capsys):
+    path = write_lightfield(bedroom.central(3), tmp_path / "small.exr")
+    line = _error(capsys, ["evaluate", str(path), str(shared_data / BEDROOM)])
+    assert "result has 3x3 views, reference 5x5" in line
+
+
+def test_missing_file(shared_data, tmp_path, capsys):
+    line = _error(capsys, ["evaluate", str(tmp_path / "nope.exr"), str(shared_data / BEDROOM)])
+    assert "nope.exr: no such file or folder" in line
+
+
+def test_scale_mismatch_and_bad_peak(bedroom, tmp_path, shared_data, capsys):
+    bright = write_lightfield(bedroom.replace(data=bedroom.data * 100), tmp_path / "bright.exr")
+    line = _error(capsys, ["evaluate", str(bright), str(shared_data / BEDROOM)])
+    assert "differ by 6.64 stops" in line and "--scale-tolerance-stops" in line
+    black = write_lightfield(bedroom.replace(data=np.zeros(bedroom.shape, np.float32)), tmp_path / "black.exr")
+    line = _error(capsys, ["evaluate", str(shared_data / BEDROOM), str(black), "--scale-tolerance-stops", "100"])
+    assert "all-black reference" in line
+    line = _error(capsys, ["evaluate", str(bright), str(bright), "--peak-luminance", "0"])
+    assert "peak_luminance: expected a positive finite number, got 0.0" in line
