@@ -1,0 +1,703 @@
+"""HDR merging of exposure brackets (method.md section 8; hdr-and-calibration.md section 1).
+
+Two estimators, both vectorised over samples of any shape (2-D images ``(H, W[, C])`` or
+light fields ``(V, U, H, W, C)``: every view and pixel is merged on its own, all views share
+the bracket's exposures) and processed in chunks to bound memory:
+
+* :func:`merge_ml` -- the noise-aware maximum-likelihood estimator of linear sensor codes
+  (Granados et al. 2010; analysed by Aguerrebere et al. 2014). Each exposure ``i`` gives
+  ``T_i`` (e-/s) with variance ``var_i(x) = var_i(0) + x / t_i`` (read noise, dark current and
+  quantisation in ``var_i(0)``, photon noise ``x / t_i``; :func:`lfproc.sensor.calibrated_observation`
+  with ``variance_from="estimate"``). The estimate is the inverse-variance weighted mean
+  ``x = sum_i w_i T_i / sum_i w_i`` with ``w_i = 1 / var_i(x)`` evaluated at the current
+  estimate: first at ``x = 0`` (read-noise weights), then ``n_iter`` fixed-point updates.
+  Saturated and black-clipped samples get weight 0, and so does every longer exposure of a
+  pixel that saturated in a shorter one (blooming and motion guard). The variance of the
+  result is ``1 / sum_i w_i`` at the final estimate.
+* :func:`merge_debevec` -- Debevec & Malik (1997) eq. 6: a hat-weighted mean in the log domain,
+  ``ln E = sum_i w(z_i) (g(z_i) - ln t_i) / sum_i w(z_i)``, on linear data (``g = ln``) or on
+  non-linear 8-bit codes with a camera response ``g`` recovered by :func:`recover_response`
+  (the paper's least-squares ``gsolve`` with a smoothness term, solved here with numpy).
+
+Pixels with no usable sample are never left as garbage. A pixel **saturated in every
+exposure** is filled with the radiance of the saturation level in the shortest exposure
+(a lower bound of its true value), its variance set to the square of that value (relative
+standard deviation 1) and it is flagged in ``info["saturated_everywhere"]``. A pixel
+**black in every exposure** (no weighted sample and not saturated) gets the longest exposure's
+value (0 for clipped linear data) and is flagged in ``info["dark_everywhere"]``.
+
+References
+----------
+P. E. Debevec, J. Malik, "Recovering high dynamic range radiance maps from photographs",
+SIGGRAPH 1997, doi:10.1145/258734.258884.
+M. Granados, B. Ajdin, M. Wand, C. Theobalt, H.-P. Seidel, H. P. A. Lensch, "Optimal HDR
+reconstruction with linear digital cameras", CVPR 2010, doi:10.1109/CVPR.2010.5540208.
+C. Aguerrebere, J. Delon, Y. Gousseau, P. Muse, "Best algorithms for HDR image generation.
+A study of performance bounds", SIAM J. Imaging Sci. 7(1), 2014, doi:10.1137/120891952.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import numpy as np
+
+from ._util import check_choice, check_random_state
+from ._version import __version__
+from .errors import InputError, ShapeError
+from .lightfield import LightField
+
+__all__ = [
+    "MERGE_METHODS",
+    "merge_ml",
+    "merge_debevec",
+    "recover_response",
+    "hat_weight",
+    "merge_lightfields",
+]
+
+MERGE_METHODS = ("ml", "debevec")
+_DEFAULT_CHUNK = 1 << 16
+
+
+# -- validation helpers -------------------------------------------------------------------
+
+def _as_stack(stack, name: str) -> np.ndarray:
+    if isinstance(stack, np.ndarray):
+        arr = stack
+    else:
+        items = [np.asarray(a) for a in stack]
+        if not items:
+            raise InputError(f"{name}: expected at least two exposures, got none")
+        shapes = {a.shape for a in items}
+        if len(shapes) != 1:
+            raise ShapeError(f"{name}: every exposure must have the same shape, got {', '.join(map(str, shapes))}")
+        arr = np.stack(items)
+    if arr.ndim < 2:
+        raise ShapeError(f"{name}: expected an array (N, ...) of N exposures, got shape {arr.shape}")
+    if arr.shape[0] < 2:
+        raise InputError(f"{name}: a bracket needs at least two exposures, got {arr.shape[0]}")
+    if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+        raise ShapeError(f"{name}: expected numeric samples, got dtype {arr.dtype}")
+    return arr
+
+
+def _per_exposure(name: str, values, n: int) -> np.ndarray:
+    arr = np.atleast_1d(np.asarray(values, dtype=np.float64))
+    if arr.ndim != 1 or arr.size not in (1, n):
+        raise InputError(f"{name}: expected one value or {n} values (one per exposure), got {arr.size}")
+    arr = np.broadcast_to(arr, (n,)).copy()
+    if not (np.isfinite(arr).all() and (arr > 0).all()):
+        raise InputError(f"{name}: expected positive finite values, got {arr.tolist()}")
+    return arr
+
+
+def _n_threads(n_threads: int | None) -> int:
+    if n_threads is None:
+        return max(1, min(4, os.cpu_count() or 1))
+    if int(n_threads) < 1:
+        raise InputError(f"n_threads: expected a positive integer, got {n_threads}")
+    return int(n_threads)
+
+
+def _run_chunks(func, total: int, chunk_size: int, n_threads: int) -> None:
+    if chunk_size < 1:
+        raise InputError(f"chunk_size: expected a positive integer, got {chunk_size}")
+    bounds = [(a, min(a + chunk_size, total)) for a in range(0, total, chunk_size)]
+    if n_threads == 1 or len(bounds) == 1:
+        for a, b in bounds:
+            func(a, b)
+        return
+    with ThreadPoolExecutor(max_workers=n_threads) as pool:  # numpy ufuncs release the GIL
+        for _ in pool.map(lambda ab: func(*ab), bounds):
+            pass
+
+
+def _summary(mask_sat: np.ndarray, mask_dark: np.ndarray) -> dict[str, Any]:
+    n = mask_sat.size
+    count = int(mask_sat.sum())
+    return {
+        "saturated_everywhere": mask_sat,
+        "saturated_everywhere_count": count,
+        "saturated_everywhere_fraction": count / n if n else 0.0,
+        "dark_everywhere": mask_dark,
+        "dark_everywhere_count": int(mask_dark.sum()),
+    }
+
+
+# -- the ML estimator ---------------------------------------------------------------------
+
+def merge_ml(
+    dn_stack,
+    *,
+    exposures_s: Sequence[float],
+    isos: float | Sequence[float],
+    profile,
+    gamma: float | None = None,
+    bias_dn: float | np.ndarray | None = None,
+    n_iter: int = 2,
+    saturation_margin_dn: float = 0.5,
+    chunk_size: int = _DEFAULT_CHUNK,
+    n_threads: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """Noise-aware maximum-likelihood merge of linear sensor codes (see the module notes).
+
+    Parameters
+    ----------
+    dn_stack : ndarray of shape (N, ...) or sequence of N arrays of one shape
+        Sensor codes (DN, black level included) of N exposures; any sample shape, e.g.
+        ``(N, H, W)``, ``(N, H, W, C)`` or ``(N, V, U, H, W, C)``. ``uint8``/``uint16`` codes
+        use exact lookup tables; float codes are converted sample by sample.
+    exposures_s : sequence of N floats
+        Exposure times in seconds.
+    isos : float or sequence of N floats
+        ISO of each exposure (must be in ``profile``).
+    profile : CameraProfile or name
+        Gain, read noise, dark current, levels (:func:`lfproc.calib.load_profile`).
+    gamma : float, optional
+        Power-law response of the codes (default: the profile's).
+    bias_dn : float or ndarray broadcastable to the sample shape, optional
+        Bias frame (default: black level plus mean dark signal, see
+        :func:`lfproc.sensor.calibrated_observation`).
+    n_iter : int
+        Fixed-point updates of the weights after the read-noise start (>= 0).
+    saturation_margin_dn : float
+        Codes at or above saturation minus this margin get weight 0.
+    chunk_size : int
+        Samples processed at once (bounds the temporary memory to about 40 bytes x N x chunk).
+    n_threads : int or None
+        Threads working on chunks (None: up to 4, the CPU count).
+
+    Returns
+    -------
+    radiance : ndarray, float32, sample shape
+        Estimate in photo-electrons per second (may be slightly negative in the dark:
+        the estimator is unbiased there).
+    variance : ndarray, float32, sample shape
+        ``1 / sum_i w_i`` at the estimate ((e-/s)^2).
+    info : dict
+        ``saturated_everywhere`` / ``dark_everywhere`` masks, their counts and the
+        saturated fraction, ``n_used`` (usable exposures per sample, uint8), ``fill_radiance``
+        (value given to saturated-everywhere samples), method parameters.
+    """
+    from .calib import load_profile
+    from .sensor import calibrated_observation, iso_maps
+
+    profile = load_profile(profile)
+    stack = _as_stack(dn_stack, "dn_stack")
+    n = stack.shape[0]
+    t = _per_exposure("exposures_s", exposures_s, n)
+    iso = _per_exposure("isos", isos, n)
+    if int(n_iter) != n_iter or n_iter < 0:
+        raise InputError(f"n_iter: expected a non-negative integer, got {n_iter}")
+    n_threads = _n_threads(n_threads)
+    sample_shape = stack.shape[1:]
+    total = math.prod(sample_shape)
+    flat = stack.reshape(n, total)
+    bias_flat = None
+    if bias_dn is not None and np.ndim(bias_dn) > 0:
+        try:
+            bias_flat = np.broadcast_to(np.asarray(bias_dn, dtype=np.float64), sample_shape).reshape(total)
+        except ValueError:
+            raise ShapeError(f"bias_dn: shape {np.shape(bias_dn)} does not broadcast to the samples {sample_shape}") from None
+        bias_scalar = None
+    else:
+        bias_scalar = None if bias_dn is None else float(bias_dn)
+
+    # exposures from the least to the most exposed (time x gain) for the saturation guard
+    gains = np.array([iso_maps(profile, i, (1,))["gain_dn_per_e"][0] for i in iso])
+    order = np.argsort(t * gains, kind="stable")
+
+    def observe(i: int, codes: np.ndarray, bias) -> tuple[np.ndarray, ...]:
+        obs = calibrated_observation(
+            codes[None, :], exposure_s=t[i], iso=iso[i], profile=profile, gamma=gamma, bias_dn=bias,
+            saturation_margin_dn=saturation_margin_dn, variance_from="estimate", radiance_estimate=0.0,
+        )
+        return obs.radiance[0], obs.variance[0], obs.saturated[0], obs.black_clipped[0]
+
+    luts = None
+    if stack.dtype in (np.uint8, np.uint16) and bias_flat is None:
+        codes = np.arange(np.iinfo(stack.dtype).max + 1, dtype=np.float64)
+        luts = [observe(i, codes, bias_scalar) for i in range(n)]
+
+    # fill value of saturated-everywhere samples: the saturation code of the least exposed shot
+    first = int(order[0])
+    sat_code = iso_maps(profile, iso[first], (1,))["saturation_dn"][0]
+    fill = float(observe(first, np.array([sat_code]), bias_scalar if bias_flat is None else float(np.mean(bias_flat)))[0][0])
+    fill = max(fill, 0.0)
+    last = int(order[-1])
+
+    radiance = np.empty(total, dtype=np.float32)
+    variance = np.empty(total, dtype=np.float32)
+    sat_all = np.empty(total, dtype=bool)
+    dark_all = np.empty(total, dtype=bool)
+    n_used = np.empty(total, dtype=np.uint8)
+    inv_t = (1.0 / t).astype(np.float32)
+
+    def work(a: int, b: int) -> None:
+        c = b - a
+        T = np.empty((n, c), np.float32)
+        V0 = np.empty((n, c), np.float32)
+        S = np.empty((n, c), bool)
+        B = np.empty((n, c), bool)
+        for i in range(n):
+            if luts is not None:
+                idx = flat[i, a:b]
+                T[i], V0[i], S[i], B[i] = (lut[idx] for lut in luts[i])
+            else:
+                bias = bias_scalar if bias_flat is None else bias_flat[a:b]
+                T[i], V0[i], S[i], B[i] = observe(i, flat[i, a:b].astype(np.float64), bias)
+        # saturated in a less exposed shot -> unusable in every more exposed one
+        S[order] = np.logical_or.accumulate(S[order], axis=0)
+        usable = ~(S | B)
+        tmp = np.empty((n, c), np.float32)
+        w = np.empty((n, c), np.float32)
+
+        def weights(x):
+            np.multiply(inv_t[:, None], np.maximum(x, 0)[None, :], out=tmp)
+            np.add(tmp, V0, out=tmp)
+            np.divide(usable, tmp, out=w)
+            return w.sum(axis=0)
+
+        def mean(wsum):
+            return np.einsum("ij,ij->j", w, T) / np.where(wsum > 0, wsum, 1)
+
+        x = mean(weights(np.zeros(c, np.float32)))  # read-noise weights
+        for _ in range(int(n_iter)):
+            x = mean(weights(x))
+        wsum = weights(x)  # variance at the final estimate
+        none = wsum <= 0
+        var = 1.0 / np.where(none, 1, wsum)
+        sat = none & S.any(axis=0)
+        dark = none & ~sat
+        x[sat] = fill
+        var[sat] = fill * fill
+        if dark.any():
+            x[dark] = np.maximum(T[last, dark], 0)
+            var[dark] = V0[last, dark]
+        radiance[a:b] = x
+        variance[a:b] = var
+        sat_all[a:b] = sat
+        dark_all[a:b] = dark
+        n_used[a:b] = usable.sum(axis=0)
+
+    _run_chunks(work, total, chunk_size, n_threads)
+    info = _summary(sat_all.reshape(sample_shape), dark_all.reshape(sample_shape))
+    info.update({
+        "method": "ml",
+        "n_used": n_used.reshape(sample_shape),
+        "fill_radiance": fill,
+        "fill": "saturated-everywhere samples = saturation level of the shortest exposure (lower bound), "
+                "variance = value^2",
+        "exposures_s": t.tolist(),
+        "isos": iso.tolist(),
+        "n_iter": int(n_iter),
+        "profile": profile.name,
+    })
+    return radiance.reshape(sample_shape), variance.reshape(sample_shape), info
+
+
+# -- Debevec & Malik ------------------------------------------------------------------------
+
+def hat_weight(z: np.ndarray) -> np.ndarray:
+    """Debevec & Malik's hat weight of normalised codes ``z`` in [0, 1]: ``min(z, 1 - z)``, 0 outside."""
+    z = np.asarray(z, dtype=np.float32)
+    return np.clip(np.minimum(z, 1 - z), 0, None)
+
+
+def _check_codes8(images: np.ndarray, name: str) -> None:
+    if images.dtype != np.uint8:
+        raise InputError(f"{name}: response recovery needs 8-bit codes (uint8), got dtype {images.dtype}")
+
+
+def recover_response(
+    images,
+    *,
+    exposures_s: Sequence[float],
+    n_samples: int = 200,
+    smoothness: float = 50.0,
+    random_state=None,
+) -> np.ndarray:
+    """Recover the log inverse camera response ``g(z) = ln f^-1(z)`` from 8-bit brackets.
+
+    The least-squares system of Debevec & Malik (1997), ``gsolve``: for sampled pixels ``j``
+    and exposures ``i``, ``w(z_ij) [g(z_ij) - ln E_j] = w(z_ij) ln t_i``; ``g(128) = 0``; and
+    ``smoothness * w(z) [g(z-1) - 2 g(z) + g(z+1)] = 0`` for z in 1..254. Pixels are sampled
+    stratified over the code values of the middle exposure (a random pixel per level), so
+    the whole code range is constrained.
+
+    Parameters
+    ----------
+    images : ndarray of shape (N, ..., C), uint8
+        N exposures; channels on the last axis (a 2-D ``(N, H, W)`` stack is one channel).
+    exposures_s : sequence of N floats
+    n_samples : int
+        Pixels sampled per channel (``n_samples * (N - 1)`` should exceed 255).
+    smoothness : float
+        Weight ``lambda`` of the second-derivative term.
+    random_state : int, Generator or None
+
+    Returns
+    -------
+    ndarray of shape (256, C), float64
+        ``g`` per channel, ``g(128) = 0``.
+    """
+    stack = _as_stack(images, "images")
+    _check_codes8(stack, "images")
+    n = stack.shape[0]
+    t = _per_exposure("exposures_s", exposures_s, n)
+    if stack.ndim == 3:
+        stack = stack[..., None]
+    if n_samples < 2:
+        raise InputError(f"n_samples: expected at least 2, got {n_samples}")
+    rng = check_random_state(random_state)
+    c = stack.shape[-1]
+    flat = stack.reshape(n, -1, c)
+    mid = int(np.argsort(t)[n // 2])
+    w = np.minimum(np.arange(256), 255 - np.arange(256)).astype(np.float64)  # Debevec's hat on codes
+    out = np.empty((256, c))
+    for ch in range(c):
+        ref = flat[mid, :, ch]
+        levels = np.unique(ref)
+        targets = levels[np.linspace(0, len(levels) - 1, min(n_samples, len(levels))).round().astype(int)]
+        picks = []
+        for level in np.unique(targets):
+            where = np.flatnonzero(ref == level)
+            picks.append(where[rng.integers(len(where))])
+        extra = n_samples - len(picks)
+        if extra > 0:
+            picks.extend(rng.integers(flat.shape[1], size=extra).tolist())
+        Z = flat[:, np.asarray(picks), ch].T.astype(np.int64)  # (P, N)
+        out[:, ch] = _gsolve(Z, np.log(t), smoothness, w)
+    return out
+
+
+def _gsolve(Z: np.ndarray, log_t: np.ndarray, smoothness: float, w: np.ndarray) -> np.ndarray:
+    p, n = Z.shape
+    rows = p * n + 1 + 254
+    A = np.zeros((rows, 256 + p))
+    b = np.zeros(rows)
+    k = np.arange(p * n)
+    z = Z.ravel()
+    wij = w[z]
+    A[k, z] = wij
+    A[k, 256 + np.repeat(np.arange(p), n)] = -wij
+    b[: p * n] = wij * np.tile(log_t, p)
+    A[p * n, 128] = 1.0
+    zz = np.arange(1, 255)
+    r = p * n + 1 + np.arange(254)
+    A[r, zz - 1] = smoothness * w[zz]
+    A[r, zz] = -2 * smoothness * w[zz]
+    A[r, zz + 1] = smoothness * w[zz]
+    sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+    return sol[:256]
+
+
+def merge_debevec(
+    images,
+    *,
+    exposures_s: Sequence[float],
+    response: np.ndarray | str | None = None,
+    white_level: float | None = None,
+    black_level: float = 0.0,
+    n_samples: int = 200,
+    smoothness: float = 50.0,
+    random_state=None,
+    chunk_size: int = _DEFAULT_CHUNK,
+    n_threads: int | None = None,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Debevec & Malik (1997) merge: hat weights, log-domain mean (see the module notes).
+
+    Parameters
+    ----------
+    images : ndarray of shape (N, ...) or sequence of N arrays
+        8-bit non-linear codes (``uint8``, channels last when ``response`` has several
+        channels) or linear data (``uint16`` DN or floats) clipping at ``white_level``.
+    exposures_s : sequence of N floats
+        Exposure times in seconds (or relative exposures).
+    response : None, "linear" or ndarray of shape (256,) or (256, C)
+        ``g(z) = ln f^-1(z)`` of 8-bit codes. None: recovered with :func:`recover_response`
+        for uint8 input, linear for other input. "linear": ``g(z) = ln(z / 255)``.
+    white_level : float, optional
+        Saturation value of linear input (default: the dtype's maximum for integers; required
+        for floats).
+    black_level : float
+        Offset subtracted from linear input.
+    n_samples, smoothness, random_state : response recovery options.
+    chunk_size, n_threads : as for :func:`merge_ml`.
+
+    Returns
+    -------
+    radiance : ndarray, float32, sample shape
+        Relative radiance: for linear input, units of ``(white - black) / s``; for 8-bit
+        input, ``exp(g)`` per second with ``g(128) = 0``.
+    info : dict
+        Masks and counts as for :func:`merge_ml`, ``response`` (the ``g`` used, 8-bit only).
+    """
+    stack = _as_stack(images, "images")
+    n = stack.shape[0]
+    t = _per_exposure("exposures_s", exposures_s, n)
+    log_t = np.log(t).astype(np.float32)
+    sample_shape = stack.shape[1:]
+    codes8 = stack.dtype == np.uint8
+    g = None
+    if stack.dtype == np.uint8:
+        if response is None:
+            g = recover_response(stack, exposures_s=t, n_samples=n_samples, smoothness=smoothness,
+                                 random_state=random_state)
+        elif isinstance(response, str):
+            check_choice("response", response, ("linear",))
+            with np.errstate(divide="ignore"):
+                g = np.log(np.arange(256) / 255.0)[:, None]
+            g[0] = g[1]
+        else:
+            g = np.asarray(response, dtype=np.float64)
+            if g.ndim == 1:
+                g = g[:, None]
+            if g.shape[0] != 256 or g.ndim != 2 or not np.isfinite(g).all():
+                raise ShapeError(f"response: expected a finite array of shape (256,) or (256, C), got {g.shape}")
+        if g.shape[1] not in (1, stack.shape[-1]) or (g.shape[1] > 1 and stack.ndim < 3):
+            raise ShapeError(f"response: {g.shape[1]} channels do not match the images' last axis {stack.shape[-1]}")
+    else:
+        codes8 = False
+        if isinstance(response, np.ndarray) or (response is not None and response != "linear"):
+            raise InputError("response: a camera response applies to 8-bit codes only; linear input takes None or 'linear'")
+        if white_level is None:
+            if np.issubdtype(stack.dtype, np.integer):
+                white_level = float(np.iinfo(stack.dtype).max)
+            else:
+                raise InputError("white_level: float input needs its saturation level (white_level=...)")
+    n_threads = _n_threads(n_threads)
+    order = np.argsort(t, kind="stable")
+    first, last = int(order[0]), int(order[-1])
+    channels = stack.shape[-1] if (codes8 and g.shape[1] > 1) else 1
+    total = math.prod(sample_shape) // channels
+    flat = stack.reshape(n, total, channels)
+    radiance = np.empty((total, channels), np.float32)
+    sat_all = np.empty((total, channels), bool)
+    dark_all = np.empty((total, channels), bool)
+    if codes8:
+        g32 = g.astype(np.float32)
+        w_lut = hat_weight(np.arange(256) / 255.0)
+        cidx = np.arange(channels)
+        fill_log = g32[255, cidx] - log_t[first]
+    else:
+        span = float(white_level) - float(black_level)
+        if span <= 0:
+            raise InputError(f"white_level ({white_level}) must exceed black_level ({black_level})")
+        fill_log = np.full(channels, -log_t[first], np.float32)
+
+    def work(a: int, b: int) -> None:
+        zc = flat[:, a:b]
+        if codes8:
+            zi = zc.astype(np.intp)
+            w = w_lut[zi]
+            lg = g32[zi, cidx] - log_t[:, None, None]
+            hi = zi >= 128
+        else:
+            z = (zc.astype(np.float32) - np.float32(black_level)) / np.float32(span)
+            w = hat_weight(z)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                lg = np.log(np.maximum(z, 1e-30)) - log_t[:, None, None]
+            hi = z >= 0.5
+        wsum = w.sum(axis=0)
+        none = wsum <= 0
+        lnE = (w * lg).sum(axis=0) / np.where(none, 1, wsum)
+        sat = none & hi[first]
+        dark = none & ~sat
+        lnE = np.where(sat, fill_log[None, :], lnE)
+        x = np.exp(lnE)
+        if dark.any():
+            dark_value = np.exp(lg[last]) if codes8 else np.maximum(z[last], 0) / t[last]
+            x = np.where(dark, dark_value, x)
+        radiance[a:b] = x
+        sat_all[a:b] = sat
+        dark_all[a:b] = dark
+
+    _run_chunks(work, total, max(1, chunk_size // channels), n_threads)
+    info = _summary(sat_all.reshape(sample_shape), dark_all.reshape(sample_shape))
+    info.update({
+        "method": "debevec",
+        "exposures_s": t.tolist(),
+        "fill": "saturated-everywhere samples = saturation level of the shortest exposure (lower bound)",
+        "response": None if g is None else g,
+        "response_kind": None if g is None else ("recovered" if response is None else "given"),
+    })
+    return radiance.reshape(sample_shape), info
+
+
+# -- light fields ------------------------------------------------------------------------------
+
+def _exposure_of(lf: LightField, i: int, given, what: str) -> float:
+    if given is not None:
+        return float(given[i])
+    value = getattr(lf, what)
+    if value is None:
+        name = lf.source or f"input {i + 1}"
+        raise InputError(f"{name}: no {what.replace('_s', ' time (s)')} in its metadata; give --exposures-s")
+    return float(value)
+
+
+def merge_lightfields(
+    lfs: Sequence[LightField],
+    *,
+    method: str = "ml",
+    profile=None,
+    exposures_s: Sequence[float] | None = None,
+    isos: Sequence[float] | float | None = None,
+    response: np.ndarray | str | None = None,
+    n_iter: int = 2,
+    random_state=None,
+    n_threads: int | None = None,
+    chunk_size: int = _DEFAULT_CHUNK,
+) -> tuple[LightField, dict[str, Any]]:
+    """Merge a bracket of light fields (or 1x1 light fields of 2-D images) into one HDR light field.
+
+    All views share the bracket's exposures; every view and pixel is merged on its own.
+
+    How the data are read, per input ``units`` (all inputs must agree):
+
+    * ``"dn"``: raw sensor codes with the black level included (what :mod:`lfproc.sensor`
+      produces). ``ml`` uses them directly with ``profile``; ``debevec`` normalises them with the
+      profile's black and white levels.
+    * ``attrs["codes_bits"] == 8``: non-linear 8-bit camera output stored as ``code / 255``
+      (see :func:`lfproc.bracket.read_bracket`): ``debevec`` with response recovery only.
+    * anything else: linear values clipping at ``saturation_level`` (required). ``ml`` maps them to
+      codes with the profile's levels, ``dn = black + value / saturation_level * (white - black)``
+      (for decoded raw data that are the raw codes normalised by the ADC range).
+
+    Parameters
+    ----------
+    lfs : sequence of LightField
+        The bracket (at least two, one shape).
+    method : {"ml", "debevec"}
+    profile : CameraProfile or name, optional
+        Required for ``ml`` and for ``dn`` input.
+    exposures_s, isos : optional
+        Override the inputs' ``exposure_s`` / ``iso`` metadata (one value per input).
+    response : see :func:`merge_debevec`.
+    n_iter, random_state, n_threads, chunk_size : see :func:`merge_ml` / :func:`recover_response`.
+
+    Returns
+    -------
+    merged : LightField
+        ``ml``: radiance in e-/s, with ``variance``; ``debevec``: relative radiance. Negative
+        ML estimates (noise in the dark) are set to 0 in ``data`` (their number is reported).
+        ``attrs`` records method, exposures, ISOs, sources, saturated-everywhere count and
+        fraction, the fill rule and the lfproc version.
+    info : dict
+        As returned by the estimator, plus ``dynamic_range_stops``, ``negative_clipped``.
+    """
+    check_choice("method", method, MERGE_METHODS)
+    lfs = list(lfs)
+    if len(lfs) < 2:
+        raise InputError(f"a bracket needs at least two exposures, got {len(lfs)} input")
+    for i, lf in enumerate(lfs):
+        if not isinstance(lf, LightField):
+            raise InputError(f"input {i + 1}: expected a LightField, got {type(lf).__name__}")
+    names = [lf.source or f"input {i + 1}" for i, lf in enumerate(lfs)]
+    shape = lfs[0].shape
+    for lf, name in zip(lfs[1:], names[1:]):
+        if lf.shape != shape:
+            raise ShapeError(f"{name}: shape {lf.shape} differs from {names[0]} {shape}")
+    n = len(lfs)
+    if exposures_s is not None and len(exposures_s) != n:
+        raise InputError(f"exposures_s: expected {n} values (one per input), got {len(exposures_s)}")
+    t = np.array([_exposure_of(lf, i, exposures_s, "exposure_s") for i, lf in enumerate(lfs)])
+    _per_exposure("exposures_s", t, n)
+    if isos is not None:
+        iso = _per_exposure("isos", isos, n)
+    else:
+        iso_raw = [lf.iso for lf in lfs]
+        iso = None if any(v is None for v in iso_raw) else np.array(iso_raw, dtype=np.float64)
+    units = {lf.units for lf in lfs}
+    if len(units) != 1:
+        raise InputError(f"inputs mix units {', '.join(sorted(units))}; a bracket needs one kind of data")
+    unit = units.pop()
+    codes8 = [lf.attrs.get("codes_bits") == 8 for lf in lfs]
+    if any(codes8) and not all(codes8):
+        raise InputError("inputs mix 8-bit non-linear images with linear data")
+    codes8 = codes8[0]
+    data = np.stack([lf.data for lf in lfs])
+    prof = None
+    if profile is not None:
+        from .calib import load_profile
+
+        prof = load_profile(profile)
+    mapping = "dn"
+    if method == "ml":
+        if codes8:
+            raise InputError("method ml needs linear sensor data (raw codes); 8-bit camera images are non-linear: "
+                             "use method debevec")
+        if prof is None:
+            raise InputError("method ml needs a camera profile (--profile): gain and read noise set its weights")
+        if iso is None:
+            missing = next(nm for lf, nm in zip(lfs, names) if lf.iso is None)
+            raise InputError(f"{missing}: no ISO in its metadata; method ml needs one per exposure (give --isos)")
+        if unit != "dn":
+            sat = [lf.saturation_level for lf in lfs]
+            if any(s is None for s in sat):
+                bad = next(nm for s, nm in zip(sat, names) if s is None)
+                raise InputError(f"{bad}: linear {unit} data without a saturation level cannot be mapped to sensor "
+                                 "codes for method ml")
+            span = prof.white_level_dn - prof.black_level_dn
+            scale = np.array(sat, dtype=np.float32).reshape((n,) + (1,) * (data.ndim - 1))
+            data = prof.black_level_dn + data / scale * span
+            mapping = "relative-to-profile-levels"
+        if np.all(data <= 65535) and np.array_equal(data, np.round(data)):
+            dn = data.astype(np.uint16)
+        else:
+            dn = data
+        del data
+        radiance, variance, info = merge_ml(dn, exposures_s=t, isos=iso, profile=prof, n_iter=n_iter,
+                                            n_threads=n_threads, chunk_size=chunk_size)
+        out_units = "e-/s"
+    else:
+        if codes8:
+            stack = np.clip(np.round(data * 255), 0, 255).astype(np.uint8)
+            kwargs = {}
+        elif unit == "dn":
+            if prof is None:
+                raise InputError("raw (dn) input needs a camera profile (--profile) for its black and white levels")
+            stack, kwargs = data, {"white_level": prof.white_level_dn, "black_level": prof.black_level_dn}
+        else:
+            sat = {lf.saturation_level for lf in lfs}
+            if None in sat or len(sat) != 1:
+                raise InputError("method debevec on linear data needs one saturation level shared by all inputs")
+            stack, kwargs = data, {"white_level": sat.pop()}
+        # ISO enters the exposure as a gain: relative exposure t * ISO / 100
+        exp_rel = t * (iso / 100.0 if iso is not None else 1.0)
+        radiance, info = merge_debevec(stack, exposures_s=exp_rel, response=response, random_state=random_state,
+                                       n_threads=n_threads, chunk_size=chunk_size, **kwargs)
+        variance = None
+        out_units = "relative"
+    negative = int((radiance < 0).sum())
+    data_out = np.maximum(radiance, 0)
+    attrs = {
+        "merge_method": method,
+        "exposures_s": t.tolist(),
+        "isos": None if iso is None else iso.tolist(),
+        "sources": names,
+        "profile": None if prof is None else prof.name,
+        "input_mapping": mapping if method == "ml" else ("codes8" if codes8 else unit),
+        "saturated_everywhere_count": info["saturated_everywhere_count"],
+        "saturated_everywhere_fraction": info["saturated_everywhere_fraction"],
+        "dark_everywhere_count": info["dark_everywhere_count"],
+        "fill": info["fill"],
+        "negative_clipped": negative,
+        "lfproc_version": __version__,
+    }
+    if method == "ml":
+        attrs["n_iter"] = int(n_iter)
+    if info.get("response") is not None:
+        attrs["response_g"] = np.asarray(info["response"]).round(6).tolist()
+    first = lfs[0]
+    merged = LightField(data=data_out, variance=variance, units=out_units, colour_space=first.colour_space,
+                        source=f"merge:{method}", attrs=attrs)
+    info["dynamic_range_stops"] = merged.dynamic_range_stops()
+    info["negative_clipped"] = negative
+    return merged, info
