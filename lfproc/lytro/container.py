@@ -362,7 +362,7 @@ def read_lfp(path: str | os.PathLike, *, verify: bool = True) -> LfpContainer:
             if actual != sha:
                 raise ChecksumError(f"{path}: SHA-1 mismatch in section {i} ({kind}, {end - start} bytes): "
                                     f"header says {sha}, data hash {actual}; the file is corrupt "
-                                    "(verify=False / --no-verify reads it anyway)")
+                                    "(verify=False reads it anyway)")
 
     toc = None
     toc_index = None
