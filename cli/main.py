@@ -21,6 +21,7 @@ COMMANDS = (
     "synth",
     "preview",
     "evaluate",
+    "simulate",
 )
 
 

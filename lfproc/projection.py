@@ -146,11 +146,8 @@ class MaskCode:
             if cfa_index.shape != (h, w):
                 raise ShapeError(f"cfa_index: expected shape {(h, w)}, got {cfa_index.shape}")
         colour = slice(None) if cfa_index is None else cfa_index
+        self.check(views=views, size=size)
         if self.kind == "random":
-            if self.codes.shape[1:3] != (nv, nu):
-                raise ShapeError(f"random mask: codes are for {self.codes.shape[1:3]} views, the light field has {views}")
-            if self.period is None and self.codes.shape[3:5] != (h, w):
-                raise ShapeError(f"random mask: codes cover {self.codes.shape[3:5]} pixels, the sensor is {size}")
             rows = np.arange(h) if self.period is None else np.arange(h) % self.period
             cols = np.arange(w) if self.period is None else np.arange(w) % self.period
             if cfa_index is None:
@@ -160,20 +157,31 @@ class MaskCode:
         sh = int(self.shift)
         rows = np.arange(nv)[:, None] * sh + np.arange(h)[None, :]  # (V, H)
         cols = np.arange(nu)[:, None] * sh + np.arange(w)[None, :]  # (U, W)
-        bh, bw = self.codes.shape[1:3]
-        if self.period is None:
-            if rows.max() >= bh or cols.max() >= bw:
-                raise ShapeError(
-                    f"shifted mask: base of {bh} x {bw} is too small for {views} views of {size} with shift {sh}; "
-                    f"expected at least {rows.max() + 1} x {cols.max() + 1}"
-                )
-        else:
+        if self.period is not None:
             rows, cols = rows % self.period, cols % self.period
         r = rows[:, None, :, None]
         c = cols[None, :, None, :]
         if cfa_index is None:
             return self.codes[:, r, c, :]
         return self.codes[:, r, c, colour[None, None]]
+
+    def check(self, *, views: tuple[int, int], size: tuple[int, int]) -> None:
+        """Raise :class:`ShapeError` unless the codes fit ``views`` of ``size`` pixels."""
+        nv, nu = views
+        h, w = size
+        if self.kind == "random":
+            if self.codes.shape[1:3] != (nv, nu):
+                raise ShapeError(f"random mask: codes are for {self.codes.shape[1:3]} views, the light field has {tuple(views)}")
+            if self.period is None and self.codes.shape[3:5] != (h, w):
+                raise ShapeError(f"random mask: codes cover {self.codes.shape[3:5]} pixels, the sensor is {tuple(size)}")
+        elif self.period is None:
+            bh, bw = self.codes.shape[1:3]
+            need = (h + self.shift * (nv - 1), w + self.shift * (nu - 1))
+            if bh < need[0] or bw < need[1]:
+                raise ShapeError(
+                    f"shifted mask: base of {bh} x {bw} is too small for {tuple(views)} views of {tuple(size)} "
+                    f"with shift {self.shift}; expected at least {need[0]} x {need[1]}"
+                )
 
     def to_json(self) -> dict:
         return {"kind": self.kind, "period": self.period, "shift": int(self.shift), "codes_shape": list(self.codes.shape)}

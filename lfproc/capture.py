@@ -1,0 +1,698 @@
+"""Capture files of the multi-ISO coded-mask camera, calibrated observations, previews.
+
+A *capture* is what the camera records (``S`` shots) plus everything needed to interpret
+it: the sensor images in DN, per shot the mask code, the ISO map and the exposure time,
+the CFA layout, the response exponent ``gamma``, the camera profile, and, for simulated
+captures, the scale from the light field's relative units to electrons per second and a
+reference to the ground truth. Loading needs no random seed and no simulator state.
+
+File format (``schema "lfproc.capture"``, ``schema_version 1``; suggested suffix
+``.capture.npz``): a ZIP archive, readable by :func:`numpy.load`, whose first member is
+``lfproc-capture.json``, a UTF-8 JSON header::
+
+    {"schema": "lfproc.capture", "schema_version": 1, "lfproc_version": "...",
+     "shots": S, "size": [H, W], "views": [V, U], "channels": 3,
+     "cfa_pattern": "RGGB", "gamma": 1.0, "exposures_s": [t_1, ...],
+     "isos": [100, 400, ...], "iso_pattern": {...}, "mask": {"kind", "period", "shift", "codes_shape"},
+     "sampling_rate": S / (3 V U), "radiance_scale": K or null, "units": "e-/s",
+     "profile": {camera profile JSON}, "ground_truth": {"path", "sha256"} or null,
+     "parameters": {...}, "arrays": {name: {"shape", "dtype"}}}
+
+followed by ``.npy`` members: ``dn`` (``(S, H, W)`` uint16, black level included), ``iso``
+(``(S, H, W)`` float32 ISO of every pixel), ``mask`` (the codes of
+:class:`lfproc.projection.MaskCode`: ``(S, V, U, Ph, Pw, 3)`` for ``random``, ``(S, Bh, Bw, 3)``
+for ``shifted``; one tile when the mask is periodic) and optionally ``bias`` (``(S, H, W)``
+float32 bias frames in DN).
+
+Radiance units: ``observations`` returns ``T`` in electrons per second reaching each
+pixel. For a simulated capture, ``L_e = radiance_scale * L_relative``, so a light field
+reconstructed from ``T`` divided by ``radiance_scale`` is in the input's relative units.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import math
+import os
+import zipfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._version import __version__
+from .errors import FileFormatError, InputError, MissingFileError, ShapeError
+from .io import atomic_file
+from .projection import CFA_PATTERNS, MaskCode, ProjectionOperator, build_operator, sampling_rate
+from .sensor import Observation, calibrated_observation
+
+__all__ = [
+    "SCHEMA",
+    "SCHEMA_VERSION",
+    "HEADER_NAME",
+    "Capture",
+    "load_capture",
+    "is_capture_file",
+    "capture_from_raw",
+    "read_sensor_frame",
+    "observations",
+    "describe_capture",
+    "render_capture_preview",
+    "PREVIEW_KINDS",
+    "file_sha256",
+]
+
+SCHEMA = "lfproc.capture"
+SCHEMA_VERSION = 1
+HEADER_NAME = "lfproc-capture.json"
+PREVIEW_KINDS = ("capture", "sensor", "iso", "mask")
+_ARRAYS = ("dn", "iso", "mask", "bias")
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    """SHA-256 of a file, or of a folder (its files' relative names and contents, sorted)."""
+    path = Path(path)
+    digest = hashlib.sha256()
+    if path.is_dir():
+        files = sorted(p for p in path.rglob("*") if p.is_file())
+        for p in files:
+            digest.update(str(p.relative_to(path)).encode())
+            digest.update(b"\0")
+            digest.update(hashlib.sha256(p.read_bytes()).digest())
+        return digest.hexdigest()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def _profile(profile):
+    from .calib import load_profile
+
+    return load_profile(profile)
+
+
+@dataclass(frozen=True, eq=False)
+class Capture:
+    """A coded multi-ISO capture (see the module documentation).
+
+    Parameters
+    ----------
+    dn : ndarray of shape (S, H, W), uint16
+        Sensor images in DN, black level included.
+    iso : ndarray of shape (S, H, W)
+        ISO of every pixel of every shot (each value must be in ``profile``).
+    exposures_s : sequence of S floats
+        Exposure time of each shot in seconds.
+    mask : MaskCode
+        Mask codes of the S shots.
+    profile : CameraProfile or name
+    views : (V, U)
+    cfa_pattern : str
+        Row-major Bayer layout from the top-left pixel (default: the profile's).
+    gamma : float, optional
+        Response exponent (default: the profile's).
+    bias_dn : ndarray of shape (S, H, W), optional
+        Bias frames (DN); default: black level plus mean dark signal.
+    radiance_scale : float, optional
+        Electrons per second per unit of the simulated light field.
+    ground_truth : dict, optional
+        ``{"path": ..., "sha256": ...}`` of the simulated light field.
+    iso_pattern : dict
+        How the ISO map was made (``{"kind": "row", "isos": [...]}``...).
+    parameters : dict
+        Further parameters (simulation options, seed, source files).
+    """
+
+    dn: np.ndarray
+    iso: np.ndarray
+    exposures_s: tuple[float, ...]
+    mask: MaskCode
+    profile: Any
+    views: tuple[int, int] = (5, 5)
+    cfa_pattern: str | None = None
+    gamma: float | None = None
+    bias_dn: np.ndarray | None = None
+    radiance_scale: float | None = None
+    ground_truth: dict | None = None
+    iso_pattern: dict = field(default_factory=dict)
+    parameters: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        profile = _profile(self.profile)
+        object.__setattr__(self, "profile", profile)
+        dn = np.asarray(self.dn)
+        if dn.ndim == 2:
+            dn = dn[None]
+        if dn.ndim != 3:
+            raise ShapeError(f"capture dn: expected sensor images of shape (S, H, W), got {dn.shape}")
+        if dn.dtype != np.uint16:
+            if not np.issubdtype(dn.dtype, np.integer) or dn.min(initial=0) < 0 or dn.max(initial=0) > 65535:
+                raise InputError(f"capture dn: expected uint16 sensor codes, got {dn.dtype}")
+            dn = dn.astype(np.uint16)
+        s, h, w = dn.shape
+        iso = np.asarray(self.iso, dtype=np.float32)
+        try:
+            iso = np.broadcast_to(iso, dn.shape).copy() if iso.ndim < 3 else iso
+        except ValueError:
+            raise ShapeError(f"capture iso: expected a scalar, (H, W) or (S, H, W) = {dn.shape} map, got {iso.shape}") from None
+        if iso.shape != dn.shape:
+            raise ShapeError(f"capture iso: expected shape {dn.shape}, got {iso.shape}")
+        for value in np.unique(iso):
+            profile.iso_figures(float(value))  # ProfileError naming the available ISOs
+        exposures = np.atleast_1d(np.asarray(self.exposures_s, dtype=np.float64))
+        if exposures.size == 1 and s > 1:
+            exposures = np.repeat(exposures, s)
+        if exposures.shape != (s,):
+            raise ShapeError(f"capture exposures_s: expected {s} exposure times (one per shot), got {exposures.size}")
+        if not (np.isfinite(exposures).all() and (exposures > 0).all()):
+            raise InputError(f"capture exposures_s: expected positive finite seconds, got {exposures.tolist()}")
+        if not isinstance(self.mask, MaskCode):
+            raise InputError(f"capture mask: expected a MaskCode, got {type(self.mask).__name__}")
+        if self.mask.shots != s:
+            raise ShapeError(f"capture mask: codes for {self.mask.shots} shots, the capture has {s} sensor images")
+        views = (int(self.views[0]), int(self.views[1]))
+        cfa = (self.cfa_pattern or profile.cfa_pattern).upper()
+        if cfa not in CFA_PATTERNS:
+            raise InputError(f"capture cfa_pattern: expected one of {', '.join(CFA_PATTERNS)}, got {cfa!r}")
+        gamma = float(profile.gamma if self.gamma is None else self.gamma)
+        if not (math.isfinite(gamma) and gamma >= 1):
+            raise InputError(f"capture gamma: expected a value >= 1, got {gamma}")
+        bias = None
+        if self.bias_dn is not None:
+            bias = np.asarray(self.bias_dn, dtype=np.float32)
+            try:
+                bias = np.broadcast_to(bias, dn.shape).copy()
+            except ValueError:
+                raise ShapeError(f"capture bias_dn: expected a map broadcastable to {dn.shape}, got {bias.shape}") from None
+        if self.radiance_scale is not None and not (math.isfinite(self.radiance_scale) and self.radiance_scale > 0):
+            raise InputError(f"capture radiance_scale: expected a positive number, got {self.radiance_scale}")
+        object.__setattr__(self, "dn", dn)
+        object.__setattr__(self, "iso", iso)
+        object.__setattr__(self, "exposures_s", tuple(float(t) for t in exposures))
+        object.__setattr__(self, "views", views)
+        object.__setattr__(self, "cfa_pattern", cfa)
+        object.__setattr__(self, "gamma", gamma)
+        object.__setattr__(self, "bias_dn", bias)
+        object.__setattr__(self, "iso_pattern", dict(self.iso_pattern))
+        object.__setattr__(self, "parameters", dict(self.parameters))
+        self.mask.check(views=views, size=(h, w))
+
+    # -- figures ------------------------------------------------------------------------
+    @property
+    def shots(self) -> int:
+        return int(self.dn.shape[0])
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return int(self.dn.shape[1]), int(self.dn.shape[2])
+
+    @property
+    def isos(self) -> list[float]:
+        return [float(v) for v in np.unique(self.iso)]
+
+    @property
+    def sampling_rate(self) -> float:
+        """``S / (3 V U)``, a fraction."""
+        return sampling_rate(shots=self.shots, views=self.views, channels=3)
+
+    def operator(self, *, dtype=np.float32) -> ProjectionOperator:
+        """The projection operator ``Phi`` of this capture (:mod:`lfproc.projection`)."""
+        return build_operator(self.mask, views=self.views, size=self.size, cfa_pattern=self.cfa_pattern, dtype=dtype)
+
+    # -- file -----------------------------------------------------------------------------
+    def header(self) -> dict[str, Any]:
+        """The JSON header written in front of the arrays."""
+        arrays = self._arrays()
+        return {
+            "schema": SCHEMA,
+            "schema_version": SCHEMA_VERSION,
+            "lfproc_version": __version__,
+            "shots": self.shots,
+            "size": list(self.size),
+            "views": list(self.views),
+            "channels": 3,
+            "cfa_pattern": self.cfa_pattern,
+            "gamma": self.gamma,
+            "exposures_s": list(self.exposures_s),
+            "isos": [_num(v) for v in self.isos],
+            "iso_pattern": self.iso_pattern,
+            "mask": self.mask.to_json(),
+            "sampling_rate": self.sampling_rate,
+            "radiance_scale": self.radiance_scale,
+            "units": "e-/s",
+            "profile": self.profile.to_json(),
+            "ground_truth": self.ground_truth,
+            "parameters": self.parameters,
+            "arrays": {k: {"shape": list(a.shape), "dtype": str(a.dtype)} for k, a in arrays.items()},
+        }
+
+    def _arrays(self) -> dict[str, np.ndarray]:
+        out = {"dn": self.dn, "iso": self.iso, "mask": self.mask.codes}
+        if self.bias_dn is not None:
+            out["bias"] = self.bias_dn
+        return out
+
+    def save(self, path: str | os.PathLike, *, force: bool = False) -> Path:
+        """Write the capture file atomically (refuses to overwrite without ``force``)."""
+        path = Path(path)
+        header = json.dumps(_jsonable(self.header()), indent=1).encode()
+        with atomic_file(path, force=force) as tmp:
+            with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=6) as zf:
+                zf.writestr(HEADER_NAME, header)
+                for name, array in self._arrays().items():
+                    buf = io.BytesIO()
+                    np.lib.format.write_array(buf, np.ascontiguousarray(array), allow_pickle=False)
+                    zf.writestr(f"{name}.npy", buf.getvalue())
+        return path
+
+
+def _num(v: float):
+    return int(v) if float(v).is_integer() else float(v)
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def is_capture_file(path: str | os.PathLike) -> bool:
+    """True when ``path`` is a ZIP archive whose first member is the capture header."""
+    path = Path(path)
+    if not path.is_file():
+        return False
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(4) != b"PK\x03\x04":
+                return False
+        with zipfile.ZipFile(path) as zf:
+            infos = zf.infolist()
+            return bool(infos) and infos[0].filename == HEADER_NAME
+    except (OSError, zipfile.BadZipFile):
+        return False
+
+
+def _read_header(path: Path, zf: zipfile.ZipFile) -> dict[str, Any]:
+    try:
+        header = json.loads(zf.read(HEADER_NAME).decode("utf-8"))
+    except KeyError:
+        raise FileFormatError(f"{path}: not an lfproc capture (no {HEADER_NAME} member)") from None
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise FileFormatError(f"{path}: capture header is not valid JSON ({exc})") from None
+    if not isinstance(header, dict):
+        raise FileFormatError(f"{path}: capture header: expected a JSON object")
+    if header.get("schema") != SCHEMA:
+        raise FileFormatError(f"{path}: field 'schema': expected {SCHEMA!r}, found {header.get('schema')!r}")
+    if header.get("schema_version") != SCHEMA_VERSION:
+        raise FileFormatError(
+            f"{path}: field 'schema_version': expected {SCHEMA_VERSION}, found {header.get('schema_version')!r} "
+            "(written by a different lfproc version)"
+        )
+    required = ("shots", "size", "views", "cfa_pattern", "gamma", "exposures_s", "mask", "profile", "arrays")
+    for key in required:
+        if header.get(key) is None:
+            raise FileFormatError(f"{path}: capture header: missing field {key!r}")
+    if not isinstance(header["mask"], dict) or "kind" not in header["mask"]:
+        raise FileFormatError(f"{path}: capture header: field 'mask': expected an object with 'kind'")
+    return header
+
+
+def _read_array(path: Path, zf: zipfile.ZipFile, name: str, header: dict) -> np.ndarray:
+    try:
+        data = zf.read(f"{name}.npy")
+    except KeyError:
+        raise FileFormatError(f"{path}: capture has no {name!r} array") from None
+    except (zipfile.BadZipFile, OSError, EOFError) as exc:
+        raise FileFormatError(f"{path}: array {name!r} is corrupt ({exc})") from None
+    try:
+        array = np.lib.format.read_array(io.BytesIO(data), allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise FileFormatError(f"{path}: array {name!r} is corrupt ({exc})") from None
+    want = header["arrays"].get(name)
+    if want is not None and (list(array.shape) != list(want.get("shape", [])) or str(array.dtype) != want.get("dtype")):
+        raise FileFormatError(
+            f"{path}: array {name!r}: header says {want.get('shape')} {want.get('dtype')}, found "
+            f"{list(array.shape)} {array.dtype}"
+        )
+    return array
+
+
+def load_capture(path: str | os.PathLike) -> Capture:
+    """Read a capture file (see the module documentation); errors name the file and field."""
+    from .calib import CameraProfile
+
+    path = Path(path)
+    if not path.exists():
+        raise MissingFileError(f"{path}: no such capture file")
+    if not zipfile.is_zipfile(path):
+        raise FileFormatError(f"{path}: not an lfproc capture (expected a ZIP/.npz archive with {HEADER_NAME})")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            header = _read_header(path, zf)
+            arrays = {name: _read_array(path, zf, name, header) for name in ("dn", "iso", "mask")}
+            if "bias" in header["arrays"]:
+                arrays["bias"] = _read_array(path, zf, "bias", header)
+    except zipfile.BadZipFile as exc:
+        raise FileFormatError(f"{path}: corrupt capture archive ({exc})") from None
+    profile = CameraProfile.from_json(header["profile"], where=f"{path}: embedded profile")
+    m = header["mask"]
+    try:
+        mask = MaskCode(kind=m["kind"], codes=arrays["mask"], period=m.get("period"), shift=int(m.get("shift", 1)))
+        capture = Capture(
+            dn=arrays["dn"],
+            iso=arrays["iso"],
+            exposures_s=header["exposures_s"],
+            mask=mask,
+            profile=profile,
+            views=tuple(header["views"]),
+            cfa_pattern=header["cfa_pattern"],
+            gamma=header["gamma"],
+            bias_dn=arrays.get("bias"),
+            radiance_scale=header.get("radiance_scale"),
+            ground_truth=header.get("ground_truth"),
+            iso_pattern=header.get("iso_pattern") or {},
+            parameters=header.get("parameters") or {},
+        )
+    except InputError as exc:
+        raise FileFormatError(f"{path}: {exc}") from None
+    if capture.shots != header["shots"] or list(capture.size) != list(header["size"]):
+        raise FileFormatError(
+            f"{path}: header says {header['shots']} shots of {header['size']}, arrays hold {capture.shots} of "
+            f"{list(capture.size)}"
+        )
+    return capture
+
+
+# -- calibrated observations --------------------------------------------------------------
+
+def observations(capture: Capture, **options) -> Observation:
+    """Radiance estimates ``T`` (e-/s), their variance and weights for every shot (method.md section 3).
+
+    Parameters
+    ----------
+    capture : Capture
+    **options
+        Passed to :func:`lfproc.sensor.calibrated_observation` (``saturation_margin_dn``,
+        ``variance_from``, ``radiance_estimate`` of shape (S, H, W)...).
+
+    Returns
+    -------
+    Observation
+        With arrays of shape ``(S, H, W)``: ``radiance`` (T), ``variance``, ``weight``
+        (``1/std(T)``, 0 where saturated or black-clipped), ``saturated``, ``black_clipped``.
+    """
+    if not isinstance(capture, Capture):
+        raise InputError(f"observations: expected a Capture, got {type(capture).__name__}")
+    estimate = options.pop("radiance_estimate", None)
+    per_shot = []
+    for s in range(capture.shots):
+        kw = dict(options)
+        if estimate is not None:
+            kw["radiance_estimate"] = np.asarray(estimate)[s]
+        per_shot.append(calibrated_observation(
+            capture.dn[s],
+            exposure_s=capture.exposures_s[s],
+            iso=capture.iso[s],
+            profile=capture.profile,
+            gamma=capture.gamma,
+            bias_dn=None if capture.bias_dn is None else capture.bias_dn[s],
+            **kw,
+        ))
+    return Observation(*(np.stack([getattr(o, f) for o in per_shot]) for f in
+                         ("radiance", "variance", "weight", "saturated", "black_clipped")))
+
+
+def describe_capture(path: str | os.PathLike) -> dict[str, Any]:
+    """Figures of a capture file for ``lfproc info`` (first key ``kind = "capture"``)."""
+    capture = load_capture(path)
+    obs = observations(capture)
+    per_iso = {}
+    for value in capture.isos:
+        sel = capture.iso == value
+        per_iso[str(_num(value))] = {
+            "fraction": float(sel.mean()),
+            "saturated_fraction": float(obs.saturated[sel].mean()),
+            "black_clipped_fraction": float(obs.black_clipped[sel].mean()),
+        }
+    return {
+        "kind": "capture",
+        "path": str(path),
+        "shots": capture.shots,
+        "size": list(capture.size),
+        "views": list(capture.views),
+        "sampling_rate_percent": 100.0 * capture.sampling_rate,
+        "saturated_fraction": obs.saturated_fraction,
+        "black_clipped_fraction": obs.black_clipped_fraction,
+        "isos": [_num(v) for v in capture.isos],
+        "per_iso": per_iso,
+        "exposures_s": list(capture.exposures_s),
+        "cfa_pattern": capture.cfa_pattern,
+        "gamma": capture.gamma,
+        "mask": capture.mask.to_json(),
+        "iso_pattern": capture.iso_pattern,
+        "profile": capture.profile.name,
+        "radiance_scale": capture.radiance_scale,
+        "dn_min": int(capture.dn.min()),
+        "dn_max": int(capture.dn.max()),
+        "ground_truth": capture.ground_truth,
+        "parameters": capture.parameters,
+    }
+
+
+# -- real captures ---------------------------------------------------------------------------
+
+_CV_SUFFIXES = (".png", ".tif", ".tiff")
+
+
+def read_sensor_frame(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, Any]]:
+    """Read one sensor image in DN: a raw file (rawpy ``raw_image_visible``) or a 16-bit PNG/TIFF.
+
+    Returns
+    -------
+    dn : ndarray of shape (H, W), uint16
+    meta : dict (``format``; for raw files ``cfa_pattern``, ``black_level_dn``, ``white_level_dn``)
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise MissingFileError(f"{path}: no such sensor image")
+    if path.suffix.lower() in _CV_SUFFIXES:
+        import cv2
+
+        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise FileFormatError(f"{path}: cannot be read as an image")
+        if image.ndim != 2 or image.dtype != np.uint16:
+            raise FileFormatError(
+                f"{path}: expected a single-channel 16-bit sensor image (raw Bayer mosaic), found "
+                f"{image.dtype} with shape {image.shape}"
+            )
+        return image, {"format": path.suffix.lower().lstrip(".")}
+    try:
+        import rawpy
+    except ImportError:  # pragma: no cover - rawpy is a dependency
+        from .errors import DependencyError
+
+        raise DependencyError("reading raw files needs rawpy (pip install rawpy)") from None
+    try:
+        with rawpy.imread(str(path)) as raw:
+            dn = np.array(raw.raw_image_visible, dtype=np.uint16, copy=True)
+            pattern = np.asarray(raw.raw_pattern)
+            desc = raw.color_desc.decode()
+            meta = {
+                "format": "raw",
+                "black_level_dn": [float(b) for b in raw.black_level_per_channel],
+                "white_level_dn": float(raw.white_level),
+            }
+            if pattern.shape == (2, 2):
+                meta["cfa_pattern"] = "".join("G" if desc[i] in "G" else desc[i] for i in pattern.reshape(-1))
+    except (rawpy.LibRawError, OSError) as exc:
+        raise FileFormatError(f"{path}: not a raw file rawpy can read ({type(exc).__name__}: {exc})") from None
+    return dn, meta
+
+
+def capture_from_raw(
+    raw_paths: Sequence[str | os.PathLike],
+    *,
+    mask: MaskCode | Mapping[str, Any],
+    iso_layout,
+    profile,
+    exposures_s,
+    views: tuple[int, int] = (5, 5),
+    cfa_pattern: str | None = None,
+    gamma: float | None = None,
+    bias_dn=None,
+    isos: Sequence[float] | None = None,
+    random_state=None,
+) -> Capture:
+    """Build a capture from real sensor images (one per shot), a mask description, an ISO layout and a profile.
+
+    Parameters
+    ----------
+    raw_paths : sequence of paths
+        One sensor image per shot: raw files (read with rawpy, ``raw_image_visible``) or
+        single-channel 16-bit PNG/TIFF mosaics.
+    mask : MaskCode or mapping
+        The mask codes, or ``{"kind": "random"|"shifted", "codes": array or .npy path,
+        "period": P or None, "shift": 1}``.
+    iso_layout : float, ndarray (H, W) or (S, H, W), or str
+        ISO of every pixel; a string names a pattern of :func:`lfproc.simulate.iso_pattern`
+        (``row``, ``block``, ``dual``, ``random``) built with ``isos`` (stored explicitly).
+    profile : CameraProfile, name or path
+    exposures_s : float or sequence of floats (one per shot)
+    views : (V, U)
+    cfa_pattern : str, optional
+        Default: the raw file's pattern when rawpy reports one, else the profile's.
+    gamma : float, optional (default: the profile's)
+    bias_dn : float or ndarray, optional (default: black level plus mean dark signal)
+    isos, random_state : for a named ``iso_layout``.
+
+    Returns
+    -------
+    Capture
+    """
+    paths = [Path(p) for p in ([raw_paths] if isinstance(raw_paths, (str, os.PathLike)) else raw_paths)]
+    if not paths:
+        raise InputError("capture_from_raw: expected at least one sensor image")
+    frames, metas = zip(*(read_sensor_frame(p) for p in paths))
+    if len({f.shape for f in frames}) != 1:
+        raise ShapeError(f"capture_from_raw: sensor images differ in size: {[f.shape for f in frames]}")
+    dn = np.stack(frames)
+    if isinstance(mask, Mapping):
+        codes = mask.get("codes")
+        if isinstance(codes, (str, os.PathLike)):
+            codes_path = Path(codes)
+            if not codes_path.is_file():
+                raise MissingFileError(f"{codes_path}: no such mask code file")
+            codes = np.load(codes_path, allow_pickle=False)
+        if codes is None or "kind" not in mask:
+            raise InputError("mask: expected a MaskCode or a mapping with 'kind' and 'codes'")
+        mask = MaskCode(kind=mask["kind"], codes=codes, period=mask.get("period"), shift=int(mask.get("shift", 1)))
+    if not isinstance(mask, MaskCode):
+        raise InputError(f"mask: expected a MaskCode or a mapping, got {type(mask).__name__}")
+    iso_info: dict[str, Any] = {"kind": "given"}
+    if isinstance(iso_layout, str):
+        from .simulate import iso_pattern
+
+        if isos is None:
+            raise InputError(f"iso_layout {iso_layout!r}: pass isos= (the ISO values of the pattern)")
+        iso_map = iso_pattern(iso_layout, size=dn.shape[1:], isos=isos, random_state=random_state)
+        iso_info = {"kind": iso_layout, "isos": [_num(v) for v in isos]}
+    else:
+        iso_map = np.asarray(iso_layout, dtype=np.float32)
+    raw_cfa = {m.get("cfa_pattern") for m in metas} - {None}
+    if cfa_pattern is None and len(raw_cfa) == 1:
+        cfa_pattern = raw_cfa.pop()
+    return Capture(
+        dn=dn,
+        iso=iso_map,
+        exposures_s=exposures_s,
+        mask=mask,
+        profile=profile,
+        views=views,
+        cfa_pattern=cfa_pattern,
+        gamma=gamma,
+        bias_dn=bias_dn,
+        iso_pattern=iso_info,
+        parameters={"source": "raw", "frames": [{"path": str(p), "sha256": file_sha256(p), **m}
+                                                for p, m in zip(paths, metas)]},
+    )
+
+
+# -- previews --------------------------------------------------------------------------------
+
+def _iso_colours(n: int) -> np.ndarray:
+    import matplotlib
+
+    cmap = matplotlib.colormaps["viridis"]
+    return np.array([cmap(x)[:3] for x in (np.linspace(0.05, 0.95, n) if n > 1 else [0.5])])
+
+
+def render_capture_preview(capture: Capture, kind: str = "capture", *, shot: int = 0, zoom: int = 32,
+                           dpi: int = 100) -> np.ndarray:
+    """A picture of a capture: the sensor image, the ISO map and the mask.
+
+    Parameters
+    ----------
+    capture : Capture
+    kind : {"capture", "sensor", "iso", "mask"}
+        ``capture`` shows all three side by side (each with a zoomed top-left crop of
+        ``zoom`` pixels so pixel-level patterns are visible); the others one of them.
+    shot : int
+        Which shot to show.
+    zoom : int
+        Side of the zoomed crop in pixels.
+
+    Returns
+    -------
+    ndarray of shape (H, W, 3), uint8
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Patch
+
+    from ._util import check_choice
+
+    check_choice("preview kind", kind, PREVIEW_KINDS)
+    if not 0 <= shot < capture.shots:
+        raise InputError(f"shot: expected 0..{capture.shots - 1}, got {shot}")
+    h, w = capture.size
+    z = max(2, min(int(zoom), h, w))
+    profile = capture.profile
+    black = float(profile.black_level_dn)
+    sensor = (capture.dn[shot].astype(np.float64) - black) / max(float(profile.white_level_dn) - black, 1.0)
+    sensor = np.clip(sensor, 0, 1) ** (1 / 2.2)
+    isos = capture.isos
+    colours = _iso_colours(len(isos))
+    iso_index = np.searchsorted(np.asarray(isos), capture.iso[shot])
+    iso_rgb = colours[iso_index]
+    op = capture.operator()
+    centre = (capture.views[0] // 2, capture.views[1] // 2)
+    # the mask seen by the centre view at each pixel's CFA colour, tinted by that colour
+    tint = np.eye(3)[op.cfa_index]
+    mask_rgb = op.weights[shot, centre[0], centre[1]][..., None] * tint
+    panels = []
+    if kind in ("capture", "sensor"):
+        panels.append((f"sensor image, shot {shot + 1}/{capture.shots} (DN, gamma 2.2)", sensor, "gray", None))
+    if kind in ("capture", "iso"):
+        legend = [Patch(color=colours[i], label=f"ISO {_num(v)}") for i, v in enumerate(isos)]
+        title = f"ISO map ({capture.iso_pattern.get('kind', 'given')})"
+        panels.append((title, iso_rgb, None, legend))
+    if kind in ("capture", "mask"):
+        panels.append((f"mask, view {centre}, CFA {capture.cfa_pattern} ({capture.mask.kind})", mask_rgb, None, None))
+    fig = Figure(figsize=(4.2 * len(panels), 8.4), dpi=dpi)
+    for i, (title, image, cmap, legend) in enumerate(panels):
+        ax = fig.add_subplot(2, len(panels), i + 1)
+        ax.imshow(image, cmap=cmap, vmin=0, vmax=1, interpolation="nearest")
+        ax.set_title(title, fontsize=9)
+        ax.add_patch(matplotlib.patches.Rectangle((-0.5, -0.5), z, z, fill=False, color="red", lw=1))
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax2 = fig.add_subplot(2, len(panels), len(panels) + i + 1)
+        ax2.imshow(image[:z, :z], cmap=cmap, vmin=0, vmax=1, interpolation="nearest")
+        ax2.set_title(f"top-left {z} x {z} pixels", fontsize=9)
+        ax2.set_xticks([])
+        ax2.set_yticks([])
+        if legend:
+            ax2.legend(handles=legend, loc="upper center", bbox_to_anchor=(0.5, -0.02), ncol=min(4, len(legend)),
+                       fontsize=8, frameon=False)
+    fig.tight_layout()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba())[..., :3].copy()

@@ -1,0 +1,442 @@
+"""Simulated captures of the multi-ISO coded-mask camera (method.md sections 1, 2, 6, 7).
+
+:func:`simulate_capture` projects an HDR light field through the coded mask and the Bayer
+CFA (:mod:`lfproc.projection`) and exposes each shot on a sensor with a per-pixel ISO map
+(:func:`lfproc.sensor.expose`: Poisson photon and dark-current noise, Gaussian read noise,
+full well and ADC saturation, power-law response, quantisation, black level). The result is a
+:class:`lfproc.capture.Capture`.
+
+Radiance scale (lfproc's rule). Light fields are usually in relative units; the sensor
+needs electrons per second. ``L_e = K * L``, with ``K = radiance_scale`` given explicitly, or
+by default chosen so that the brightest *expected* sensor signal just reaches saturation at
+the lowest ISO in use and the reference exposure ``exposure_s``::
+
+    K = e_sat(ISO_min) / (exposure_s * mean_transmittance * max_{p, c} sum_{v, u} L(v, u, p, c))
+
+where ``e_sat`` is the electron count at which a pixel of that ISO saturates (full well or
+ADC, whichever first) and ``mean_transmittance = 0.5`` (masks are uniform in [0, 1]). The
+scale does not depend on the mask draw, so acquisitions of one scene with the same
+``exposure_s`` and ISO set (joint, individual-ISO, bracketing) see the same electrons per
+second. ``K`` is recorded in the capture (``radiance_scale``).
+
+ISO patterns (:func:`iso_pattern`): ``random`` (i.i.d. per pixel), ``row`` (rows alternate ISO
+in 2-row units, so a Bayer quad shares one ISO, as in Magic Lantern's dual ISO), ``block``
+(square blocks of ``block_px`` pixels, an even number; the ISOs of the set are laid out in a
+``g x g`` arrangement of blocks, ``g = ceil(sqrt(n))``), ``dual`` (the row pattern with the
+lowest and the highest ISO of the set: (100, 1600) for the default set), or a file (``.npy``
+or a single-channel integer image, values = ISO). The ISO map is the same in every shot (it
+is a property of the sensor); each shot has its own mask code.
+
+Baselines (method.md section 6): ``baseline="individual-iso"`` takes one shot per ISO of the
+set, each with one global ISO; ``baseline="bracketing"`` takes 2, 3 or 4 shots at the lowest
+ISO of the set with relative exposures ``[0.5, 8]``, ``[0.5, 2, 8]``, ``[0.5, 2, 4, 8]``
+(times ``exposure_s``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._util import check_choice, check_positive, check_random_state
+from ._version import __version__
+from .capture import Capture, _num, file_sha256, observations
+from .errors import FileFormatError, InputError, MissingFileError, ShapeError
+from .lightfield import LightField, clean_nonfinite
+from .projection import MASK_KINDS, build_operator, make_mask
+from .sensor import expose
+
+__all__ = [
+    "ISO_PATTERNS",
+    "BASELINES",
+    "BRACKETING_EXPOSURES",
+    "DEFAULT_ISOS",
+    "NOISE_PROFILES",
+    "iso_pattern",
+    "auto_radiance_scale",
+    "simulate_capture",
+    "simulate_file",
+    "capture_summary",
+]
+
+ISO_PATTERNS = ("random", "row", "block", "dual")
+BASELINES = ("individual-iso", "bracketing")
+#: Relative exposures of the bracketing baseline by number of shots (method.md section 6).
+BRACKETING_EXPOSURES = {2: (0.5, 8.0), 3: (0.5, 2.0, 8.0), 4: (0.5, 2.0, 4.0, 8.0)}
+DEFAULT_ISOS = (100, 400, 800, 1600)
+#: ``--noise LEVEL`` -> shipped camera profile (paper Table VI noise levels).
+NOISE_PROFILES = {"none": "paper-none", "low": "paper-low", "medium": "paper-medium", "high": "paper-high"}
+_NEEDED = ("gain_dn_per_e", "read_noise_e", "dark_current_e_per_s", "black_level_dn", "full_well_e")
+
+
+def _profile(profile):
+    from .calib import load_profile
+
+    return load_profile(profile)
+
+
+def _check_isos(profile, isos: Sequence[float]) -> list[float]:
+    values = [float(v) for v in isos]
+    if not values:
+        raise InputError("isos: expected at least one ISO value")
+    for v in values:
+        if not math.isfinite(v) or v <= 0:
+            raise InputError(f"isos: expected positive ISO values, got {v}")
+        profile.require(v, *_NEEDED)  # ProfileError: ISO not in profile, or a needed figure missing
+    return values
+
+
+def _load_iso_file(path: Path, size: tuple[int, int]) -> np.ndarray:
+    if not path.is_file():
+        raise MissingFileError(f"{path}: no such ISO map file (or use one of {', '.join(ISO_PATTERNS)})")
+    if path.suffix.lower() == ".npy":
+        try:
+            values = np.load(path, allow_pickle=False)
+        except (ValueError, OSError) as exc:
+            raise FileFormatError(f"{path}: not a readable .npy ISO map ({exc})") from None
+    else:
+        import cv2
+
+        values = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if values is None:
+            raise FileFormatError(f"{path}: cannot be read as an ISO map image (.npy, .png, .tif)")
+        if values.ndim != 2:
+            raise FileFormatError(f"{path}: ISO map image: expected one channel, found shape {values.shape}")
+    values = np.asarray(values, dtype=np.float64)
+    if values.shape != tuple(size):
+        raise ShapeError(f"{path}: ISO map of shape {values.shape}; expected the sensor size {tuple(size)}")
+    return values
+
+
+def iso_pattern(
+    kind: str | os.PathLike,
+    *,
+    size: tuple[int, int],
+    isos: Sequence[float] = DEFAULT_ISOS,
+    block_px: int = 4,
+    random_state=None,
+) -> np.ndarray:
+    """ISO of every sensor pixel for a named pattern or a file (see the module documentation).
+
+    Parameters
+    ----------
+    kind : {"random", "row", "block", "dual"} or path
+        Pattern name, or a ``.npy``/integer image file holding the ISO of every pixel.
+    size : (H, W)
+    isos : sequence of float
+        The ISO set.
+    block_px : int
+        Side of the blocks of ``block`` in pixels (even, so Bayer quads share one ISO).
+    random_state : int, Generator or None (``random`` only)
+
+    Returns
+    -------
+    ndarray of shape (H, W), float32
+    """
+    h, w = (int(size[0]), int(size[1]))
+    isos = np.asarray([float(v) for v in isos])
+    if isos.size == 0:
+        raise InputError("isos: expected at least one ISO value")
+    name = str(kind)
+    if name not in ISO_PATTERNS:
+        path = Path(name)
+        if path.suffix or path.exists():
+            return _load_iso_file(path, (h, w)).astype(np.float32)
+        raise InputError(f"iso pattern: expected one of {', '.join(ISO_PATTERNS)} or a file; got {name!r}")
+    rows = np.arange(h)[:, None]
+    cols = np.arange(w)[None, :]
+    if name == "random":
+        index = check_random_state(random_state).integers(0, isos.size, size=(h, w))
+    elif name == "row":
+        index = np.broadcast_to((rows // 2) % isos.size, (h, w))
+    elif name == "dual":
+        isos = np.array([isos.min(), isos.max()])
+        index = np.broadcast_to((rows // 2) % 2, (h, w))
+    else:
+        b = int(block_px)
+        if b < 2 or b % 2 or b != block_px:
+            raise InputError(f"block size: expected an even number of pixels >= 2, got {block_px}")
+        g = math.ceil(math.sqrt(isos.size))
+        index = (((rows // b) % g) * g + (cols // b) % g) % isos.size
+    return isos[index].astype(np.float32)
+
+
+def _saturation_electrons(profile, iso: float) -> float:
+    figs = profile.require(iso, "gain_dn_per_e", "black_level_dn", "full_well_e")
+    sat_dn = profile.saturation_dn(iso)
+    imax = float(profile.white_level_dn)
+    linear_dn = imax * (max(sat_dn - figs["black_level_dn"], 0.0) / imax) ** profile.gamma
+    return min(figs["full_well_e"], linear_dn / figs["gain_dn_per_e"])
+
+
+def auto_radiance_scale(
+    lf: np.ndarray,
+    *,
+    profile,
+    iso: float,
+    exposure_s: float,
+    mean_transmittance: float = 0.5,
+) -> float:
+    """The default ``radiance_scale`` (module documentation): electrons/s per light-field unit.
+
+    Parameters
+    ----------
+    lf : ndarray of shape (V, U, H, W, C)
+    profile : CameraProfile or name
+    iso : float
+        The lowest ISO in use.
+    exposure_s : float
+        Reference exposure time (s).
+    mean_transmittance : float
+        Expected mask transmittance.
+    """
+    profile = _profile(profile)
+    peak = float(np.asarray(lf, dtype=np.float64).sum(axis=(0, 1)).max())
+    if not peak > 0:
+        raise InputError("light field: all samples are zero; cannot choose a radiance scale (give radiance_scale)")
+    return _saturation_electrons(profile, iso) / (check_positive("exposure_s", exposure_s) * mean_transmittance * peak)
+
+
+def simulate_capture(
+    lf: LightField | np.ndarray,
+    *,
+    profile="paper-low",
+    iso_pattern_kind: str | os.PathLike = "random",
+    isos: Sequence[float] = DEFAULT_ISOS,
+    shots: int = 1,
+    exposure_s: float = 0.004,
+    gamma: float | None = None,
+    mask: str = "random",
+    mask_period: int | None = None,
+    mask_shift: int = 1,
+    block_px: int = 4,
+    baseline: str | None = None,
+    relative_exposures: Sequence[float] | None = None,
+    radiance_scale: float | None = None,
+    noise: bool = True,
+    random_state=None,
+    ground_truth: dict | None = None,
+) -> Capture:
+    """Simulate a capture of a light field (see the module documentation).
+
+    Parameters
+    ----------
+    lf : LightField or ndarray of shape (V, U, H, W, 3)
+        Linear HDR radiance (relative units unless ``radiance_scale`` says otherwise);
+        finite and non-negative.
+    profile : CameraProfile, shipped name or path
+        Camera profile (``paper-none|low|medium|high`` for the paper's noise levels).
+    iso_pattern_kind : {"random", "row", "block", "dual"} or path
+        Per-pixel ISO layout (ignored by the baselines, which use global ISOs).
+    isos : sequence of float
+        The ISO set; each must be in the profile.
+    shots : int
+        Number of shots (each its own mask code). For ``bracketing``: 2, 3 or 4.
+    exposure_s : float
+        Exposure time of a shot (s); the reference for ``relative_exposures``.
+    gamma : float, optional
+        Power-law response (default: the profile's).
+    mask : {"random", "shifted"}
+    mask_period : int, optional
+        Tile the mask with this period (pixels); lets patches share one operator.
+    mask_shift : int
+        Pixels of mask shift per view step (``shifted``).
+    block_px : int
+        Block size of the ``block`` ISO pattern.
+    baseline : {None, "individual-iso", "bracketing"}
+    relative_exposures : sequence of float, optional
+        Exposure of each shot relative to ``exposure_s`` (default 1, or the bracketing table).
+    radiance_scale : float, optional
+        Electrons per second per light-field unit; default: automatic (module documentation).
+    noise : bool
+        False: noiseless expected codes (still quantised and clipped).
+    random_state : int, Generator or None
+        Seeds the mask, the random ISO map and the noise. None draws a seed and records it.
+    ground_truth : dict, optional
+        ``{"path", "sha256"}`` of the light-field file, recorded in the capture.
+
+    Returns
+    -------
+    Capture
+    """
+    profile = _profile(profile)
+    if isinstance(lf, LightField):
+        data = lf.data
+    else:
+        data = np.asarray(lf, dtype=np.float32)
+        if data.ndim != 5:
+            raise ShapeError(f"light field: expected shape (V, U, H, W, C), got {data.shape}")
+        data, _ = clean_nonfinite(data, policy="raise", negative="raise", name="light field")
+    if data.shape[-1] != 3:
+        raise ShapeError(f"light field: a Bayer sensor needs 3 colour channels, this one has {data.shape[-1]}")
+    if (data < 0).any() or not np.isfinite(data).all():
+        raise InputError("light field: expected finite, non-negative radiance")
+    nv, nu, h, w, _ = data.shape
+    exposure_s = check_positive("exposure_s", exposure_s)
+    if gamma is not None:
+        gamma = check_positive("gamma", gamma)
+        if gamma < 1:
+            raise InputError(f"gamma: expected a value >= 1, got {gamma}")
+    check_choice("mask", mask, MASK_KINDS)
+    if baseline is not None:
+        check_choice("baseline", baseline, BASELINES)
+    if isinstance(shots, bool) or int(shots) != shots or int(shots) < 1:
+        raise InputError(f"shots: expected an integer >= 1, got {shots!r}")
+    shots = int(shots)
+    isos = _check_isos(profile, isos)
+    if random_state is None:
+        seed: Any = int(np.random.SeedSequence().entropy % (2**63))
+        rng = check_random_state(seed)
+    else:
+        rng = check_random_state(random_state)
+        seed = int(random_state) if isinstance(random_state, (int, np.integer)) else "generator"
+
+    # -- per-shot ISO maps and exposures ---------------------------------------------------
+    if baseline == "individual-iso":
+        shots = len(isos)
+        iso_maps = np.stack([np.full((h, w), v, dtype=np.float32) for v in isos])
+        iso_info = {"kind": "global", "baseline": baseline, "isos": [_num(v) for v in isos]}
+        rel = [1.0] * shots if relative_exposures is None else [float(r) for r in relative_exposures]
+    elif baseline == "bracketing":
+        if relative_exposures is None:
+            if shots not in BRACKETING_EXPOSURES:
+                raise InputError(f"shots: the bracketing baseline takes 2, 3 or 4 shots, got {shots}")
+            rel = list(BRACKETING_EXPOSURES[shots])
+        else:
+            rel = [float(r) for r in relative_exposures]
+            shots = len(rel)
+        iso0 = min(isos)
+        iso_maps = np.full((shots, h, w), iso0, dtype=np.float32)
+        iso_info = {"kind": "global", "baseline": baseline, "isos": [_num(iso0)]}
+    else:
+        one = iso_pattern(iso_pattern_kind, size=(h, w), isos=isos, block_px=block_px, random_state=rng)
+        used = np.unique(one)
+        _check_isos(profile, used)
+        iso_maps = np.broadcast_to(one, (shots, h, w)).copy()
+        name = str(iso_pattern_kind) if str(iso_pattern_kind) in ISO_PATTERNS else "file"
+        iso_info = {"kind": name, "isos": [_num(v) for v in used]}
+        if name == "block":
+            iso_info["block_px"] = int(block_px)
+        if name == "file":
+            iso_info["path"] = str(iso_pattern_kind)
+        rel = [1.0] * shots if relative_exposures is None else [float(r) for r in relative_exposures]
+    if len(rel) != shots:
+        raise InputError(f"relative exposures: expected {shots} values (one per shot), got {len(rel)}")
+    exposures = [check_positive("exposure_s", exposure_s * r) for r in rel]
+
+    # -- radiance scale, mask, projection, exposure -------------------------------------------
+    if radiance_scale is None:
+        scale = auto_radiance_scale(data, profile=profile, iso=float(iso_maps.min()), exposure_s=exposure_s)
+        scale_rule = "auto: brightest expected signal (mean transmittance 0.5) saturates the lowest ISO at exposure_s"
+    else:
+        scale = check_positive("radiance_scale", radiance_scale)
+        scale_rule = "given"
+    code = make_mask(mask, shots=shots, views=(nv, nu), size=(h, w), period=mask_period, shift=mask_shift,
+                     random_state=rng)
+    cfa = profile.cfa_pattern
+    op = build_operator(code, views=(nv, nu), size=(h, w), cfa_pattern=cfa)
+    irradiance = op.forward(data) * np.float32(scale)  # (S, H, W) e-/s
+    dn = np.stack([
+        expose(irradiance[s].astype(np.float64), exposure_s=exposures[s], iso=iso_maps[s], profile=profile,
+               gamma=gamma, noise=noise, random_state=rng)
+        for s in range(shots)
+    ])
+    parameters = {
+        "source": "simulate",
+        "lfproc_version": __version__,
+        "seed": seed,
+        "profile": profile.name,
+        "iso_pattern": iso_info["kind"],
+        "isos_requested": [_num(v) for v in isos],
+        "shots": shots,
+        "exposure_s": exposure_s,
+        "relative_exposures": rel,
+        "gamma": gamma,
+        "mask": mask,
+        "mask_period": mask_period,
+        "mask_shift": int(mask_shift),
+        "baseline": baseline,
+        "noise": bool(noise),
+        "radiance_scale_rule": scale_rule,
+        "light_field_source": lf.source if isinstance(lf, LightField) else None,
+    }
+    return Capture(
+        dn=dn,
+        iso=iso_maps,
+        exposures_s=exposures,
+        mask=code,
+        profile=profile,
+        views=(nv, nu),
+        cfa_pattern=cfa,
+        gamma=gamma,
+        radiance_scale=scale,
+        ground_truth=ground_truth,
+        iso_pattern=iso_info,
+        parameters=parameters,
+    )
+
+
+def capture_summary(capture: Capture, *, path: str | os.PathLike | None = None) -> dict[str, Any]:
+    """Figures of a capture: shots, size, sampling rate, saturated and black-clipped fractions."""
+    obs = observations(capture)
+    per_iso = {}
+    for value in capture.isos:
+        sel = capture.iso == value
+        per_iso[str(_num(value))] = {
+            "saturated_fraction": float(obs.saturated[sel].mean()),
+            "black_clipped_fraction": float(obs.black_clipped[sel].mean()),
+        }
+    out: dict[str, Any] = {"kind": "capture"}
+    if path is not None:
+        out["output"] = str(path)
+    rate = 100.0 * capture.sampling_rate
+    out.update({
+        "shots": capture.shots,
+        "size": list(capture.size),
+        "views": list(capture.views),
+        "sampling_rate": f"{rate:.2f} %",
+        "sampling_rate_percent": rate,
+        "saturated_fraction": obs.saturated_fraction,
+        "black_clipped_fraction": obs.black_clipped_fraction,
+        "isos": [_num(v) for v in capture.isos],
+        "per_iso": per_iso,
+        "exposures_s": list(capture.exposures_s),
+        "iso_pattern": capture.iso_pattern.get("kind"),
+        "mask": capture.mask.kind,
+        "profile": capture.profile.name,
+        "radiance_scale": capture.radiance_scale,
+        "seed": capture.parameters.get("seed"),
+    })
+    return out
+
+
+def simulate_file(
+    input_path: str | os.PathLike,
+    output_path: str | os.PathLike,
+    *,
+    force: bool = False,
+    **options,
+) -> tuple[Capture, dict[str, Any]]:
+    """Read a light field, simulate a capture (:func:`simulate_capture` ``options``), write it.
+
+    NaN/Inf or negative radiance in the input is refused. The capture records the input's
+    path and SHA-256 as its ground truth.
+
+    Returns
+    -------
+    capture : Capture
+    summary : dict (:func:`capture_summary`)
+    """
+    from .io import check_output, read_lightfield
+
+    check_output(output_path, force=force)
+    lf = read_lightfield(input_path, nonfinite="raise", negative="raise")
+    truth = {"path": str(Path(input_path).resolve()), "sha256": file_sha256(input_path)}
+    capture = simulate_capture(lf, ground_truth=truth, **options)
+    capture.save(output_path, force=force)
+    return capture, capture_summary(capture, path=output_path)
