@@ -22,6 +22,8 @@ COMMANDS = (
     "preview",
     "evaluate",
     "simulate",
+    "merge",
+    "dataset",
 )
 
 

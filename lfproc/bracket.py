@@ -1,0 +1,295 @@
+"""Reading exposure brackets from files, and merging them (the library side of ``lfproc merge``).
+
+Every input becomes a :class:`~lfproc.lightfield.LightField` with its exposure time and ISO:
+
+=====================================  ==================================================================
+input                                  how it is read
+=====================================  ==================================================================
+Lytro capture (``.lfr``, ``.lfp``)     decoded by :mod:`lfproc.lytro.decode` with one white image for all
+lfproc EXR light field, view folder    :func:`lfproc.io.read_lightfield`; ``exposure_s``/``iso`` metadata
+camera raw (``.dng``, ``.cr2``...)     rawpy, linear: ``postprocess(gamma=(1, 1), no_auto_bright=True,
+                                       output_bps=16)`` with bilinear (linear) demosaicing, unit white
+                                       balance, camera colours, no rotation; exposure from rawpy or EXIF
+8-bit JPEG/PNG/TIFF                    codes kept (``code / 255``, ``attrs["codes_bits"] = 8``): the
+                                       camera response is non-linear and recovered by the merge
+16-bit PNG/TIFF                        taken as linear (``value / 65535``, saturation 1)
+=====================================  ==================================================================
+
+Exposure time, ISO and exposure bias of 2-D images come from EXIF (Pillow). Given
+``exposures_s`` override the metadata. Missing exposure information, or exposure bias values
+that contradict the exposure times, raise :class:`~lfproc.errors.InputError` naming the file.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import DependencyError, FileFormatError, InputError, MissingFileError
+from .lightfield import LightField
+
+__all__ = [
+    "LYTRO_SUFFIXES",
+    "RAW_SUFFIXES",
+    "IMAGE_SUFFIXES_LDR",
+    "BRACKET_SUFFIXES",
+    "read_exif_exposure",
+    "read_bracket",
+    "merge_files",
+]
+
+LYTRO_SUFFIXES = (".lfr", ".lfp")
+RAW_SUFFIXES = (".dng", ".cr2", ".cr3", ".crw", ".nef", ".nrw", ".arw", ".srf", ".sr2", ".raf", ".orf", ".rw2",
+                ".pef", ".srw", ".x3f", ".3fr", ".erf", ".kdc", ".mos", ".mrw", ".iiq", ".rwl")
+IMAGE_SUFFIXES_LDR = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
+BRACKET_SUFFIXES = LYTRO_SUFFIXES + RAW_SUFFIXES + IMAGE_SUFFIXES_LDR + (".exr",)
+
+
+def _ratio(value) -> float | None:
+    if value is None:
+        return None
+    try:
+        if isinstance(value, tuple) and len(value) == 2:
+            v = float(value[0]) / float(value[1])
+        else:
+            v = float(value)
+    except (TypeError, ValueError, ZeroDivisionError):
+        return None
+    return v if math.isfinite(v) else None
+
+
+def read_exif_exposure(path: str | os.PathLike) -> dict[str, float | None]:
+    """Exposure time (s), ISO, exposure bias (EV) and f-number from a file's EXIF (Pillow).
+
+    Returns a dict with ``exposure_s``, ``iso``, ``exposure_bias_ev``, ``f_number``; a value
+    the file does not hold is None. Files Pillow cannot open give all None.
+    """
+    from PIL import ExifTags, Image, UnidentifiedImageError
+
+    out: dict[str, float | None] = {"exposure_s": None, "iso": None, "exposure_bias_ev": None, "f_number": None}
+    try:
+        with Image.open(path) as im:
+            exif = im.getexif()
+    except (UnidentifiedImageError, OSError):
+        return out
+    tags = dict(exif)
+    try:
+        tags.update(exif.get_ifd(ExifTags.IFD.Exif))
+    except (KeyError, AttributeError):
+        pass
+    names = {v: k for k, v in ExifTags.TAGS.items()}
+    iso = tags.get(names["ISOSpeedRatings"])
+    if isinstance(iso, (tuple, list)):
+        iso = iso[0] if iso else None
+    t = _ratio(tags.get(names["ExposureTime"]))
+    out["exposure_s"] = t if t and t > 0 else None
+    iso_v = _ratio(iso)
+    out["iso"] = iso_v if iso_v and iso_v > 0 else None
+    out["exposure_bias_ev"] = _ratio(tags.get(names["ExposureBiasValue"]))
+    out["f_number"] = _ratio(tags.get(names["FNumber"]))
+    return out
+
+
+def _read_ldr(path: Path) -> LightField:
+    import cv2
+
+    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
+    if raw is None:
+        raise FileFormatError(f"{path}: not a readable image (OpenCV could not decode it)")
+    if raw.ndim == 2:
+        raw = raw[..., None]
+    elif raw.shape[2] == 4:
+        raw = raw[..., :3]
+    if raw.shape[2] == 3:
+        raw = raw[..., ::-1]
+    exif = read_exif_exposure(path)
+    if raw.dtype == np.uint8:
+        data, attrs = raw.astype(np.float32) / 255, {"codes_bits": 8}
+    elif raw.dtype == np.uint16:
+        data, attrs = raw.astype(np.float32) / 65535, {"codes_bits": 16, "transfer": "linear"}
+    else:
+        raise FileFormatError(f"{path}: expected 8- or 16-bit samples, found {raw.dtype}")
+    attrs["exif"] = exif
+    return LightField(data=np.ascontiguousarray(data)[None, None], units="relative",
+                      colour_space="camera-rgb" if data.shape[-1] == 3 else "luminance",
+                      exposure_s=exif["exposure_s"], iso=exif["iso"], saturation_level=1.0, source=str(path),
+                      attrs=attrs)
+
+
+def _read_raw(path: Path) -> LightField:
+    import rawpy
+
+    try:
+        raw = rawpy.imread(str(path))
+    except (rawpy.LibRawError, OSError) as exc:  # type: ignore[attr-defined]
+        raise FileFormatError(f"{path}: not a camera raw file rawpy can read ({exc})") from None
+    with raw:
+        rgb = raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16, use_camera_wb=False,
+                              use_auto_wb=False, user_wb=[1.0, 1.0, 1.0, 1.0], output_color=rawpy.ColorSpace.raw,
+                              demosaic_algorithm=rawpy.DemosaicAlgorithm.LINEAR, user_flip=0,
+                              adjust_maximum_thr=0.0)
+        other = getattr(raw, "other", None)
+        t = getattr(other, "shutter_speed", None) if other is not None else None
+        iso = getattr(other, "iso_speed", None) if other is not None else None
+        black = [float(b) for b in raw.black_level_per_channel]
+        white = float(raw.white_level)
+    exif = read_exif_exposure(path)
+    t = float(t) if t else exif["exposure_s"]
+    iso = float(iso) if iso else exif["iso"]
+    return LightField(data=(rgb.astype(np.float32) / 65535)[None, None], units="relative", colour_space="camera-rgb",
+                      exposure_s=t, iso=iso, saturation_level=1.0, source=str(path),
+                      attrs={"raw_black_level": black, "raw_white_level": white, "exif": exif})
+
+
+def _read_lytro(path: Path, *, white_db, profile) -> LightField:
+    try:
+        from .lytro import decode as lytro_decode
+    except ImportError:
+        raise DependencyError(f"{path}: Lytro decoding (lfproc.lytro.decode) is not available in this build") from None
+    if not hasattr(lytro_decode, "decode_capture"):
+        raise DependencyError(f"{path}: lfproc.lytro.decode has no decode_capture function")
+    kwargs: dict[str, Any] = {}
+    if white_db is not None:
+        kwargs["white_db"] = white_db
+    return lytro_decode.decode_capture(path, **kwargs)
+
+
+def _check_bias(lfs: list[LightField], names: list[str]) -> None:
+    """EXIF exposure bias values that vary must follow the exposures (log2 t*ISO - bias constant)."""
+    bias = [lf.attrs.get("exif", {}).get("exposure_bias_ev") if isinstance(lf.attrs.get("exif"), dict) else None
+            for lf in lfs]
+    if any(b is None for b in bias) or len(set(bias)) < 2:
+        return
+    ev = np.array([math.log2(lf.exposure_s * (lf.iso or 100.0)) - b for lf, b in zip(lfs, bias)])
+    ref = float(np.median(ev))
+    worst = int(np.argmax(np.abs(ev - ref)))
+    if abs(ev[worst] - ref) > 0.5:
+        raise InputError(
+            f"{names[worst]}: EXIF exposure bias {bias[worst]:+g} EV contradicts its exposure time "
+            f"{lfs[worst].exposure_s:g} s and ISO against the rest of the bracket (off by {ev[worst] - ref:+.2f} EV); "
+            "give --exposures-s"
+        )
+
+
+def read_bracket(
+    paths: Sequence[str | os.PathLike],
+    *,
+    exposures_s: Sequence[float] | None = None,
+    isos: Sequence[float] | float | None = None,
+    white_db: str | os.PathLike | None = None,
+    profile=None,
+) -> list[LightField]:
+    """Read a bracket of inputs (see the module table) as light fields with exposure metadata.
+
+    Parameters
+    ----------
+    paths : sequence of paths (at least two)
+    exposures_s : sequence of floats, optional
+        Exposure times (s), one per input, overriding the metadata.
+    isos : float or sequence, optional
+        ISO, one for all or one per input, overriding the metadata.
+    white_db : path, optional
+        White-image database for Lytro captures (the same white image is used for all).
+    profile : camera profile, optional
+        Passed to the Lytro decoder.
+
+    Returns
+    -------
+    list of LightField
+        Same shape, ``exposure_s`` set on every one.
+
+    Raises
+    ------
+    InputError
+        Fewer than two inputs; a count of ``exposures_s`` that does not match; an input with no
+        exposure time (and none given); contradictory EXIF exposure bias.
+    """
+    from .io import read_lightfield
+
+    paths = [Path(p) for p in paths]
+    if len(paths) < 2:
+        raise InputError(f"a bracket needs at least two inputs (exposures), got {len(paths)}: "
+                         f"{', '.join(map(str, paths)) or 'none'}")
+    if exposures_s is not None and len(exposures_s) != len(paths):
+        raise InputError(f"--exposures-s: expected {len(paths)} values (one per input), got {len(exposures_s)}")
+    if isos is not None and np.ndim(isos) and len(isos) not in (1, len(paths)):  # type: ignore[arg-type]
+        raise InputError(f"--isos: expected 1 or {len(paths)} values, got {len(isos)}")  # type: ignore[arg-type]
+    lfs = []
+    for p in paths:
+        if not p.exists():
+            raise MissingFileError(f"{p}: no such file or folder")
+        suffix = p.suffix.lower()
+        if p.is_dir() or suffix == ".exr":
+            lf = read_lightfield(p)
+        elif suffix in LYTRO_SUFFIXES:
+            lf = _read_lytro(p, white_db=white_db, profile=profile)
+        elif suffix in RAW_SUFFIXES:
+            lf = _read_raw(p)
+        elif suffix in IMAGE_SUFFIXES_LDR:
+            lf = _read_ldr(p)
+        else:
+            raise FileFormatError(f"{p}: not a bracket input; expected one of {', '.join(BRACKET_SUFFIXES)} "
+                                  "or a folder of views")
+        lfs.append(lf if lf.source else lf.replace(source=str(p)))
+    for i, (lf, p) in enumerate(zip(lfs, paths)):
+        changes: dict[str, Any] = {}
+        if exposures_s is not None:
+            changes["exposure_s"] = float(exposures_s[i])
+        if isos is not None:
+            changes["iso"] = float(np.broadcast_to(np.asarray(isos, dtype=float), (len(paths),))[i])
+        if changes:
+            lfs[i] = lf = lf.replace(**changes)
+        if lf.exposure_s is None:
+            raise InputError(f"{p}: no exposure time in its metadata (EXIF ExposureTime or lfproc exposure_s); "
+                             "give --exposures-s")
+    if exposures_s is None:
+        _check_bias(lfs, [str(p) for p in paths])
+    return lfs
+
+
+def merge_files(
+    paths: Sequence[str | os.PathLike],
+    *,
+    method: str | None = None,
+    profile=None,
+    exposures_s: Sequence[float] | None = None,
+    isos: Sequence[float] | float | None = None,
+    white_db: str | os.PathLike | None = None,
+    n_iter: int = 2,
+    random_state=0,
+    n_threads: int | None = None,
+) -> tuple[LightField, dict[str, Any]]:
+    """Read a bracket of files and merge it (:func:`read_bracket` then :func:`lfproc.merge.merge_lightfields`).
+
+    ``method=None`` chooses: ``debevec`` for 8-bit camera images (non-linear) or when no camera
+    profile is known, ``ml`` otherwise. Lytro captures default to the ``illum`` profile.
+
+    Returns the merged light field (``attrs["sources"]`` are the file paths) and the merge
+    information (see :func:`lfproc.merge.merge_lightfields`), plus ``method``.
+    """
+    from .merge import MERGE_METHODS, merge_lightfields
+    from ._util import check_choice
+
+    if method is not None:
+        check_choice("method", method, MERGE_METHODS)
+    paths = [Path(p) for p in paths]
+    lytro = any(p.suffix.lower() in LYTRO_SUFFIXES for p in paths)
+    if profile is None and lytro:
+        profile = "illum"
+    lfs = read_bracket(paths, exposures_s=exposures_s, isos=isos, white_db=white_db, profile=profile)
+    if method is None:
+        codes8 = any(lf.attrs.get("codes_bits") == 8 for lf in lfs)
+        method = "debevec" if codes8 or profile is None else "ml"
+    if method == "ml" and isos is None and any(lf.iso is None for lf in lfs):
+        bad = next(p for p, lf in zip(paths, lfs) if lf.iso is None)
+        raise InputError(f"{bad}: no ISO in its metadata; method ml needs one (give --isos)")
+    merged, info = merge_lightfields(lfs, method=method, profile=profile, n_iter=n_iter, random_state=random_state,
+                                     n_threads=n_threads)
+    merged = merged.replace(attrs=dict(merged.attrs) | {"sources": [str(p) for p in paths]})
+    info["method"] = method
+    return merged, info

@@ -1,0 +1,318 @@
+"""Building an HDR light-field data set from folders of exposure brackets (method.md section 8).
+
+Layout of ``SCENES_DIR``: one folder per scene holding its bracket (Lytro captures, or
+decoded light-field EXRs / view folders, or 2-D images: anything :func:`lfproc.bracket.read_bracket`
+reads), optionally calibration data (a folder or ``.tar`` whose name starts with ``caldata``,
+used to build the white-image database of Lytro captures). When a scene holds Lytro
+captures only those are the bracket; files named ``truth.*`` (the ground truth written by
+``lfproc virtual-illum``) and hidden files are never part of it.
+
+Layout of ``DATASET_DIR`` (every file written atomically)::
+
+    scenes/<scene>/hdr.exr            the merged HDR light field
+    scenes/<scene>/preview.png        tone-mapped centre view
+    scenes/<scene>/histogram.png      histogram of log2 luminance (dynamic range)
+    scenes/<scene>/record.json        the scene's manifest row
+    done/<scene>.json                 done-record (written last: the scene is finished)
+    manifest.json, manifest.csv       rebuilt from the done-records after every run
+    failed.json                       scenes that failed in the last run and why
+
+Resuming: a scene whose done-record and outputs exist is skipped; its output folder is
+written as a whole (temporary folder, then rename) before the done-record, so an interrupted
+run leaves either a finished scene or none. A failed scene is reported and does not stop the
+others.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import os
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ._version import __version__
+from .errors import InputError, MissingFileError
+
+__all__ = [
+    "Scene",
+    "find_scenes",
+    "process_scene",
+    "build_dataset",
+    "read_manifest",
+    "SCENE_OUTPUTS",
+    "MANIFEST_FIELDS",
+]
+
+SCENE_OUTPUTS = ("hdr.exr", "preview.png", "histogram.png", "record.json")
+MANIFEST_FIELDS = ("scene", "method", "exposures_s", "dynamic_range_stops", "saturated_fraction", "views", "size",
+                   "units", "hdr", "preview", "histogram", "sources", "sha256")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One scene folder: its name, bracket inputs and optional calibration data."""
+
+    name: str
+    folder: Path
+    inputs: tuple[Path, ...]
+    caldata: Path | None = None
+
+
+def _scene_of(folder: Path) -> Scene:
+    from .bracket import BRACKET_SUFFIXES, LYTRO_SUFFIXES
+
+    caldata = None
+    inputs: list[Path] = []
+    for p in sorted(folder.iterdir()):
+        if p.name.startswith("."):
+            continue
+        if p.name.lower().startswith("caldata"):
+            caldata = p
+            continue
+        if p.stem.lower() == "truth":
+            continue
+        if p.is_file() and p.suffix.lower() in BRACKET_SUFFIXES:
+            inputs.append(p)
+        elif p.is_dir():
+            inputs.append(p)  # a folder of views
+    lytro = [p for p in inputs if p.suffix.lower() in LYTRO_SUFFIXES]
+    return Scene(name=folder.name, folder=folder, inputs=tuple(lytro or inputs), caldata=caldata)
+
+
+def find_scenes(scenes_dir: str | os.PathLike) -> list[Scene]:
+    """The scene folders of ``scenes_dir`` (sorted by name; hidden folders ignored)."""
+    scenes_dir = Path(scenes_dir)
+    if not scenes_dir.is_dir():
+        raise MissingFileError(f"{scenes_dir}: no such scenes folder")
+    scenes = [_scene_of(p) for p in sorted(scenes_dir.iterdir()) if p.is_dir() and not p.name.startswith(".")]
+    if not scenes:
+        raise InputError(f"{scenes_dir}: expected one folder per scene, found none")
+    return scenes
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    files = sorted(q for q in path.rglob("*") if q.is_file()) if path.is_dir() else [path]
+    for f in files:
+        with open(f, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    return h.hexdigest()
+
+
+def _white_db(scene: Scene, workdir: Path) -> Path | None:
+    """Build the white-image database of a scene's calibration data (Lytro captures only)."""
+    if scene.caldata is None:
+        return None
+    from .lytro import whites  # the Lytro white-image database (lfproc whites)
+
+    db = workdir / "whites"
+    whites.build_white_db(scene.caldata, db)
+    return db
+
+
+def _write_previews(lf, folder: Path) -> None:
+    from .preview import write_preview
+
+    write_preview(lf, folder / "preview.png", kind="centre")
+    write_preview(lf, folder / "histogram.png", kind="histogram")
+
+
+def process_scene(
+    scene: Scene,
+    out_dir: str | os.PathLike,
+    *,
+    method: str | None = None,
+    profile=None,
+    n_threads: int = 1,
+) -> dict[str, Any]:
+    """Decode, merge and write one scene; return its manifest row (also written as records).
+
+    Writes ``scenes/<name>/`` (atomically, as a whole) and then ``done/<name>.json``.
+    """
+    from .bracket import merge_files
+    from .io import atomic_dir, atomic_file, write_lightfield
+
+    out_dir = Path(out_dir)
+    start = time.perf_counter()
+    if len(scene.inputs) < 2:
+        raise InputError(f"scene {scene.name}: a bracket needs at least two inputs, found "
+                         f"{', '.join(p.name for p in scene.inputs) or 'none'} in {scene.folder}")
+    scene_out = out_dir / "scenes" / scene.name
+    (out_dir / "scenes").mkdir(parents=True, exist_ok=True)
+    (out_dir / "done").mkdir(parents=True, exist_ok=True)
+    with atomic_dir(scene_out, force=True) as tmp:
+        white_db = _white_db(scene, tmp)
+        merged, info = merge_files(scene.inputs, method=method, profile=profile, white_db=white_db,
+                                   n_threads=n_threads)
+        if white_db is not None:
+            shutil.rmtree(white_db, ignore_errors=True)
+        write_lightfield(merged, tmp / "hdr.exr")
+        _write_previews(merged, tmp)
+        sat = info["saturated_everywhere_fraction"]
+        row = {
+            "scene": scene.name,
+            "method": info["method"],
+            "exposures_s": merged.attrs["exposures_s"],
+            "dynamic_range_stops": round(float(info["dynamic_range_stops"]), 4),
+            "saturated_fraction": float(sat),
+            "views": list(merged.views),
+            "size": list(merged.size),
+            "units": merged.units,
+            "hdr": f"scenes/{scene.name}/hdr.exr",
+            "preview": f"scenes/{scene.name}/preview.png",
+            "histogram": f"scenes/{scene.name}/histogram.png",
+            "sources": [str(p) for p in scene.inputs],
+            "sha256": [_sha256(p) for p in scene.inputs],
+            "lfproc_version": __version__,
+            "seconds": round(time.perf_counter() - start, 3),
+        }
+        (tmp / "record.json").write_text(json.dumps(row, indent=2))
+    with atomic_file(out_dir / "done" / f"{scene.name}.json", force=True) as tmp:
+        tmp.write_text(json.dumps(row, indent=2))
+    return row
+
+
+def _is_done(scene: Scene, out_dir: Path) -> bool:
+    record = out_dir / "done" / f"{scene.name}.json"
+    folder = out_dir / "scenes" / scene.name
+    return record.is_file() and all((folder / name).is_file() for name in SCENE_OUTPUTS)
+
+
+def _write_manifest(out_dir: Path, scenes: list[Scene]) -> list[dict[str, Any]]:
+    from .io import atomic_file
+
+    rows = []
+    for scene in scenes:
+        if _is_done(scene, out_dir):
+            rows.append(json.loads((out_dir / "done" / f"{scene.name}.json").read_text()))
+    doc = {"lfproc_version": __version__, "n_scenes": len(rows), "scenes": rows}
+    with atomic_file(out_dir / "manifest.json", force=True) as tmp:
+        tmp.write_text(json.dumps(doc, indent=2))
+    buf = io.StringIO()
+    writer = csv.writer(buf)
+    writer.writerow(MANIFEST_FIELDS)
+    for row in rows:
+        writer.writerow([";".join(map(str, row[k])) if isinstance(row[k], list) else row[k] for k in MANIFEST_FIELDS])
+    with atomic_file(out_dir / "manifest.csv", force=True) as tmp:
+        tmp.write_text(buf.getvalue())
+    return rows
+
+
+def read_manifest(dataset_dir: str | os.PathLike) -> list[dict[str, Any]]:
+    """The rows of a data set's ``manifest.json``."""
+    path = Path(dataset_dir) / "manifest.json"
+    if not path.is_file():
+        raise MissingFileError(f"{path}: no manifest; run lfproc dataset build first")
+    return json.loads(path.read_text())["scenes"]
+
+
+def _run_scene(scene: Scene, out_dir: str, method, profile) -> dict[str, Any]:
+    return process_scene(scene, out_dir, method=method, profile=profile, n_threads=1)
+
+
+def build_dataset(
+    scenes_dir: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    method: str | None = None,
+    profile=None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    progress_bar: bool | None = None,
+) -> dict[str, Any]:
+    """Process every scene of ``scenes_dir`` into ``out_dir`` in parallel with Dask (see the module notes).
+
+    Parameters
+    ----------
+    scenes_dir : path
+        One folder per scene.
+    out_dir : path
+        Data-set folder (created if missing; finished scenes in it are skipped).
+    method, profile : merge options (see :func:`lfproc.bracket.merge_files`).
+    scheduler : str, optional
+        Address of a running Dask scheduler (``tcp://host:8786``); default: a local cluster of
+        ``workers`` processes with one thread each. ``"synchronous"`` runs the scenes one
+        after the other in this process (debugging).
+    workers : int, optional
+        Processes of the local cluster (default: the CPU count, at most the number of scenes).
+    progress_bar : bool, optional
+        Show a progress bar (None: when stderr is a terminal).
+
+    Returns
+    -------
+    dict
+        ``processed``, ``skipped`` and ``failed`` (scene -> error message) scene names,
+        ``manifest`` (path) and ``rows`` (the manifest rows).
+    """
+    from ._util import progress
+
+    scenes = find_scenes(scenes_dir)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if profile is not None and not isinstance(profile, str):
+        from .calib import load_profile
+
+        profile = load_profile(profile)
+    todo = [s for s in scenes if not _is_done(s, out)]
+    skipped = [s.name for s in scenes if s not in todo]
+    processed: list[str] = []
+    failed: dict[str, str] = {}
+    if todo:
+        bar = progress(total=len(todo), desc="scenes", disable=None if progress_bar is None else not progress_bar)
+        if scheduler == "synchronous":
+            for scene in todo:
+                try:
+                    _run_scene(scene, str(out), method, profile)
+                    processed.append(scene.name)
+                except Exception as exc:  # noqa: BLE001 - a failed scene must not stop the others
+                    failed[scene.name] = f"{type(exc).__name__}: {exc}"
+                bar.update(1)
+        else:
+            _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, failed)
+        bar.close()
+    rows = _write_manifest(out, scenes)
+    from .io import atomic_file
+
+    with atomic_file(out / "failed.json", force=True) as tmp:
+        tmp.write_text(json.dumps(failed, indent=2))
+    return {"scenes": len(scenes), "processed": processed, "skipped": skipped, "failed": failed,
+            "manifest": str(out / "manifest.json"), "rows": rows}
+
+
+def _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, failed) -> None:
+    import logging
+
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        n = workers or min(len(todo), os.cpu_count() or 1)
+        if n < 1:
+            raise InputError(f"--workers: expected a positive number, got {workers}")
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
+        client = Client(cluster)
+    try:
+        futures = {client.submit(_run_scene, scene, str(out), method, profile, key=f"scene-{scene.name}-{i}",
+                                 pure=False): scene for i, scene in enumerate(todo)}
+        for future in as_completed(futures):
+            scene = futures[future]
+            exc = future.exception()
+            if exc is None:
+                processed.append(scene.name)
+            else:
+                failed[scene.name] = f"{type(exc).__name__}: {exc}"
+            bar.update(1)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
