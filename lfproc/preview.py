@@ -234,7 +234,7 @@ def _preview_histogram(lf: LightField, *, exposure_ev: float = 0.0, width_px: in
         for p in (p_lo, p_hi):
             ax.axvline(p, color="#c44e52", linestyle="--", linewidth=1)
         ax.axvspan(p_lo, p_hi, color="#c44e52", alpha=0.06)
-        ax.set_xlim(lo, hi)
+        ax.set_xlim(lo - 0.5, hi + 0.5)
     else:
         ax.text(0.5, 0.5, "no positive luminance", transform=ax.transAxes, ha="center")
     ax.set_xlabel("log2 luminance (stops)")

@@ -444,7 +444,10 @@ def scene_names() -> list[str]:
 # -- validation ---------------------------------------------------------------------------------
 
 def _check_views(views) -> tuple[int, int]:
-    pair = (views, views) if isinstance(views, (int, np.integer)) else tuple(views)
+    try:
+        pair = (views, views) if isinstance(views, (int, np.integer)) else tuple(views)
+    except TypeError:
+        pair = ()
     if len(pair) != 2 or not all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) for n in pair):
         raise InputError(f"views: expected an odd integer >= 1 or a pair of them, got {views!r}")
     if not all(n >= 1 and n % 2 == 1 for n in pair):

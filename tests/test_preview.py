@@ -1,0 +1,224 @@
+"""Previews: Reinhard tone mapping, contact sheet, EPI, histogram, registry, files, CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from lfproc.errors import InputError, OutputExistsError, ShapeError
+from lfproc.io import srgb_encode, write_lightfield
+from lfproc.lightfield import LightField
+from lfproc.preview import (
+    PREVIEWS,
+    epi_stretch,
+    register_preview,
+    reinhard_parameters,
+    render_preview,
+    tonemap,
+    write_preview,
+)
+from lfproc.synth import synthesize
+
+
+@pytest.fixture(scope="module")
+def lf():
+    return synthesize("layers", size=(48, 64), views=5, baseline_px=2.0, random_state=0)
+
+
+# -- tone mapping ---------------------------------------------------------------------------------
+
+def test_tonemap_is_monotonic_and_in_range():
+    lum = np.exp2(np.linspace(-20, 20, 4001)).astype(np.float32)
+    grey = np.repeat(lum[:, None], 3, axis=1)
+    out = tonemap(grey)
+    assert out.dtype == np.float32 and out.shape == grey.shape
+    assert out.min() >= 0 and out.max() <= 1
+    assert np.all(np.diff(out[:, 1]) >= 0)
+    assert out[0, 1] < 0.01 and out[-1, 1] == 1.0
+
+
+def test_tonemap_maps_log_average_to_documented_value():
+    rng = np.random.default_rng(0)
+    lum = np.exp2(rng.uniform(-10, 10, size=(64, 64))).astype(np.float32)
+    image = lum[..., None] * np.array([1.0, 1.0, 1.0], np.float32)
+    params = reinhard_parameters(image)
+    log_avg = float(np.exp(np.mean(np.log(lum.astype(np.float64)))))
+    assert params["log_average"] == pytest.approx(log_avg, rel=1e-5)
+    assert params["scale"] == pytest.approx(0.18 / log_avg, rel=1e-5)
+    white = params["white"]
+    assert white == pytest.approx(np.percentile(lum, 99.9) * 0.18 / log_avg, rel=1e-5)
+    probe = np.full((1, 1, 3), log_avg, np.float32)
+    value = tonemap(probe, reference=image, encoding="linear")[0, 0, 1]
+    expected = 0.18 * (1 + 0.18 / white**2) / (1 + 0.18)
+    assert value == pytest.approx(expected, rel=1e-5)
+    assert value == pytest.approx(0.1525, abs=1e-3)  # the value the docstring quotes
+    # the sRGB output is the sRGB encoding of the linear one
+    assert tonemap(probe, reference=image)[0, 0, 1] == pytest.approx(float(srgb_encode(np.float32(value))), rel=1e-5)
+    # the white percentile maps to 1
+    top = np.full((1, 1, 3), np.percentile(lum, 99.9), np.float32)
+    assert tonemap(top, reference=image, encoding="linear")[0, 0, 1] == pytest.approx(1.0, rel=1e-5)
+
+
+def test_tonemap_keeps_colour_ratios_and_exposure_brightens():
+    image = np.array([[[0.2, 0.1, 0.05], [1.0, 1.0, 1.0], [4.0, 4.0, 4.0]]], np.float32)
+    out = tonemap(image, encoding="linear")
+    np.testing.assert_allclose(out[0, 0] / out[0, 0, 0], [1.0, 0.5, 0.25], rtol=1e-5)
+    brighter = tonemap(image, encoding="linear", exposure_ev=1.0)
+    assert brighter[0, 0, 1] > out[0, 0, 1]
+    assert tonemap(np.zeros((2, 2, 3), np.float32)).max() == 0
+
+
+def test_tonemap_errors():
+    with pytest.raises(ShapeError, match="1 or 3 colour channels"):
+        tonemap(np.ones((4, 4, 2)))
+    with pytest.raises(InputError, match="key: expected a number in"):
+        tonemap(np.ones((4, 4, 3)), key=1.5)
+    with pytest.raises(InputError, match="white_percentile"):
+        tonemap(np.ones((4, 4, 3)), white_percentile=0)
+    with pytest.raises(InputError, match="encoding: expected srgb or linear"):
+        tonemap(np.ones((4, 4, 3)), encoding="gamma")
+
+
+# -- renderers -----------------------------------------------------------------------------------
+
+def test_centre_preview(lf):
+    img = render_preview(lf, "centre")
+    assert img.dtype == np.uint8 and img.shape == (48, 64, 3)
+    expected = np.round(tonemap(lf.centre()) * 255).astype(np.uint8)
+    np.testing.assert_array_equal(img, expected)
+
+
+def test_sheet_has_tiles_and_gaps_with_one_tone_curve():
+    base = synthesize("checker", size=(32, 40), views=3, baseline_px=0.0, random_state=1).data.copy()
+    base[0, 0] *= 4  # one view 2 stops brighter: with a common curve its tile is brighter
+    lf = LightField(data=base)
+    img = render_preview(lf, "sheet")
+    g = 2
+    assert img.shape == (3 * 32 + 2 * g, 3 * 40 + 2 * g, 3)
+    assert (img[32:32 + g] == 40).all() and (img[:, 40:40 + g] == 40).all()
+    tiles = np.round(tonemap(lf.data) * 255).astype(np.uint8)
+    np.testing.assert_array_equal(img[:32, :40], tiles[0, 0])
+    np.testing.assert_array_equal(img[32 + g:64 + g, 40 + g:80 + g], tiles[1, 1])
+    assert img[:32, :40].mean() > img[32 + g:64 + g, 40 + g:80 + g].mean() + 10
+
+
+def test_epi_layout_and_slopes():
+    # views that are the centre view translated by d * (u - cu): a bright dot draws a line of slope d
+    h, w, d = 40, 48, 3
+    data = np.full((5, 5, h, w, 3), 0.01, np.float32)
+    for v in range(5):
+        for u in range(5):
+            data[v, u, 20 + d * (v - 2), 24 + d * (u - 2)] = (10.0, 0.0, 0.0)  # a red dot
+    lf = LightField(data=data)
+    s = epi_stretch(lf)
+    g = 2
+    img = render_preview(lf, "epi")
+    assert img.shape == (h + g + 5 * s, w + g + 5 * s, 3)
+    redness = img[..., 0].astype(int) - img[..., 1]
+    horizontal = redness[h + g:, :w]  # rows: u (each s times), columns: x
+    for u in range(5):
+        assert np.argmax(horizontal[u * s + s // 2]) == 24 + d * (u - 2)
+    vertical = redness[:h, w + g:]  # rows: y, columns: v (each s times)
+    for v in range(5):
+        assert np.argmax(vertical[:, v * s + s // 2]) == 20 + d * (v - 2)
+
+
+def test_histogram_preview(lf):
+    img = render_preview(lf, "histogram")
+    assert img.shape == (500, 800, 3) and img.dtype == np.uint8
+    assert img.std() > 10  # a drawn plot, not a blank canvas
+
+
+def test_histogram_of_black_light_field_draws():
+    img = render_preview(LightField(data=np.zeros((1, 1, 8, 8, 3))), "histogram")
+    assert img.shape == (500, 800, 3)
+
+
+def test_render_preview_errors(lf):
+    with pytest.raises(InputError, match="preview kind: expected one of centre, sheet, epi, histogram; got 'pie'"):
+        render_preview(lf, "pie")
+    with pytest.raises(InputError, match="expected a LightField, got ndarray"):
+        render_preview(np.zeros((2, 2, 3)), "centre")
+
+
+def test_registry_takes_new_input_kinds():
+    class Capture:
+        def __init__(self, image):
+            self.image = image
+
+    def sensor(capture, *, exposure_ev=0.0):
+        return np.round(tonemap(capture.image[..., None], exposure_ev=exposure_ev) * 255).astype(np.uint8).repeat(3, 2)
+
+    register_preview("test-sensor", sensor, accepts=Capture, description="sensor image")
+    try:
+        img = render_preview(Capture(np.ones((6, 7), np.float32)), "test-sensor")
+        assert img.shape == (6, 7, 3)
+        with pytest.raises(InputError, match="already registered"):
+            register_preview("test-sensor", sensor, accepts=Capture)
+        with pytest.raises(InputError, match="expected a Capture, got LightField"):
+            render_preview(LightField(data=np.ones((1, 1, 4, 4, 3))), "test-sensor")
+    finally:
+        del PREVIEWS["test-sensor"]
+
+
+# -- files and CLI -----------------------------------------------------------------------------
+
+def test_write_preview_png_with_metadata(lf, tmp_path):
+    path = write_preview(lf, tmp_path / "h.png", kind="histogram")
+    assert path.stat().st_size > 1000
+    with Image.open(path) as im:
+        assert im.size == (800, 500)
+        assert im.text["lfproc_preview"] == "histogram" and im.text["Software"].startswith("lfproc ")
+    with pytest.raises(OutputExistsError, match="output exists"):
+        write_preview(lf, path, kind="centre")
+    write_preview(lf, path, kind="centre", force=True)
+    with Image.open(path) as im:
+        assert im.size == (64, 48)
+        np.testing.assert_array_equal(np.asarray(im), render_preview(lf, "centre"))
+    with pytest.raises(InputError, match=r"expected a preview file ending in \.png"):
+        write_preview(lf, tmp_path / "x.exr")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["h.png"]  # no temporary files left
+
+
+def test_cli_preview(lf, tmp_path, capsys):
+    from lfproc.cli.main import main
+
+    src = tmp_path / "lf.exr"
+    write_lightfield(lf, src)
+    out = tmp_path / "sheet.png"
+    assert main(["preview", str(src), "-o", str(out), "--kind", "sheet", "--exposure", "1", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    g = 2
+    assert report["size"] == [5 * 48 + 4 * g, 5 * 64 + 4 * g] and report["kind"] == "sheet"
+    expected = render_preview(lf, "sheet", exposure_ev=1.0)
+    with Image.open(out) as im:
+        np.testing.assert_array_equal(np.asarray(im), expected)
+    # existing output without --force
+    before = out.read_bytes()
+    assert main(["preview", str(src), "-o", str(out), "--kind", "centre"]) == 2
+    err = capsys.readouterr().err
+    assert "lfproc preview: error:" in err and "output exists" in err and err.count("\n") == 1
+    assert out.read_bytes() == before
+    # unknown kind
+    assert main(["preview", str(src), "-o", str(tmp_path / "k.png"), "--kind", "pie"]) == 2
+    assert "--kind: expected one of centre, sheet, epi, histogram; got 'pie'" in capsys.readouterr().err
+    # missing input
+    assert main(["preview", str(tmp_path / "nope.exr"), "-o", str(tmp_path / "n.png")]) == 2
+    assert "no such file" in capsys.readouterr().err
+    assert not (tmp_path / "k.png").exists() and not (tmp_path / "n.png").exists()
+
+
+@pytest.mark.parametrize("kind", ["centre", "sheet", "epi", "histogram"])
+def test_previews_of_real_light_field(shared_data, tmp_path, kind):
+    folder = shared_data / "lightfields" / "lowres_5x5" / "hci_bedroom"
+    if not folder.is_dir():
+        pytest.skip(f"{folder} not found")
+    from lfproc.cli.main import main
+
+    out = tmp_path / f"{kind}.png"
+    assert main(["preview", str(folder), "-o", str(out), "--kind", kind]) == 0
+    with Image.open(out) as im:
+        assert im.size[0] >= 128 and im.size[1] >= 128
