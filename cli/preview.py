@@ -29,8 +29,12 @@ def register(sub, common) -> None:
 
 def run(args) -> int:
     from lfproc.io import check_output, read_lightfield
+    from lfproc.capture import is_capture_file, write_capture_preview
     from lfproc.preview import PREVIEWS, write_preview
 
+    if is_capture_file(args.input):  # coded captures: sensor image, ISO map, mask
+        emit(write_capture_preview(args.input, args.output, kind=args.kind, force=args.force), as_json=args.json)
+        return 0
     if args.kind not in PREVIEWS:  # before reading a large input
         from lfproc.errors import InputError
 

@@ -62,6 +62,7 @@ __all__ = [
     "observations",
     "describe_capture",
     "render_capture_preview",
+    "write_capture_preview",
     "PREVIEW_KINDS",
     "file_sha256",
 ]
@@ -654,8 +655,9 @@ def render_capture_preview(capture: Capture, kind: str = "capture", *, shot: int
     z = max(2, min(int(zoom), h, w))
     profile = capture.profile
     black = float(profile.black_level_dn)
-    sensor = (capture.dn[shot].astype(np.float64) - black) / max(float(profile.white_level_dn) - black, 1.0)
-    sensor = np.clip(sensor, 0, 1) ** (1 / 2.2)
+    sensor = np.maximum(capture.dn[shot].astype(np.float64) - black, 0)
+    top = max(float(np.percentile(sensor, 99.5)), 1.0)
+    sensor = np.clip(sensor / top, 0, 1) ** (1 / 2.2)
     isos = capture.isos
     colours = _iso_colours(len(isos))
     iso_index = np.searchsorted(np.asarray(isos), capture.iso[shot])
@@ -667,7 +669,7 @@ def render_capture_preview(capture: Capture, kind: str = "capture", *, shot: int
     mask_rgb = op.weights[shot, centre[0], centre[1]][..., None] * tint
     panels = []
     if kind in ("capture", "sensor"):
-        panels.append((f"sensor image, shot {shot + 1}/{capture.shots} (DN, gamma 2.2)", sensor, "gray", None))
+        panels.append((f"sensor, shot {shot + 1}/{capture.shots} (DN - black, gamma 2.2)", sensor, "gray", None))
     if kind in ("capture", "iso"):
         legend = [Patch(color=colours[i], label=f"ISO {_num(v)}") for i, v in enumerate(isos)]
         title = f"ISO map ({capture.iso_pattern.get('kind', 'given')})"
@@ -696,3 +698,29 @@ def render_capture_preview(capture: Capture, kind: str = "capture", *, shot: int
     canvas = FigureCanvasAgg(fig)
     canvas.draw()
     return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+
+def write_capture_preview(capture, output: str | os.PathLike, *, kind: str = "capture", force: bool = False,
+                          shot: int = 0) -> dict[str, Any]:
+    """Write :func:`render_capture_preview` of a capture (object or file) to a PNG/JPEG/TIFF.
+
+    ``kind="centre"`` (the light-field preview default of ``lfproc preview``) means
+    ``"capture"``. Returns a summary (``output``, ``kind``, ``size`` of the picture, ``shots``).
+    """
+    from .io import check_output
+
+    if kind == "centre":
+        kind = "capture"
+    from ._util import check_choice
+
+    check_choice("--kind (capture previews)", kind, PREVIEW_KINDS)
+    output = check_output(output, force=force)
+    if not isinstance(capture, Capture):
+        capture = load_capture(capture)
+    image = render_capture_preview(capture, kind, shot=shot)
+    from PIL import Image
+
+    with atomic_file(output, force=force) as tmp:
+        Image.fromarray(image).save(tmp)
+    return {"output": str(output), "kind": kind, "size": list(image.shape[:2]), "shots": capture.shots,
+            "isos": [_num(v) for v in capture.isos]}
