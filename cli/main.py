@@ -16,6 +16,7 @@ from lfproc.errors import LfprocError
 
 # One module of lfproc.cli per sub-command, in the order `lfproc --help` lists them.
 COMMANDS = (
+    "demo",
     "info",
     "convert",
     "synth",
