@@ -21,7 +21,6 @@ white images) or ``"F01"`` (first generation).
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
