@@ -1,0 +1,287 @@
+"""HDR merging: ML and Debevec estimators, response recovery, bracket reading, lfproc merge."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from lfproc.cli.main import main
+from lfproc.errors import InputError, ShapeError
+from lfproc.io import read_lightfield, write_lightfield
+from lfproc.lightfield import LightField
+from lfproc.merge import merge_debevec, merge_lightfields, merge_ml, recover_response
+from lfproc.sensor import calibrated_observation, expose
+from lfproc.synth import synthesize
+
+TIMES = [0.01 * 2**k for k in range(5)]  # 5 exposures 1 EV apart
+GAIN_100 = 0.22733333333333333  # illum profile, ISO 100 (DN per electron)
+
+
+def _bracket(scale=2e5, size=(48, 64), views=3, seed=0):
+    """A known HDR light field (e-/s) and its 5-exposure bracket through the sensor model."""
+    truth = synthesize("lamps", size=size, views=views, random_state=seed).data.astype(np.float64) * scale
+    flat = truth.reshape(-1, truth.shape[-2] * truth.shape[-1])  # every sample is an independent pixel
+    dn = np.stack([expose(flat, exposure_s=t, iso=100, profile="illum", random_state=seed + k).reshape(truth.shape)
+                   for k, t in enumerate(TIMES)])
+    return truth, dn
+
+
+@pytest.fixture(scope="module")
+def bracket():
+    return _bracket()
+
+
+def test_ml_unbiased_lower_error_than_debevec_and_calibrated_variance(bracket):
+    truth, dn = bracket
+    x, var, info = merge_ml(dn, exposures_s=TIMES, isos=100, profile="illum")
+    assert x.shape == truth.shape and var.shape == truth.shape
+    valid = ~info["saturated_everywhere"]
+    assert 0 < info["saturated_everywhere_count"] < 0.2 * truth.size  # the lamps clip in every exposure
+    rel = (x[valid] - truth[valid]) / truth[valid]
+    assert abs(rel.mean()) < 0.01  # unbiased
+    # written variance matches the measured error variance
+    z = (x[valid] - truth[valid]) / np.sqrt(var[valid])
+    assert abs(z.var() - 1) < 0.2
+    assert abs(z.mean()) < 0.1
+    # Debevec (hat weights, log domain, linear response) on the same codes: larger error
+    r, dinfo = merge_debevec(dn, exposures_s=TIMES, white_level=1023, black_level=64)
+    est_deb = r * (1023 - 64) / GAIN_100  # (white - black) per second -> e-/s
+    rel_deb = (est_deb[valid] - truth[valid]) / truth[valid]
+    assert np.sqrt(np.mean(rel**2)) < np.sqrt(np.mean(rel_deb**2))
+    assert np.mean(np.abs(rel)) < np.mean(np.abs(rel_deb))
+    np.testing.assert_array_equal(dinfo["saturated_everywhere"], info["saturated_everywhere"])
+
+
+def test_ml_saturated_everywhere_filled_with_shortest_saturation(bracket):
+    truth, dn = bracket
+    x, var, info = merge_ml(dn, exposures_s=TIMES, isos=100, profile="illum")
+    sat = info["saturated_everywhere"]
+    # expected: saturation code 1023 in the 0.01 s exposure -> (1023 - 64 - h t I_dark) / (h t)
+    expected = (1023 - 64 - GAIN_100 * 0.01 * 1.0) / (GAIN_100 * 0.01)
+    assert info["fill_radiance"] == pytest.approx(expected, rel=1e-5)
+    np.testing.assert_allclose(x[sat], expected, rtol=1e-5)
+    np.testing.assert_allclose(var[sat], expected**2, rtol=1e-4)
+    assert (truth[sat] >= 0.95 * expected).all()  # a lower bound of the true radiance
+    assert info["saturated_everywhere_fraction"] == pytest.approx(sat.mean())
+    assert (info["n_used"][sat] == 0).all() and (info["n_used"][~sat] >= 1).all()
+
+
+def test_ml_lookup_path_equals_float_path_and_any_shape():
+    truth, dn = _bracket(size=(16, 20), views=3, seed=3)
+    x16, v16, _ = merge_ml(dn, exposures_s=TIMES, isos=100, profile="illum", chunk_size=1000)
+    xf, vf, _ = merge_ml(dn.astype(np.float64), exposures_s=TIMES, isos=100, profile="illum", n_threads=2)
+    np.testing.assert_allclose(x16, xf, rtol=1e-5, atol=1e-3)
+    np.testing.assert_allclose(v16, vf, rtol=1e-5)
+    # 2-D sample shape: the same numbers per pixel (the merge is per sample)
+    x2, _, _ = merge_ml(list(dn.reshape(5, -1, 3)), exposures_s=TIMES, isos=100, profile="illum")
+    np.testing.assert_allclose(x2.reshape(x16.shape), x16, rtol=1e-6)
+
+
+def test_ml_single_exposure_weights_match_sensor_model():
+    # one usable exposure per pixel: the merge returns that exposure's calibrated value and variance
+    dn = np.array([[500, 1023], [1023, 1023]], dtype=np.uint16)[:, None, :]  # (2 exposures, 1, 2)
+    x, var, info = merge_ml(dn, exposures_s=[0.01, 0.02], isos=100, profile="illum", n_iter=3)
+    obs = calibrated_observation(np.array([[500.0]]), exposure_s=0.01, iso=100, profile="illum",
+                                 variance_from="estimate", radiance_estimate=np.array([[x[0, 0]]]))
+    assert x[0, 0] == pytest.approx(float(obs.radiance[0, 0]), rel=1e-5)
+    assert var[0, 0] == pytest.approx(float(obs.variance[0, 0]), rel=1e-4)
+    assert info["saturated_everywhere"].tolist() == [[False, True]]
+
+
+def test_merge_lightfields_ml_light_field(bracket):
+    truth, dn = bracket
+    lfs = [LightField(data=dn[i].astype(np.float32), units="dn", exposure_s=t, iso=100, source=f"e{i}.exr")
+           for i, t in enumerate(TIMES)]
+    merged, info = merge_lightfields(lfs, method="ml", profile="illum")
+    assert merged.units == "e-/s" and merged.variance is not None and merged.shape == truth.shape
+    assert merged.attrs["exposures_s"] == TIMES and merged.attrs["merge_method"] == "ml"
+    assert merged.attrs["sources"] == [f"e{i}.exr" for i in range(5)]
+    valid = ~info["saturated_everywhere"]
+    assert abs(np.mean((merged.data[valid] - truth[valid]) / truth[valid])) < 0.01
+    assert info["dynamic_range_stops"] > 12
+    with pytest.raises(InputError, match="e1.exr: no exposure time"):
+        merge_lightfields([lfs[0], lfs[1].replace(exposure_s=None)], method="ml", profile="illum")
+    with pytest.raises(ShapeError, match="e1.exr: shape"):
+        merge_lightfields([lfs[0], lfs[1].crop(0, 0, 10, 10)], method="ml", profile="illum")
+    with pytest.raises(InputError, match="method: expected one of ml, debevec"):
+        merge_lightfields(lfs, method="robertson", profile="illum")
+    with pytest.raises(InputError, match="at least two exposures"):
+        merge_lightfields(lfs[:1], method="ml", profile="illum")
+    with pytest.raises(InputError, match="needs a camera profile"):
+        merge_lightfields(lfs, method="ml")
+
+
+def test_estimator_input_errors():
+    dn = np.zeros((3, 4, 4), np.uint16)
+    with pytest.raises(InputError, match="exposures_s: expected one value or 3 values"):
+        merge_ml(dn, exposures_s=[1, 2], isos=100, profile="illum")
+    with pytest.raises(InputError, match="exposures_s: expected positive"):
+        merge_ml(dn, exposures_s=[1, 0, 2], isos=100, profile="illum")
+    with pytest.raises(ShapeError, match="same shape"):
+        merge_ml([dn[0], dn[1, :2]], exposures_s=[1, 2], isos=100, profile="illum")
+    with pytest.raises(InputError, match="at least two exposures"):
+        merge_debevec(dn[:1], exposures_s=[1])
+    with pytest.raises(InputError, match="white_level"):
+        merge_debevec(dn.astype(np.float32), exposures_s=[1, 2, 4])
+    with pytest.raises(InputError, match="8-bit codes"):
+        recover_response(dn, exposures_s=[1, 2, 4])
+
+
+# -- the real bracket ----------------------------------------------------------------------------
+
+FROBISHER = ("IMG_2600.jpg", "IMG_2601.jpg", "IMG_2602.jpg")
+
+
+@pytest.fixture(scope="module")
+def frobisher(shared_data):
+    import cv2
+
+    folder = shared_data / "brackets" / "frobisher"
+    paths = [folder / name for name in FROBISHER]
+    images = np.stack([cv2.imread(str(p))[..., ::-1] for p in paths])
+    return paths, images
+
+
+def test_frobisher_exif_and_response_recovery(frobisher):
+    import cv2
+
+    from lfproc.bracket import read_bracket, read_exif_exposure
+
+    paths, images = frobisher
+    assert [read_exif_exposure(p)["exposure_s"] for p in paths] == [0.125, 1.0, 8.0]
+    lfs = read_bracket(paths)
+    assert [lf.exposure_s for lf in lfs] == [0.125, 1.0, 8.0] and [lf.iso for lf in lfs] == [100, 100, 100]
+    g = recover_response(images, exposures_s=[0.125, 1.0, 8.0], random_state=0)
+    assert g.shape == (256, 3) and np.all(g[128] == 0)
+    assert np.all(np.diff(g, axis=0) > 0)  # strictly monotonic in every channel
+    # OpenCV's CalibrateDebevec on the same (8-bit) data gives the same curve shape
+    ref = cv2.createCalibrateDebevec().process([np.ascontiguousarray(i[..., ::-1]) for i in images],
+                                               np.array([0.125, 1.0, 8.0], np.float32))
+    ref = np.log(ref[:, 0, ::-1])
+    ref -= ref[128]
+    for c in range(3):
+        assert np.corrcoef(ref[10:246, c], g[10:246, c])[0, 1] > 0.99
+
+
+def test_frobisher_merge_radiance_ratios(frobisher):
+    paths, images = frobisher
+    r, info = merge_debevec(images, exposures_s=[0.125, 1.0, 8.0], random_state=0)
+    g = info["response"]
+    assert r.shape == images.shape[1:] and np.isfinite(r).all() and (r > 0).all()
+    # mid-tone pixels well exposed in the 1/8 s and 1 s shots: both exposures and the merge agree
+    ok = ((images[:2] > 30) & (images[:2] < 220)).all(axis=0)
+    e0 = np.exp(g[images[0].astype(int), np.arange(3)]) / 0.125
+    e1 = np.exp(g[images[1].astype(int), np.arange(3)]) / 1.0
+    assert np.median(e0[ok] / e1[ok]) == pytest.approx(1, abs=0.05)
+    assert np.median(r[ok] / e1[ok]) == pytest.approx(1, abs=0.05)
+    # a bright pixel (saturated at 8 s) is brighter than a dark one by more than one exposure's range
+    lum = r.mean(axis=-1)
+    assert np.log2(np.percentile(lum, 99.9) / np.percentile(lum, 0.1)) > 9
+    assert 0 < info["saturated_everywhere_fraction"] < 0.1
+
+
+def test_cli_merge_frobisher_json(frobisher, tmp_path, capsys):
+    paths, _ = frobisher
+    out = tmp_path / "frobisher.exr"
+    assert main(["merge", *map(str, paths), "-o", str(out), "--json", "--mask", str(tmp_path / "mask.exr")]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["method"] == "debevec" and doc["exposures_s"] == [0.125, 1.0, 8.0]
+    assert doc["views"] == [1, 1] and doc["size"] == [426, 640] and doc["dynamic_range_stops"] > 9
+    lf = read_lightfield(out)
+    assert lf.shape == (1, 1, 426, 640, 3) and lf.attrs["merge_method"] == "debevec"
+    assert lf.attrs["sources"] == [str(p) for p in paths] and "lfproc_version" in lf.attrs
+    mask = read_lightfield(tmp_path / "mask.exr")
+    assert int(mask.data.sum()) <= doc["saturated_everywhere_count"]
+    assert main(["merge", *map(str, paths), "-o", str(out)]) == 2  # exists, no --force
+    assert "output exists" in capsys.readouterr().err
+    assert main(["merge", *map(str, paths), "-o", str(out), "--method", "ml", "--profile", "illum", "--force"]) == 2
+    assert "use method debevec" in capsys.readouterr().err
+
+
+# -- files and the CLI ------------------------------------------------------------------------------
+
+def _write_png_bracket(tmp_path, *, exif=None):
+    from PIL import Image
+
+    rng = np.random.default_rng(1)
+    base = rng.uniform(0.05, 1.0, size=(12, 16, 3))
+    paths = []
+    for k, t in enumerate([0.25, 0.5, 1.0]):
+        codes = np.clip(np.round(255 * np.clip(base * t * 2, 0, 1) ** (1 / 2.2)), 0, 255).astype(np.uint8)
+        p = tmp_path / f"shot{k}.{'jpg' if exif else 'png'}"
+        im = Image.fromarray(codes)
+        if exif:
+            e = Image.Exif()
+            ifd = e.get_ifd(0x8769)
+            for tag, value in exif[k].items():
+                ifd[tag] = value
+            im.save(p, exif=e, quality=100)
+        else:
+            im.save(p)
+        paths.append(p)
+    return paths
+
+
+def test_cli_merge_error_paths(tmp_path, capsys, bracket):
+    pngs = _write_png_bracket(tmp_path)
+    out = str(tmp_path / "o.exr")
+    # PNGs without EXIF: missing exposure names the file
+    assert main(["merge", *map(str, pngs), "-o", out]) == 2
+    assert f"{pngs[0]}: no exposure time" in capsys.readouterr().err
+    # --exposures-s fixes it; wrong count is an error
+    assert main(["merge", *map(str, pngs), "-o", out, "--exposures-s", "0.25,0.5"]) == 2
+    assert "expected 3 values" in capsys.readouterr().err
+    assert main(["merge", *map(str, pngs), "-o", out, "--exposures-s", "0.25,0.5,1", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["exposures_s"] == [0.25, 0.5, 1.0]
+    # one input only
+    assert main(["merge", str(pngs[0]), "-o", out, "--force"]) == 2
+    assert "at least two inputs" in capsys.readouterr().err
+    # unknown method (argparse)
+    assert main(["merge", *map(str, pngs), "-o", out, "--method", "robertson"]) == 2
+    assert "invalid choice" in capsys.readouterr().err
+    # inconsistent shapes
+    truth, dn = bracket
+    a = tmp_path / "a.exr"
+    b = tmp_path / "b.exr"
+    write_lightfield(LightField(data=dn[0].astype(np.float32), units="dn", exposure_s=0.01, iso=100), a)
+    write_lightfield(LightField(data=dn[1, :, :, :10].astype(np.float32), units="dn", exposure_s=0.02, iso=100), b)
+    assert main(["merge", str(a), str(b), "-o", out, "--force", "--profile", "illum"]) == 2
+    assert "differs from" in capsys.readouterr().err
+    # missing input file
+    assert main(["merge", str(a), str(tmp_path / "nope.exr"), "-o", out, "--force"]) == 2
+    assert "nope.exr: no such file" in capsys.readouterr().err
+
+
+def test_exif_bias_contradiction_is_an_error(tmp_path):
+    from lfproc.bracket import read_bracket
+
+    # tags: 0x829A ExposureTime, 0x8827 ISO, 0x9204 ExposureBiasValue
+    good = [{0x829A: t, 0x8827: 100, 0x9204: b} for t, b in ((0.25, -1.0), (0.5, 0.0), (1.0, 1.0))]
+    lfs = read_bracket(_write_png_bracket(tmp_path, exif=good))
+    assert [lf.exposure_s for lf in lfs] == [0.25, 0.5, 1.0]
+    assert lfs[0].attrs["codes_bits"] == 8
+    bad = [{0x829A: t, 0x8827: 100, 0x9204: b} for t, b in ((0.25, -1.0), (0.5, 0.0), (1.0, -2.0))]
+    (tmp_path / "bad").mkdir()
+    with pytest.raises(InputError, match=r"shot2.jpg: EXIF exposure bias -2 EV contradicts"):
+        read_bracket(_write_png_bracket(tmp_path / "bad", exif=bad))
+
+
+def test_cli_merge_ml_light_field_files(tmp_path, capsys):
+    truth, dn = _bracket(size=(20, 24), views=3, seed=5)
+    paths = []
+    for i, t in enumerate(TIMES):
+        p = tmp_path / f"exp{i}.exr"
+        write_lightfield(LightField(data=dn[i].astype(np.float32), units="dn", exposure_s=t, iso=100), p)
+        paths.append(str(p))
+    out = tmp_path / "hdr.exr"
+    assert main(["merge", *paths, "-o", str(out), "--profile", "illum", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["method"] == "ml" and doc["has_variance"] and doc["units"] == "e-/s"
+    lf = read_lightfield(out)
+    assert lf.variance is not None and lf.shape == truth.shape
+    assert lf.attrs["merge_method"] == "ml" and lf.attrs["exposures_s"] == TIMES and lf.attrs["profile"] == "illum"
+    assert doc["saturated_everywhere_count"] == lf.attrs["saturated_everywhere_count"]
+    valid = lf.data < lf.data.max()
+    assert abs(np.median((lf.data[valid] - truth[valid]) / truth[valid])) < 0.01
