@@ -1,0 +1,207 @@
+"""Capture files: round trip, schema errors, observations, real frames, info and preview."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+
+import cv2
+import numpy as np
+import pytest
+
+from lfproc.calib import load_profile
+from lfproc.capture import (
+    HEADER_NAME,
+    Capture,
+    capture_from_raw,
+    describe_capture,
+    is_capture_file,
+    load_capture,
+    observations,
+    render_capture_preview,
+)
+from lfproc.cli.main import main
+from lfproc.errors import FileFormatError, InputError, OutputExistsError, ProfileError, ShapeError
+from lfproc.projection import MaskCode, make_mask
+from lfproc.simulate import simulate_capture
+
+
+def _lf(h=32, w=32, seed=0):
+    rng = np.random.default_rng(seed)
+    base = rng.random((1, 1, h, w, 3)).astype(np.float32) ** 4  # some dynamic range
+    return np.broadcast_to(base, (5, 5, h, w, 3)).copy()
+
+
+@pytest.fixture(scope="module")
+def capture():
+    return simulate_capture(_lf(), profile="paper-medium", iso_pattern_kind="row", shots=2, mask="shifted",
+                            mask_period=4, random_state=11,
+                            ground_truth={"path": "/x/lf.exr", "sha256": "0" * 64})
+
+
+def test_round_trip_needs_no_seed(tmp_path, capture):
+    path = capture.save(tmp_path / "a.capture.npz")
+    assert is_capture_file(path) and not is_capture_file(tmp_path / "missing.npz")
+    back = load_capture(path)
+    np.testing.assert_array_equal(back.dn, capture.dn)
+    assert back.dn.dtype == np.uint16
+    np.testing.assert_array_equal(back.iso, capture.iso)
+    np.testing.assert_array_equal(back.mask.codes, capture.mask.codes)
+    assert back.mask.codes.shape == (2, 4, 4, 3)  # a periodic mask is stored as its tile
+    assert (back.mask.kind, back.mask.period, back.mask.shift) == ("shifted", 4, 1)
+    assert back.exposures_s == capture.exposures_s and back.gamma == capture.gamma
+    assert back.cfa_pattern == "RGGB" and back.views == (5, 5)
+    assert back.profile.to_json() == capture.profile.to_json()
+    assert back.radiance_scale == capture.radiance_scale
+    assert back.ground_truth == {"path": "/x/lf.exr", "sha256": "0" * 64}
+    assert back.parameters["seed"] == 11
+    lf = _lf()
+    np.testing.assert_array_equal(back.operator().forward(lf), capture.operator().forward(lf))
+    # self-describing: the header is plain JSON, first member of the archive; numpy can read the arrays
+    with zipfile.ZipFile(path) as zf:
+        assert zf.infolist()[0].filename == HEADER_NAME
+        header = json.loads(zf.read(HEADER_NAME))
+    assert header["schema"] == "lfproc.capture" and header["schema_version"] == 1
+    assert header["lfproc_version"] and header["profile"]["name"] == "paper-medium"
+    assert header["arrays"]["dn"] == {"shape": [2, 32, 32], "dtype": "uint16"}
+    with np.load(path) as npz:
+        np.testing.assert_array_equal(npz["dn"], capture.dn)
+
+
+def test_save_is_atomic_and_refuses_overwrite(tmp_path, capture):
+    path = capture.save(tmp_path / "a.capture.npz")
+    with pytest.raises(OutputExistsError, match="output exists"):
+        capture.save(path)
+    capture.save(path, force=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.capture.npz"]
+
+
+def _rewrite(src, dst, *, header=None, drop=()):
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
+        for info in zin.infolist():
+            if info.filename in drop:
+                continue
+            data = zin.read(info.filename)
+            if info.filename == HEADER_NAME and header is not None:
+                data = json.dumps(header(json.loads(data))).encode()
+            zout.writestr(info.filename, data)
+    return dst
+
+
+def test_load_errors_are_clear(tmp_path, capture):
+    good = capture.save(tmp_path / "good.capture.npz")
+    (tmp_path / "text.npz").write_text("hello")
+    with pytest.raises(FileFormatError, match="not an lfproc capture"):
+        load_capture(tmp_path / "text.npz")
+    bad = _rewrite(good, tmp_path / "v9.npz", header=lambda h: h | {"schema_version": 9})
+    with pytest.raises(FileFormatError, match="'schema_version': expected 1, found 9"):
+        load_capture(bad)
+    bad = _rewrite(good, tmp_path / "nomask.npz", drop=("mask.npy",))
+    with pytest.raises(FileFormatError, match="has no 'mask' array"):
+        load_capture(bad)
+    bad = _rewrite(good, tmp_path / "noexp.npz", header=lambda h: {k: v for k, v in h.items() if k != "exposures_s"})
+    with pytest.raises(FileFormatError, match="missing field 'exposures_s'"):
+        load_capture(bad)
+    bad = _rewrite(good, tmp_path / "shape.npz",
+                   header=lambda h: h | {"arrays": h["arrays"] | {"dn": {"shape": [1, 32, 32], "dtype": "uint16"}}})
+    with pytest.raises(FileFormatError, match="array 'dn': header says"):
+        load_capture(bad)
+    bad = _rewrite(good, tmp_path / "prof.npz", header=lambda h: h | {"profile": h["profile"] | {"full_well_e": None}})
+    with pytest.raises(ProfileError, match="missing field 'full_well_e'"):
+        load_capture(bad)
+
+
+def test_observations_and_weights(capture):
+    obs = observations(capture)
+    assert obs.radiance.shape == obs.weight.shape == obs.saturated.shape == (2, 32, 32)
+    assert (obs.weight[obs.saturated] == 0).all() and (obs.weight[~obs.saturated & ~obs.black_clipped] > 0).all()
+    # a hand-made capture with a saturated and a black-clipped pixel
+    profile = load_profile("paper-low")
+    dn = np.full((1, 4, 4), 500, np.uint16)
+    dn[0, 0, 0] = 4095
+    dn[0, 1, 1] = 0
+    mask = make_mask("random", shots=1, views=(5, 5), size=(4, 4), random_state=0)
+    cap = Capture(dn=dn, iso=400, exposures_s=0.01, mask=mask, profile=profile)
+    obs = observations(cap)
+    assert obs.saturated[0, 0, 0] and obs.black_clipped[0, 1, 1]
+    assert obs.weight[0, 0, 0] == 0 and obs.weight[0, 1, 1] == 0
+    h = profile.isos[400].gain_dn_per_e
+    bias = 64 + h * 0.01 * profile.isos[400].dark_current_e_per_s
+    assert obs.radiance[0, 2, 2] == pytest.approx((500 - bias) / (h * 0.01), rel=1e-6)
+    assert obs.weight[0, 2, 2] == pytest.approx(1 / np.sqrt(obs.variance[0, 2, 2]), rel=1e-6)
+
+
+def test_capture_validation():
+    mask = make_mask("random", shots=1, views=(5, 5), size=(4, 4), random_state=0)
+    dn = np.zeros((1, 4, 4), np.uint16)
+    with pytest.raises(ProfileError, match="ISO 123 is not in camera profile"):
+        Capture(dn=dn, iso=123, exposures_s=0.01, mask=mask, profile="paper-low")
+    with pytest.raises(InputError, match="exposures_s: expected positive"):
+        Capture(dn=dn, iso=100, exposures_s=0, mask=mask, profile="paper-low")
+    with pytest.raises(ShapeError, match="codes for 1 shots, the capture has 2"):
+        Capture(dn=np.zeros((2, 4, 4), np.uint16), iso=100, exposures_s=0.01, mask=mask, profile="paper-low")
+    with pytest.raises(ShapeError, match="random mask: codes are for"):
+        Capture(dn=dn, iso=100, exposures_s=0.01, mask=mask, profile="paper-low", views=(3, 3))
+
+
+def test_capture_from_16bit_png_frames(tmp_path):
+    rng = np.random.default_rng(0)
+    frames = [rng.integers(64, 4000, size=(12, 16), dtype=np.uint16) for _ in range(2)]
+    paths = []
+    for i, frame in enumerate(frames):
+        paths.append(tmp_path / f"shot{i}.png")
+        assert cv2.imwrite(str(paths[-1]), frame)
+    codes = make_mask("random", shots=2, views=(5, 5), size=(12, 16), period=4, random_state=3).codes
+    np.save(tmp_path / "codes.npy", codes)
+    cap = capture_from_raw(paths, mask={"kind": "random", "codes": tmp_path / "codes.npy", "period": 4},
+                           iso_layout="row", isos=[100, 800], profile="paper-low", exposures_s=[0.004, 0.008])
+    np.testing.assert_array_equal(cap.dn, np.stack(frames))
+    np.testing.assert_array_equal(cap.iso[0, :, 0], [100, 100, 800, 800] * 3)
+    assert cap.exposures_s == (0.004, 0.008) and cap.cfa_pattern == "RGGB"
+    assert cap.parameters["frames"][0]["path"] == str(paths[0]) and len(cap.parameters["frames"][0]["sha256"]) == 64
+    back = load_capture(cap.save(tmp_path / "real.capture.npz"))
+    np.testing.assert_array_equal(back.dn, cap.dn)
+    np.testing.assert_array_equal(back.mask.codes, codes)
+    # an ISO map given as an array, one exposure for all shots
+    cap2 = capture_from_raw(paths, mask=MaskCode("random", codes, period=4), iso_layout=np.full((12, 16), 400),
+                            profile="paper-low", exposures_s=0.01)
+    assert cap2.isos == [400.0] and cap2.exposures_s == (0.01, 0.01)
+    cv2.imwrite(str(tmp_path / "eight.png"), np.zeros((12, 16), np.uint8))
+    with pytest.raises(FileFormatError, match="expected a single-channel 16-bit sensor image"):
+        capture_from_raw([tmp_path / "eight.png"], mask=MaskCode("random", codes[:1], period=4), iso_layout=100,
+                         profile="paper-low", exposures_s=0.01)
+    with pytest.raises(ShapeError, match="codes for 2 shots, the capture has 1"):
+        capture_from_raw(paths[:1], mask=MaskCode("random", codes, period=4), iso_layout=100, profile="paper-low",
+                         exposures_s=0.01)
+
+
+def test_describe_and_info_json(tmp_path, capsys, capture):
+    path = capture.save(tmp_path / "a.capture.npz")
+    info = describe_capture(path)
+    obs = observations(capture)
+    assert info["kind"] == "capture" and info["shots"] == 2 and info["size"] == [32, 32]
+    assert info["sampling_rate_percent"] == pytest.approx(200 / 75)
+    assert info["saturated_fraction"] == pytest.approx(obs.saturated.mean())
+    assert info["black_clipped_fraction"] == pytest.approx(obs.black_clipped.mean())
+    assert info["isos"] == [100, 400, 800, 1600]
+    assert main(["info", str(path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for key in ("kind", "shots", "size", "sampling_rate_percent", "saturated_fraction", "black_clipped_fraction",
+                "isos"):
+        assert out[key] == info[key]
+
+
+def test_preview(tmp_path, capsys, capture):
+    image = render_capture_preview(capture, "capture")
+    assert image.dtype == np.uint8 and image.ndim == 3 and image.shape[2] == 3
+    assert image.shape[1] > image.shape[0]  # three panels side by side
+    iso_only = render_capture_preview(capture, "iso")
+    assert iso_only.shape[1] < image.shape[1]
+    with pytest.raises(InputError, match="preview kind: expected one of capture, sensor, iso, mask"):
+        render_capture_preview(capture, "epi")
+    path = capture.save(tmp_path / "a.capture.npz")
+    assert main(["preview", str(path), "-o", str(tmp_path / "p.png"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["kind"] == "capture" and cv2.imread(str(tmp_path / "p.png")).shape[:2] == tuple(out["size"])
+    assert main(["preview", str(path), "-o", str(tmp_path / "m.png"), "--kind", "mask"]) == 0
+    assert (tmp_path / "m.png").exists()

@@ -1,0 +1,265 @@
+"""The capture simulator: ISO patterns, baselines, noise statistics, CLI and bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from lfproc.calib import load_profile
+from lfproc.capture import load_capture, observations
+from lfproc.cli.main import main
+from lfproc.errors import InputError, ProfileError
+from lfproc.io import write_image, write_lightfield
+from lfproc.lightfield import LightField
+from lfproc.simulate import (
+    BRACKETING_EXPOSURES,
+    ISO_PATTERNS,
+    auto_radiance_scale,
+    iso_pattern,
+    simulate_capture,
+)
+
+ISOS = (100, 400, 800, 1600)
+
+
+def _lf(h=32, w=32, seed=0):
+    rng = np.random.default_rng(seed)
+    base = 0.01 + rng.random((1, 1, h, w, 3)).astype(np.float32) ** 4
+    return np.broadcast_to(base, (5, 5, h, w, 3)).copy()
+
+
+# -- ISO patterns -----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("kind", ["row", "block", "dual"])
+def test_structured_patterns_keep_bayer_quads_on_one_iso(kind):
+    m = iso_pattern(kind, size=(16, 24), isos=ISOS)
+    quads = m.reshape(8, 2, 12, 2)
+    assert (quads == quads[:, :1, :, :1]).all()
+
+
+def test_iso_pattern_layouts(tmp_path):
+    row = iso_pattern("row", size=(10, 4), isos=ISOS)
+    np.testing.assert_array_equal(row[:, 0], [100, 100, 400, 400, 800, 800, 1600, 1600, 100, 100])
+    assert (row == row[:, :1]).all()
+    dual = iso_pattern("dual", size=(8, 3), isos=ISOS)
+    np.testing.assert_array_equal(dual[:, 0], [100, 100, 1600, 1600] * 2)
+    block = iso_pattern("block", size=(8, 8), isos=ISOS, block_px=2)
+    np.testing.assert_array_equal(block[::2, ::2], [[100, 400, 100, 400], [800, 1600, 800, 1600]] * 2)
+    rnd = iso_pattern("random", size=(200, 200), isos=ISOS, random_state=0)
+    values, counts = np.unique(rnd, return_counts=True)
+    np.testing.assert_array_equal(values, ISOS)
+    assert np.allclose(counts / rnd.size, 0.25, atol=0.01)
+    np.testing.assert_array_equal(rnd, iso_pattern("random", size=(200, 200), isos=ISOS, random_state=0))
+    np.save(tmp_path / "iso.npy", block)
+    np.testing.assert_array_equal(iso_pattern(tmp_path / "iso.npy", size=(8, 8)), block)
+    with pytest.raises(InputError, match="iso pattern: expected one of random, row, block, dual or a file"):
+        iso_pattern("zigzag", size=(8, 8))
+    with pytest.raises(InputError, match="block size: expected an even number"):
+        iso_pattern("block", size=(8, 8), block_px=3)
+    with pytest.raises(Exception, match=r"ISO map of shape \(8, 8\); expected the sensor size \(4, 4\)"):
+        iso_pattern(tmp_path / "iso.npy", size=(4, 4))
+
+
+# -- simulation, baselines, scale -----------------------------------------------------------------
+
+@pytest.mark.parametrize("kind", ISO_PATTERNS)
+def test_simulated_capture_uses_the_pattern_in_every_shot(kind):
+    cap = simulate_capture(_lf(), iso_pattern_kind=kind, shots=2, random_state=1)
+    assert cap.dn.shape == (2, 32, 32) and cap.dn.dtype == np.uint16
+    np.testing.assert_array_equal(cap.iso[0], cap.iso[1])
+    assert not np.array_equal(cap.mask.codes[0], cap.mask.codes[1])  # each shot its own code
+    assert cap.iso_pattern["kind"] == kind
+    assert set(cap.isos) == ({100.0, 1600.0} if kind == "dual" else set(map(float, ISOS)))
+
+
+def test_seed_reproduces_and_none_records_a_seed():
+    a = simulate_capture(_lf(), shots=2, random_state=5)
+    b = simulate_capture(_lf(), shots=2, random_state=5)
+    np.testing.assert_array_equal(a.dn, b.dn)
+    c = simulate_capture(_lf(), shots=2)
+    d = simulate_capture(_lf(), shots=2, random_state=c.parameters["seed"])
+    np.testing.assert_array_equal(c.dn, d.dn)
+
+
+def test_baselines():
+    ind = simulate_capture(_lf(), baseline="individual-iso", isos=ISOS, random_state=0)
+    assert ind.shots == 4
+    for s, iso in enumerate(ISOS):
+        assert (ind.iso[s] == iso).all()
+    for n, rel in BRACKETING_EXPOSURES.items():
+        br = simulate_capture(_lf(), baseline="bracketing", shots=n, exposure_s=0.004, random_state=0)
+        assert br.exposures_s == pytest.approx([0.004 * r for r in rel]) and br.isos == [100.0]
+    assert BRACKETING_EXPOSURES == {2: (0.5, 8.0), 3: (0.5, 2.0, 8.0), 4: (0.5, 2.0, 4.0, 8.0)}
+    with pytest.raises(InputError, match="bracketing baseline takes 2, 3 or 4 shots, got 5"):
+        simulate_capture(_lf(), baseline="bracketing", shots=5)
+    with pytest.raises(InputError, match="baseline: expected one of individual-iso, bracketing"):
+        simulate_capture(_lf(), baseline="hdr-cnn")
+
+
+def test_auto_radiance_scale_saturates_the_lowest_iso():
+    lf = _lf()
+    profile = load_profile("paper-medium")
+    scale = auto_radiance_scale(lf, profile=profile, iso=100, exposure_s=0.004)
+    # ISO 100: the ADC saturates first, at (4095 - 64) / h electrons
+    e_sat = (4095 - 64) / profile.isos[100].gain_dn_per_e
+    assert scale * 0.004 * 0.5 * lf.sum(axis=(0, 1)).max() == pytest.approx(e_sat)
+    cap = simulate_capture(lf, profile=profile, random_state=0)
+    assert cap.radiance_scale == pytest.approx(scale)
+    # noiseless, ISO 100 only: pixels whose mask transmits more than the mean 0.5 saturate, few others
+    cap = simulate_capture(lf, profile=profile, iso_pattern_kind="row", isos=[100], noise=False, random_state=0)
+    expected_e = cap.operator(dtype=np.float64).forward(lf.astype(np.float64)) * scale * 0.004
+    obs = observations(cap)
+    np.testing.assert_array_equal(obs.saturated, expected_e >= e_sat - 0.5 / profile.isos[100].gain_dn_per_e)
+    with pytest.raises(InputError, match="all samples are zero"):
+        auto_radiance_scale(np.zeros((5, 5, 4, 4, 3)), profile=profile, iso=100, exposure_s=0.004)
+
+
+# -- statistics ---------------------------------------------------------------------------------
+
+def _light(kind: str) -> np.ndarray:
+    h = w = 96
+    if kind == "constant":
+        return np.ones((5, 5, h, w, 3), np.float32)
+    ramp = 0.02 + np.linspace(0, 1, w, dtype=np.float32)
+    return np.broadcast_to(ramp[None, None, None, :, None], (5, 5, h, w, 3)).copy()
+
+
+@pytest.mark.parametrize("gamma", [1.0, 2.2])
+@pytest.mark.parametrize("kind", ["constant", "ramp"])
+@pytest.mark.parametrize("level", ["none", "low", "medium", "high"])
+def test_radiance_estimate_is_unbiased_with_the_predicted_variance(level, kind, gamma):
+    """Every pixel is a sample: 4 shots of 96 x 96 give about 9000 samples per ISO.
+
+    The ramp drives ISO 1600 into saturation; statistics use pixels whose expected code is
+    at least 6 standard deviations inside the sensor's range (clipped distributions are
+    neither unbiased nor of the model's variance: that is what weight 0 is for).
+    """
+    profile = load_profile(f"paper-{level}")
+    lf = _light(kind)
+    t = 0.004
+    # electrons at the mean mask (12.5 of 25 views): 300 (constant) or up to 1530 (ramp)
+    scale = (300 if kind == "constant" else 1500) / (t * 12.5)
+    cap = simulate_capture(lf, profile=profile, iso_pattern_kind="random", shots=4, exposure_s=t, gamma=gamma,
+                           radiance_scale=scale, random_state=7)
+    truth = cap.operator(dtype=np.float64).forward(lf.astype(np.float64)) * scale
+    pred = observations(cap, variance_from="estimate", radiance_estimate=truth)
+    plug_in = observations(cap)
+    z = (pred.radiance - truth) / np.sqrt(pred.variance)
+    assert (pred.weight[pred.saturated] == 0).all() and (plug_in.weight[plug_in.saturated] == 0).all()
+    for iso in ISOS:
+        h = profile.isos[iso].gain_dn_per_e
+        mean_dn = h * t * truth
+        sd_dn = h * t * np.sqrt(pred.variance)
+        inside = (cap.iso == iso) & (mean_dn - 6 * sd_dn > 0) & (mean_dn + 6 * sd_dn < profile.saturation_dn(iso) - 64)
+        n = int(inside.sum())
+        assert n > 4000, (iso, n)
+        zi = z[inside]
+        assert abs(zi.mean()) < 4.5 / np.sqrt(n), (iso, zi.mean())  # unbiased
+        assert zi.var() == pytest.approx(1.0, rel=0.10), iso  # variance as predicted
+        # the plug-in variance (from T itself) predicts the same on average
+        assert plug_in.variance[inside].mean() == pytest.approx(pred.variance[inside].mean(), rel=0.10)
+        assert not plug_in.saturated[inside].any()
+    if kind == "ramp":
+        sat = cap.iso == 1600
+        assert pred.saturated[sat].mean() > 0.1  # the ramp saturates ISO 1600 ...
+        assert (pred.weight[sat & pred.saturated] == 0).all()  # ... at weight zero
+        assert not pred.saturated[cap.iso == 100].any()
+
+
+# -- bad input --------------------------------------------------------------------------------------
+
+def test_bad_input_is_refused_by_the_library(tmp_path):
+    with pytest.raises(ProfileError, match="ISO 123 is not in camera profile 'paper-low'; it has ISO 100, 200"):
+        simulate_capture(_lf(), isos=[100, 123])
+    with pytest.raises(InputError, match="exposure_s: expected a positive finite number, got -1"):
+        simulate_capture(_lf(), exposure_s=-1)
+    bad = _lf()
+    bad[0, 0, 1, 1, 0] = np.nan
+    with pytest.raises(InputError, match="light field: contains 1 NaN"):
+        simulate_capture(bad)
+    bad[0, 0, 1, 1, 0] = -1
+    with pytest.raises(InputError, match="light field: contains 1 negative values"):
+        simulate_capture(bad)
+    with pytest.raises(InputError, match="shots: expected an integer >= 1, got 0"):
+        simulate_capture(_lf(), shots=0)
+    with pytest.raises(InputError, match="a Bayer sensor needs 3 colour channels"):
+        simulate_capture(_lf()[..., :1])
+    doc = load_profile("paper-low").to_json()
+    doc["isos"]["400"]["read_noise_e"] = None
+    doc["isos"]["400"]["read_noise_dn"] = None
+    (tmp_path / "p.json").write_text(json.dumps(doc))
+    with pytest.raises(ProfileError, match="ISO 400 has no read_noise_e"):
+        simulate_capture(_lf(), profile=tmp_path / "p.json")
+
+
+# -- command line ---------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def lf_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("lf") / "lf.exr"
+    write_lightfield(LightField(_lf(24, 20)), path)
+    return path
+
+
+def test_cli_simulate_prints_the_sampling_rate(tmp_path, capsys, lf_file):
+    out = tmp_path / "one.capture.npz"
+    assert main(["simulate", str(lf_file), "-o", str(out), "--seed", "3", "--iso-pattern", "row"]) == 0
+    text = capsys.readouterr().out
+    assert "1.33 %" in text and "saturated_fraction" in text and "black_clipped_fraction" in text
+    assert main(["simulate", str(lf_file), "-o", str(tmp_path / "two.capture.npz"), "--shots", "2", "--noise",
+                 "high", "--mask", "shifted", "--mask-period", "4", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["sampling_rate"] == "2.67 %" and summary["sampling_rate_percent"] == pytest.approx(200 / 75)
+    assert summary["shots"] == 2 and summary["profile"] == "paper-high" and summary["size"] == [24, 20]
+    cap = load_capture(tmp_path / "two.capture.npz")
+    assert cap.ground_truth["path"] == str(lf_file.resolve()) and len(cap.ground_truth["sha256"]) == 64
+    assert cap.mask.period == 4 and cap.parameters["seed"] == summary["seed"]
+    assert main(["simulate", str(lf_file), "-o", str(tmp_path / "br.capture.npz"), "--baseline", "bracketing",
+                 "--shots", "3", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["exposures_s"] == pytest.approx([0.002, 0.008, 0.032])
+    assert main(["simulate", str(lf_file), "-o", str(tmp_path / "k.capture.npz"), "--radiance-scale", "1000",
+                 "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["radiance_scale"] == 1000
+
+
+def _nan_image(tmp_path, value):
+    image = np.ones((8, 8, 3), np.float32)
+    image[2, 3, 1] = value
+    return write_image(tmp_path / f"bad{value}.exr", image)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--isos", "100,123"], "ISO 123 is not in camera profile"),
+    (["--exposure-s", "0"], "exposure_s: expected a positive finite number"),
+    (["--shots", "0"], "shots: expected an integer >= 1"),
+    (["--iso-pattern", "zigzag"], "iso pattern: expected one of random, row, block, dual or a file"),
+    (["--isos", "100,x"], "--isos: expected comma-separated numbers"),
+    (["--profile", "nowhere.json"], "no such camera profile file"),
+])
+def test_cli_errors_are_one_line(tmp_path, capsys, lf_file, args, message):
+    assert main(["simulate", str(lf_file), "-o", str(tmp_path / "x.capture.npz"), *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("lfproc simulate: error: ") and message in err and "\n" not in err
+    assert not (tmp_path / "x.capture.npz").exists()
+
+
+def test_cli_refuses_bad_light_fields_and_existing_outputs(tmp_path, capsys, lf_file):
+    for value, message in ((np.nan, "NaN"), (-2.0, "negative")):
+        path = _nan_image(tmp_path, value)
+        assert main(["simulate", str(path), "-o", str(tmp_path / "x.capture.npz")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("lfproc simulate: error: ") and message in err and "\n" not in err
+    doc = load_profile("paper-low").to_json()
+    doc["isos"]["100"]["gain_dn_per_e"] = None
+    (tmp_path / "nogain.json").write_text(json.dumps(doc))
+    assert main(["simulate", str(lf_file), "-o", str(tmp_path / "x.capture.npz"), "--profile",
+                 str(tmp_path / "nogain.json")]) == 2
+    assert "ISO 100 has no gain_dn_per_e" in capsys.readouterr().err
+    out = tmp_path / "y.capture.npz"
+    assert main(["simulate", str(lf_file), "-o", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["simulate", str(lf_file), "-o", str(out)]) == 2
+    assert "output exists" in capsys.readouterr().err
+    assert main(["simulate", str(lf_file), "-o", str(out), "--force"]) == 0
