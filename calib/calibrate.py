@@ -1,0 +1,750 @@
+"""Measure a camera profile from bias, dark and flat frames (or an EMVA 1288 data set).
+
+Per ISO (hdr-and-calibration.md section 2.4; every figure also per CFA position when
+the frames have a CFA):
+
+1. **Black level / bias frame**: master bias = mean of the bias frames; black level =
+   its mean (minus the dark signal of the bias exposure, when the dark current is known).
+2. **Read noise**: temporal variance of bias pairs, ``mean(((A - mu_A) - (B - mu_B))^2) / 2``
+   (the difference removes the fixed pattern), minus the dark-current variance of the bias
+   exposure; ``read_noise_dn = sqrt(var - 1/12)`` (quantisation removed, as
+   :mod:`lfproc.sensor` adds it separately); ``read_noise_e = read_noise_dn / K``.
+3. **DSNU**: spatial variance of the master bias minus ``var_read / N`` (EMVA correction),
+   pooled over the 2x2 CFA positions.
+4. **Gain** ``K`` (DN/e-): slope through the origin of ``var - var_dark(t)`` against
+   ``mean - mean_dark(t)`` of the flat pairs, using the pairs without clipped pixels below
+   70 % of the variance-maximum signal (photon transfer, EMVA 1288).
+5. **Saturation**: the output code where over-exposed flats pile up (``saturation_dn``);
+   ``full_well_e = (saturation_dn - black) / K`` (well or ADC, whichever clips first, as
+   :meth:`CameraProfile.saturation_dn`); the EMVA saturation capacity at the variance
+   maximum is reported too (``saturation_capacity_emva_e``).
+6. **Dark current**: slope of the dark level against exposure time over bias and dark
+   frames (at least three exposure times) divided by ``K`` (mean method, stored in the
+   profile) and slope of the dark temporal variance divided by ``K^2`` (variance method).
+7. **Hot pixels**: pixels of the longest-exposure master dark more than ``hot_pixel_sigma``
+   robust standard deviations above the median; they are left out of every statistic.
+8. **PRNU**: from the flat level nearest 50 % saturation:
+   ``sqrt(s_y^2 - var_t / n - s_dark^2) / signal``.
+9. **Read-noise split across ISOs**: least squares ``var_read(S) = K(S)^2 sigma_pre^2 +
+   sigma_post^2`` (Hasinoff): ``sigma_pre`` (e-) before, ``sigma_post`` (DN) after the ISO gain.
+10. **Dynamic range and SNR** (EMVA 1288): ``DR = mu_e.sat / (sigma_y.dark / K + 1/2)`` with the
+    variance-maximum saturation capacity, ``SNR_max = sqrt(mu_e.sat)``; also
+    ``full_well_e / read_noise_e`` in stops.
+
+A figure the frames cannot give is ``None`` and its reason is in ``unknown`` (keys like
+``isos.100.gain_dn_per_e``). Frames are read one at a time and reduced to running sums, so
+memory stays at a few frames whatever the stack size.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import defaultdict
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lfproc._util import check_positive, progress
+from lfproc._version import __version__
+from lfproc.errors import CalibrationError, InputError
+
+from .emva import SIGMA2_Q, EmvaDescriptor, evaluate, is_descriptor, read_descriptor, reduce_descriptor
+from .frames import FrameChecker, FrameRecord, _channel_names, read_frame, read_manifest
+from .profile import CameraProfile, IsoFigures
+
+__all__ = ["calibrate", "CalibrationResult", "DEFAULT_ISO_KEY"]
+
+DEFAULT_ISO_KEY = "default"
+_CLIP_PILE_FRACTION = 0.01  # a frame whose maximum code holds >= 1 % of its pixels is clipped there
+_CLIPPED_PAIR_FRACTION = 1e-4  # flat pairs with more clipped pixels stay out of the gain fit
+_BLACK_CLIP_FRACTION = 1e-3
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """What :func:`calibrate` measured.
+
+    Attributes
+    ----------
+    profile : CameraProfile
+        The measured profile (master bias frames in ``bias_frames``).
+    figures : dict
+        ISO as a string (``"default"`` for EMVA data) -> figures (units in the names;
+        ``None`` = unknown).
+    unknown : dict
+        Figure (``isos.<ISO>.<name>``) -> why the frames cannot give it.
+    read_noise_model : dict
+        The pre/post-amplifier split (``sigma_pre_e``, ``sigma_post_dn``) or its reason.
+    curves : dict
+        ISO -> data of the photon-transfer and dark plots (lists).
+    hot_pixels : dict
+        ISO -> boolean hot-pixel mask (H, W).
+    notes : list of str
+    """
+
+    profile: CameraProfile
+    figures: dict[str, dict[str, Any]]
+    unknown: dict[str, str]
+    read_noise_model: dict[str, Any]
+    curves: dict[str, dict[str, Any]] = field(default_factory=dict)
+    hot_pixels: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    notes: list[str] = field(default_factory=list)
+    source: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"isos": {ISO: figures}, "read_noise_model", "unknown", "notes", "source"}``."""
+        return {"isos": self.figures, "read_noise_model": self.read_noise_model, "unknown": self.unknown,
+                "notes": self.notes, "source": self.source, "profile": self.profile.name}
+
+
+# -- statistics of frame sets ----------------------------------------------------------------
+def _views(shape) -> dict[str, tuple[slice, slice]]:
+    out = {"all": (slice(None), slice(None))}
+    if shape[0] >= 2 and shape[1] >= 2:
+        for r in (0, 1):
+            for c in (0, 1):
+                out[f"p{r}{c}"] = (slice(r, None, 2), slice(c, None, 2))
+    return out
+
+
+_POS = ("p00", "p01", "p10", "p11")
+
+
+@dataclass
+class _SetStats:
+    kind: str
+    exposure_s: float
+    group: str
+    paths: list[Path]
+    n: int = 0
+    n_pairs: int = 0
+    master: np.ndarray | None = None
+    mean: dict[str, float] = field(default_factory=dict)
+    pair_var: dict[str, float] = field(default_factory=dict)
+    spatial_var: dict[str, float] = field(default_factory=dict)
+    max_code: int = 0
+    frac_at_max: float = 0.0
+    zero_fraction: float = 0.0
+    temperature_c: float | None = None
+
+
+def _reduce_set(records: list[FrameRecord], checker: FrameChecker, mask: np.ndarray | None,
+                cfa: str | None) -> _SetStats:
+    """Read a set's frames once: running sum, pair variances (consecutive pairs), clip stats."""
+    r0 = records[0]
+    st = _SetStats(kind=r0.kind, exposure_s=r0.exposure_s, group=r0.group, paths=[r.path for r in records])
+    total = None
+    pair_sums: dict[str, float] = defaultdict(float)
+    pending = None
+    max_code, count_at_max, n_pix, zeros = -1, 0, 0, 0
+    for rec in records:
+        frame = read_frame(rec.path)
+        checker.check(frame, cfa_override=cfa)
+        x = frame.data
+        if mask is None:
+            mask = np.ones(x.shape, dtype=bool)
+        xf = x.astype(np.float64)
+        total = xf.copy() if total is None else total + xf
+        m = int(x.max())
+        c = int(np.count_nonzero(x == m))
+        if m > max_code:
+            max_code, count_at_max = m, c
+        elif m == max_code:
+            count_at_max += c
+        n_pix += x.size
+        zeros += int(np.count_nonzero(x == 0))
+        if pending is None:
+            pending = xf
+        else:
+            d = pending - xf
+            for name, (rs, cs) in _views(x.shape).items():
+                sel = d[rs, cs][mask[rs, cs]]
+                pair_sums[name] += float(sel.var() / 2) if sel.size else float("nan")
+            st.n_pairs += 1
+            pending = None
+        st.n += 1
+    st.master = total / st.n
+    for name, (rs, cs) in _views(st.master.shape).items():
+        sel = st.master[rs, cs][mask[rs, cs]]
+        st.mean[name] = float(sel.mean())
+        st.spatial_var[name] = float(sel.var(ddof=1)) if sel.size > 1 else float("nan")
+    if st.n_pairs:
+        st.pair_var = {k: v / st.n_pairs for k, v in pair_sums.items()}
+    st.max_code = max_code
+    st.frac_at_max = count_at_max / n_pix
+    st.zero_fraction = zeros / n_pix
+    temps = [r.temperature_c for r in records if r.temperature_c is not None]
+    st.temperature_c = float(np.mean(temps)) if temps else None
+    return st
+
+
+def _pooled(values: dict[str, float], key_all: str = "all") -> float:
+    """Mean of the per-CFA-position values (removes channel offsets), or the ``all`` value."""
+    pos = [values[p] for p in _POS if p in values and math.isfinite(values[p])]
+    return float(np.mean(pos)) if len(pos) == 4 else values[key_all]
+
+
+def _fit_line(x, y) -> tuple[float, float]:
+    slope, intercept = np.polyfit(np.asarray(x, float), np.asarray(y, float), 1)
+    return float(slope), float(intercept)
+
+
+def _hot_mask(master: np.ndarray, sigma: float) -> tuple[np.ndarray, float]:
+    med = float(np.median(master))
+    mad = float(np.median(np.abs(master - med)))
+    robust = max(1.4826 * mad, 1.0)
+    threshold = med + sigma * robust
+    return master > threshold, threshold
+
+
+# -- per-ISO calibration ----------------------------------------------------------------------
+def _calibrate_iso(iso_key: str, records: list[FrameRecord], *, cfa: str | None, hot_pixel_sigma: float,
+                   unknown: dict[str, str]) -> tuple[dict[str, Any], dict[str, Any], np.ndarray | None,
+                                                     np.ndarray | None, FrameChecker]:
+    def unk(name: str, why: str) -> None:
+        unknown[f"isos.{iso_key}.{name}"] = why
+
+    notes: list[str] = []
+    checker = FrameChecker(f"ISO {iso_key}")
+    sets: dict[tuple, list[FrameRecord]] = {}
+    for r in records:
+        sets.setdefault((r.kind, r.exposure_s, r.group), []).append(r)
+    bias_keys = [k for k in sets if k[0] == "bias"]
+    dark_keys = sorted((k for k in sets if k[0] == "dark"), key=lambda k: k[1])
+    flat_keys = sorted((k for k in sets if k[0] == "flat"), key=lambda k: (k[1], k[2]))
+    # hot pixels from the longest dark set
+    mask = None
+    hot_count = None
+    if dark_keys:
+        longest = _reduce_set(sets[dark_keys[-1]], checker, None, cfa)
+        hot, threshold = _hot_mask(longest.master, hot_pixel_sigma)
+        mask = ~hot
+        hot_count = int(hot.sum())
+        if mask.sum() < 0.5 * mask.size:
+            raise CalibrationError(f"ISO {iso_key}: more than half the pixels of the dark frames are hot; "
+                                   f"check {longest.paths[0]}")
+    else:
+        unk("hot_pixels", "no dark frames")
+    stats = {k: _reduce_set(sets[k], checker, mask, cfa) for k in progress(bias_keys + dark_keys + flat_keys,
+                                                                          desc=f"ISO {iso_key}")}
+    first = checker.first
+    shape = first.shape
+    views = list(_views(shape))
+    fig: dict[str, Any] = {"n_bias": sum(stats[k].n for k in bias_keys), "n_dark": sum(stats[k].n for k in dark_keys),
+                           "n_flat": sum(stats[k].n for k in flat_keys), "hot_pixels": hot_count,
+                           "hot_pixel_fraction": None if hot_count is None else hot_count / float(np.prod(shape))}
+    temps = [stats[k].temperature_c for k in bias_keys + dark_keys if stats[k].temperature_c is not None]
+    fig["temperature_c"] = float(np.mean(temps)) if temps else None
+    # bias
+    bias_master = None
+    t_bias = None
+    bias_pairs = 0
+    if bias_keys:
+        n = sum(stats[k].n for k in bias_keys)
+        bias_master = sum(stats[k].master * stats[k].n for k in bias_keys) / n
+        t_bias = float(sum(stats[k].exposure_s * stats[k].n for k in bias_keys) / n)
+        bias_pairs = sum(stats[k].n_pairs for k in bias_keys)
+        if max(stats[k].zero_fraction for k in bias_keys) > _BLACK_CLIP_FRACTION:
+            notes.append("bias frames have many 0 DN pixels: the black level clips the read noise, which is "
+                         "then underestimated")
+    # dark points: (t, mean per view, pair var per view or None)
+    points = [(stats[k].exposure_s, stats[k].mean, stats[k].pair_var or None, stats[k].n) for k in bias_keys + dark_keys]
+    times = sorted({p[0] for p in points})
+    var_points = [p for p in points if p[2]]
+    var_times = sorted({p[0] for p in var_points})
+    mean_slope = {v: None for v in views}
+    var_slope = {v: None for v in views}
+    if len(times) >= 3:
+        for v in views:
+            mean_slope[v], _ = _fit_line([p[0] for p in points], [p[1][v] for p in points])
+    else:
+        why = f"bias/dark frames at {len(times)} exposure time(s); the dark current needs at least 3"
+        unk("dark_current_e_per_s", why)
+    if len(var_times) >= 3:
+        for v in views:
+            var_slope[v], _ = _fit_line([p[0] for p in var_points], [p[2][v] for p in var_points])
+    else:
+        unk("dark_current_var_e_per_s",
+            f"bias/dark pairs at {len(var_times)} exposure time(s); the variance method needs at least 3")
+    # read variance (incl. quantisation) per view
+    read_var: dict[str, float] | None = None
+    if bias_pairs:
+        read_var = {}
+        for v in views:
+            val = sum(stats[k].pair_var[v] * stats[k].n_pairs for k in bias_keys if stats[k].n_pairs) / bias_pairs
+            if var_slope[v] is not None and var_slope[v] > 0:
+                val -= var_slope[v] * t_bias
+            read_var[v] = val
+        fig["read_noise_method"] = f"{bias_pairs} bias pair(s)"
+    elif len(var_times) >= 2:
+        read_var = {v: _fit_line([p[0] for p in var_points], [p[2][v] for p in var_points])[1] for v in views}
+        fig["read_noise_method"] = "intercept of the dark pair variance against exposure time"
+    else:
+        n_bias = fig["n_bias"]
+        why = (f"the read noise needs a pair of bias frames; ISO {iso_key} has {n_bias} bias frame(s)"
+               + (" and no dark pairs at two exposure times" if dark_keys else ""))
+        for name in ("read_noise_dn", "read_noise_e", "dsnu_dn"):
+            unk(name, why)
+    # black level per view
+    black: dict[str, float] | None = None
+    if bias_keys:
+        black = {v: float(np.average([stats[k].mean[v] for k in bias_keys], weights=[stats[k].n for k in bias_keys]))
+                 for v in views}
+        if mean_slope["all"] is not None:
+            black = {v: black[v] - mean_slope[v] * t_bias for v in views}
+    elif len(times) >= 2:
+        black = {v: _fit_line([p[0] for p in points], [p[1][v] for p in points])[1] for v in views}
+        notes.append("no bias frames: black level from the intercept of the dark level against exposure time")
+    else:
+        unk("black_level_dn", "no bias frames and dark frames at fewer than two exposure times")
+
+    def dark_mean(t, v):
+        return black[v] + (mean_slope[v] or 0.0) * t
+
+    def dark_var(t, v):
+        return read_var[v] + max(var_slope[v] or 0.0, 0.0) * t
+
+    # flats
+    flat_stats = [stats[k] for k in flat_keys]
+    singles = [s for s in flat_stats if s.n_pairs == 0]
+    if singles:
+        notes.append(f"{len(singles)} flat level(s) with a single frame (no pair): " + ", ".join(
+            str(s.paths[0].name) for s in singles[:3]) + (" ..." if len(singles) > 3 else ""))
+    sat_candidates = [s.max_code for s in flat_stats if s.frac_at_max >= _CLIP_PILE_FRACTION]
+    saturation_dn = float(max(sat_candidates)) if sat_candidates else None
+    if saturation_dn is None:
+        unk("saturation_dn", "no flat frame reaches saturation (no pile-up at a top code)" if flat_stats
+            else "no flat frames")
+    ptc = []  # (signal, variance per view, clipped fraction, exposure, set)
+    gain: dict[str, float] | None = None
+    if not flat_stats:
+        unk("gain_dn_per_e", "no flat frames")
+    elif black is None or read_var is None:
+        unk("gain_dn_per_e", "the photon transfer needs the black level and the read noise (bias pairs)")
+    else:
+        for s in flat_stats:
+            if not s.n_pairs:
+                continue
+            clipped = s.frac_at_max if (saturation_dn is not None and s.max_code >= saturation_dn) else 0.0
+            sig = {v: s.mean[v] - dark_mean(s.exposure_s, v) for v in views}
+            var = {v: s.pair_var[v] - dark_var(s.exposure_s, v) for v in views}
+            ptc.append((sig, var, clipped, s))
+        ptc.sort(key=lambda p: p[0]["all"])
+        usable = [p for p in ptc if p[2] <= _CLIPPED_PAIR_FRACTION and p[0]["all"] > 0]
+        if not ptc:
+            unk("gain_dn_per_e", f"the {len(flat_stats)} flat level(s) at ISO {iso_key} have no frame pairs; the "
+                "photon transfer needs pairs")
+        elif not usable:
+            unk("gain_dn_per_e", f"all {fig['n_flat']} flat frames at ISO {iso_key} are saturated "
+                f"(clipped at {saturation_dn:g} DN)" if saturation_dn is not None else
+                f"no flat pair at ISO {iso_key} has a signal above the dark level")
+        else:
+            variances = np.array([p[1]["all"] for p in ptc])
+            imax = int(np.argmax(variances))
+            saturated = saturation_dn is not None and imax < len(ptc) - 1
+            if saturated:
+                limit = 0.7 * ptc[imax][0]["all"]
+                fit = [p for p in usable if p[0]["all"] <= limit]
+                fig["saturation_variance_max_dn"] = ptc[imax][0]["all"] + dark_mean(ptc[imax][3].exposure_s, "all")
+            else:
+                fit = usable
+                fig["saturation_variance_max_dn"] = None
+                unk("saturation_variance_max_dn", "the flat variance never falls after its maximum")
+            if len(fit) < 2:
+                unk("gain_dn_per_e", f"only {len(fit)} unclipped flat pair(s) below 70 % of saturation at ISO "
+                    f"{iso_key}; the photon transfer slope needs at least 2")
+            else:
+                gain = {}
+                for v in views:
+                    x = np.array([p[0][v] for p in fit])
+                    y = np.array([p[1][v] for p in fit])
+                    gain[v] = float(np.dot(x, y) / np.dot(x, x))
+                if not gain["all"] > 0:
+                    unk("gain_dn_per_e", f"the photon transfer slope is not positive ({gain['all']:g})")
+                    gain = None
+                else:
+                    fig["gain_fit_points"] = len(fit)
+    K = gain["all"] if gain else None
+    # figures
+    fig["gain_dn_per_e"] = K
+    fig["black_level_dn"] = _pooled(black) if black else None
+    fig["black_level_per_channel_dn"] = [black[p] for p in _POS] if black and "p00" in black else None
+    fig["read_noise_var_dn2"] = read_var["all"] if read_var else None
+    rn_dn = math.sqrt(max(_pooled(read_var) - SIGMA2_Q, 0.0)) if read_var else None
+    if read_var and _pooled(read_var) < SIGMA2_Q:
+        notes.append("read variance below the quantisation noise (1/12 DN^2): read noise recorded as 0")
+    fig["read_noise_dn"] = rn_dn
+    fig["read_noise_e"] = rn_dn / K if (rn_dn is not None and K) else None
+    if rn_dn is not None and not K:
+        unk("read_noise_e", "the gain is unknown")
+    fig["temporal_dark_noise_dn"] = math.sqrt(max(_pooled(read_var), 0.0)) if read_var else None
+    # dark current
+    for name, slope, scale in (("dark_current_e_per_s", mean_slope["all"], 1),
+                               ("dark_current_var_e_per_s", var_slope["all"], 2)):
+        if slope is None:
+            fig[name] = None
+        elif not K:
+            fig[name] = None
+            unk(name, "the gain is unknown")
+        else:
+            value = slope / K**scale
+            if value < 0:
+                notes.append(f"{name}: measured slope is negative ({value:.4g} e-/s); recorded as 0")
+                value = 0.0
+            fig[name] = value
+    # DSNU
+    if bias_master is not None and read_var is not None:
+        n_bias = fig["n_bias"]
+        s2 = {v: stats_var - read_var[v] / n_bias for v, stats_var in _spatial(bias_master, mask).items()}
+        dsnu = math.sqrt(max(_pooled(s2), 0.0))
+        fig["dsnu_dn"] = dsnu
+        fig["dsnu_e"] = dsnu / K if K else None
+        s2_dark = max(_pooled(s2), 0.0)
+    else:
+        fig["dsnu_dn"] = fig["dsnu_e"] = None
+        s2_dark = None
+        unk("dsnu_dn", "needs bias frames with a pair")
+    # saturation / full well
+    fig["saturation_dn"] = saturation_dn
+    if saturation_dn is not None and K and black:
+        fig["full_well_e"] = (saturation_dn - fig["black_level_dn"]) / K
+    else:
+        fig["full_well_e"] = None
+        if saturation_dn is not None:
+            unk("full_well_e", "the gain or the black level is unknown")
+        else:
+            unk("full_well_e", unknown[f"isos.{iso_key}.saturation_dn"])
+    if K and fig.get("saturation_variance_max_dn") is not None:
+        fig["saturation_capacity_emva_e"] = (fig["saturation_variance_max_dn"] - fig["black_level_dn"]) / K
+    else:
+        fig["saturation_capacity_emva_e"] = None
+        unk("saturation_capacity_emva_e", "needs the gain and flats beyond the variance maximum")
+    # PRNU from the level nearest half saturation
+    fig["prnu"] = None
+    if K and s2_dark is not None and ptc and (gain is not None):
+        top = fig["full_well_e"] * K if fig["full_well_e"] else max(p[0]["all"] for p in ptc)
+        candidates = [p for p in ptc if p[2] <= _CLIPPED_PAIR_FRACTION and p[0]["all"] > 0]
+        if candidates:
+            sig, var, _, s = min(candidates, key=lambda p: abs(p[0]["all"] - 0.5 * top))
+            temporal = {v: s.pair_var[v] for v in views}
+            s2 = {v: sv - temporal[v] / s.n - s2_dark for v, sv in _spatial(s.master, mask).items()}
+            fig["prnu"] = math.sqrt(max(_pooled(s2), 0.0)) / sig["all"]
+    if fig["prnu"] is None:
+        unk("prnu", "needs the gain, the DSNU and an unclipped flat pair")
+    # EMVA dynamic range and SNR
+    if fig["saturation_capacity_emva_e"] and fig["temporal_dark_noise_dn"] is not None:
+        s_dark = math.sqrt(max(fig["temporal_dark_noise_dn"] ** 2, 0.24))
+        threshold = s_dark / K + 0.5
+        fig["absolute_sensitivity_threshold_e"] = threshold
+        fig["dynamic_range_emva"] = fig["saturation_capacity_emva_e"] / threshold
+        fig["dynamic_range_emva_db"] = 20 * math.log10(fig["dynamic_range_emva"])
+        fig["snr_max"] = math.sqrt(fig["saturation_capacity_emva_e"])
+        fig["snr_max_db"] = 20 * math.log10(fig["snr_max"])
+    else:
+        for k in ("absolute_sensitivity_threshold_e", "dynamic_range_emva", "dynamic_range_emva_db", "snr_max",
+                  "snr_max_db"):
+            fig[k] = None
+        unk("dynamic_range_emva", "needs the EMVA saturation capacity and the dark noise")
+    if fig["full_well_e"] and fig["read_noise_e"]:
+        fig["dynamic_range_stops"] = math.log2(fig["full_well_e"] / fig["read_noise_e"])
+    else:
+        fig["dynamic_range_stops"] = None
+    # per CFA channel
+    if "p00" in views:
+        names = _channel_names(checker.cfa)
+        channels = {}
+        for p, name in zip(_POS, names):
+            ch = {"black_level_dn": black[p] if black else None,
+                  "read_noise_dn": math.sqrt(max(read_var[p] - SIGMA2_Q, 0.0)) if read_var else None,
+                  "gain_dn_per_e": gain[p] if gain else None}
+            ch["read_noise_e"] = ch["read_noise_dn"] / ch["gain_dn_per_e"] if (ch["read_noise_dn"] is not None
+                                                                                and ch["gain_dn_per_e"]) else None
+            channels[name] = ch
+        fig["channels"] = channels
+        differ = []
+        if gain and max(abs(gain[p] / K - 1) for p in _POS) > 0.05:
+            differ.append("gain")
+        if black and max(black[p] for p in _POS) - min(black[p] for p in _POS) > 1.0:
+            differ.append("black level")
+        fig["channels_differ"] = differ
+    fig["notes"] = notes
+    curves = {
+        "dark_exposure_s": [p[0] for p in points],
+        "dark_mean_dn": [p[1]["all"] for p in points],
+        "dark_var_exposure_s": [p[0] for p in var_points],
+        "dark_var_dn2": [p[2]["all"] for p in var_points],
+        "dark_mean_slope_dn_per_s": mean_slope["all"],
+        "dark_var_slope_dn2_per_s": var_slope["all"],
+        "black_level_dn": fig["black_level_dn"],
+        "read_var_dn2": fig["read_noise_var_dn2"],
+        "flat_signal_dn": [p[0]["all"] for p in ptc],
+        "flat_var_dn2": [p[1]["all"] for p in ptc],
+        "flat_clipped_fraction": [p[2] for p in ptc],
+        "gain_dn_per_e": K,
+    }
+    hot = None if mask is None else ~mask
+    return fig, curves, bias_master, hot, checker
+
+
+def _spatial(image: np.ndarray, mask: np.ndarray | None) -> dict[str, float]:
+    out = {}
+    for name, (rs, cs) in _views(image.shape).items():
+        sel = image[rs, cs] if mask is None else image[rs, cs][mask[rs, cs]]
+        out[name] = float(sel.var(ddof=1)) if sel.size > 1 else float("nan")
+    return out
+
+
+def _read_noise_split(figures: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    pts = [(f["gain_dn_per_e"] ** 2, f["read_noise_dn"] ** 2) for f in figures.values()
+           if f.get("gain_dn_per_e") and f.get("read_noise_dn") is not None]
+    if len({round(x, 12) for x, _ in pts}) < 2:
+        return {"sigma_pre_e": None, "sigma_post_dn": None,
+                "unknown": f"the split needs read noise and gain at two or more ISOs; {len(pts)} ISO(s) have both"}
+    slope, intercept = _fit_line([p[0] for p in pts], [p[1] for p in pts])
+    out: dict[str, Any] = {"model": "read_noise_dn^2 = gain^2 * sigma_pre_e^2 + sigma_post_dn^2",
+                           "sigma_pre_e2": slope, "sigma_post_dn2": intercept, "n_isos": len(pts)}
+    out["sigma_pre_e"] = math.sqrt(slope) if slope >= 0 else None
+    out["sigma_post_dn"] = math.sqrt(max(intercept, 0.0))
+    if intercept < 0:
+        out["note"] = f"fitted sigma_post^2 is negative ({intercept:.4g} DN^2, no post-amplifier noise measurable); 0 recorded"
+    if slope < 0:
+        out["unknown"] = "the read variance falls with the gain; no pre-amplifier noise can be fitted"
+    return out
+
+
+def _median(values):
+    vals = [v for v in values if v is not None]
+    return float(np.median(vals)) if vals else None
+
+
+# -- public entry ------------------------------------------------------------------------------
+def calibrate(
+    frames_or_manifest,
+    *,
+    name: str | None = None,
+    adc_bits: int | None = None,
+    cfa_pattern: str | None = None,
+    iso: int | None = None,
+    hot_pixel_sigma: float = 6.0,
+) -> CalibrationResult:
+    """Measure a camera profile from calibration frames.
+
+    Parameters
+    ----------
+    frames_or_manifest : str, Path, list of FrameRecord or EmvaDescriptor
+        A manifest (CSV or JSON), an EMVA 1288 descriptor file, frame records (see
+        :func:`lfproc.calib.frames.read_manifest`) or a parsed descriptor.
+    name : str, optional
+        Profile name (default: the manifest's ``name``, else the input's file stem).
+    adc_bits : int, optional
+        ADC resolution; default: the raw files' white level, the descriptor's ``n`` line, the
+        manifest's ``adc_bits``, else the largest code seen (recorded in ``source``).
+    cfa_pattern : str, optional
+        Bayer layout when the frames do not carry it (PNG/TIFF); "RGGB" with a recorded
+        ``unknown`` entry otherwise.
+    iso : int, optional
+        ISO under which EMVA 1288 figures are stored in the profile (EMVA data give none;
+        default 100, recorded in ``unknown``). ``figures`` use the key ``"default"``.
+    hot_pixel_sigma : float
+        Hot-pixel threshold in robust standard deviations of the longest master dark.
+
+    Returns
+    -------
+    CalibrationResult
+
+    Raises
+    ------
+    CalibrationError
+        Frames of mixed size/bit depth/CFA in one ISO (named), or no ISO gives a gain or a
+        saturation level (the reasons are named).
+    InputError, FileFormatError, MissingFileError
+        Bad manifest rows (named), unreadable frames (named).
+    """
+    check_positive("hot_pixel_sigma", hot_pixel_sigma)
+    options: dict[str, Any] = {}
+    source_path = None
+    if isinstance(frames_or_manifest, EmvaDescriptor):
+        return _calibrate_emva(frames_or_manifest, name=name, adc_bits=adc_bits, cfa_pattern=cfa_pattern, iso=iso)
+    if isinstance(frames_or_manifest, (str, os.PathLike)):
+        source_path = Path(frames_or_manifest)
+        if source_path.is_file() and source_path.suffix.lower() not in (".csv", ".json") and is_descriptor(source_path):
+            return _calibrate_emva(read_descriptor(source_path), name=name, adc_bits=adc_bits,
+                                   cfa_pattern=cfa_pattern, iso=iso)
+        records, options = read_manifest(source_path)
+    else:
+        records = list(frames_or_manifest)
+        if not records or not all(isinstance(r, FrameRecord) for r in records):
+            raise InputError("frames: expected a manifest path, an EMVA 1288 descriptor or a list of FrameRecord")
+    missing = [r for r in records if r.iso is None]
+    if missing:
+        raise InputError(f"{missing[0].where or missing[0].path}: missing ISO; every frame needs its ISO")
+    cfa = cfa_pattern or options.get("cfa_pattern") or next((r.cfa_pattern for r in records if r.cfa_pattern), None)
+    by_iso: dict[int, list[FrameRecord]] = {}
+    for r in records:
+        key = int(round(r.iso))
+        if abs(key - r.iso) > 1e-6:
+            raise InputError(f"{r.where or r.path}: ISO: expected a whole number, found {r.iso:g}")
+        by_iso.setdefault(key, []).append(r)
+    unknown: dict[str, str] = {}
+    figures: dict[str, dict[str, Any]] = {}
+    curves: dict[str, dict[str, Any]] = {}
+    hot_pixels: dict[str, np.ndarray] = {}
+    bias_frames: dict[int, np.ndarray] = {}
+    frame_cfa = None
+    bit_source = None
+    max_code = 0
+    shapes = {}
+    for key in sorted(by_iso):
+        fig, cur, bias, hot, checker = _calibrate_iso(str(key), by_iso[key], cfa=cfa,
+                                                      hot_pixel_sigma=hot_pixel_sigma, unknown=unknown)
+        figures[str(key)] = fig
+        curves[str(key)] = cur
+        shapes[key] = checker.first.shape
+        if hot is not None:
+            hot_pixels[str(key)] = hot
+        if bias is not None:
+            bias_frames[key] = bias.astype(np.float32)
+        frame_cfa = frame_cfa or checker.first.cfa_pattern
+        if checker.first.white_level_dn and checker.first.source != "image":
+            bit_source = (checker.first.bit_depth, f"white level of {checker.first.path.name}")
+        for v in (fig.get("saturation_dn"),):
+            if v:
+                max_code = max(max_code, int(v))
+    if len(set(shapes.values())) > 1:
+        detail = ", ".join(f"ISO {k}: {s[0]}x{s[1]}" for k, s in shapes.items())
+        raise CalibrationError(f"frames of different sizes across ISOs ({detail}); one sensor mode per calibration")
+    cfa = cfa or frame_cfa
+    return _build(figures=figures, curves=curves, hot_pixels=hot_pixels, bias_frames=bias_frames, unknown=unknown,
+                  name=name or options.get("name") or (source_path.stem if source_path else "calibrated"),
+                  adc_bits=adc_bits or options.get("adc_bits") or (bit_source[0] if bit_source else None),
+                  bits_from=("argument" if adc_bits else "manifest" if options.get("adc_bits") else
+                             bit_source[1] if bit_source else None),
+                  max_code=max_code, cfa=cfa, input_path=source_path, kind="frames")
+
+
+def _build(*, figures, curves, hot_pixels, bias_frames, unknown, name, adc_bits, bits_from, max_code, cfa,
+           input_path, kind, iso_keys=None, extra_source=None) -> CalibrationResult:
+    with_gain = {k: f for k, f in figures.items() if f.get("gain_dn_per_e")}
+    if not with_gain:
+        reasons = "; ".join(f"ISO {k}: {unknown.get(f'isos.{k}.gain_dn_per_e', 'unknown')}" for k in figures)
+        raise CalibrationError(f"the frames give no system gain at any ISO ({reasons})")
+    wells = [f["full_well_e"] for f in figures.values() if f.get("full_well_e")]
+    if not wells:
+        reasons = "; ".join(f"ISO {k}: {unknown.get(f'isos.{k}.full_well_e', 'unknown')}" for k in figures)
+        raise CalibrationError(f"the frames give no saturation level at any ISO ({reasons}); add over-exposed flats")
+    profile_unknown = dict(unknown)
+    source: dict[str, Any] = {"kind": "calibrated", "method": kind, "lfproc_version": __version__,
+                              "input": str(input_path) if input_path else None}
+    if adc_bits is None:
+        adc_bits = max(8, int(math.ceil(math.log2(max_code + 1)))) if max_code else 16
+        bits_from = f"the largest saturation code ({max_code} DN)"
+    source["adc_bits_from"] = bits_from
+    if cfa is None:
+        cfa = "RGGB"
+        profile_unknown["cfa_pattern"] = "the frames carry no CFA layout (PNG/TIFF) and none was given; RGGB recorded"
+    read_model = _read_noise_split(figures)
+    source["read_noise_model"] = {k: v for k, v in read_model.items()}
+    temps = [f.get("temperature_c") for f in figures.values() if f.get("temperature_c") is not None]
+    if temps:
+        source["temperature_c"] = float(np.mean(temps))
+    if extra_source:
+        source.update(extra_source)
+    isos = {}
+    for key, f in figures.items():
+        iso_int = iso_keys[key] if iso_keys else int(key)
+        isos[iso_int] = IsoFigures(
+            gain_dn_per_e=f.get("gain_dn_per_e"), read_noise_e=f.get("read_noise_e"),
+            read_noise_dn=f.get("read_noise_dn"), dark_current_e_per_s=f.get("dark_current_e_per_s"),
+            black_level_dn=f.get("black_level_dn"), full_well_e=f.get("full_well_e"), dsnu_dn=f.get("dsnu_dn"),
+            prnu=f.get("prnu"),
+        )
+        if iso_keys:  # EMVA: rename the unknown keys to the ISO the profile uses
+            for k in list(profile_unknown):
+                if k.startswith(f"isos.{key}."):
+                    profile_unknown[f"isos.{iso_int}." + k.split(".", 2)[2]] = profile_unknown.pop(k)
+    white = float(2**adc_bits - 1)
+    blacks = [f["black_level_dn"] for f in figures.values() if f.get("black_level_dn") is not None]
+    black = _median(blacks)
+    if black is None:
+        raise CalibrationError("the frames give no black level at any ISO; add bias frames")
+    dark = _median(f.get("dark_current_e_per_s") for f in figures.values())
+    if dark is None:
+        profile_unknown["dark_current_e_per_s"] = "no ISO gives a dark current; 0 recorded"
+    prnu = _median(f.get("prnu") for f in figures.values())
+    if prnu is None:
+        profile_unknown["prnu"] = "no ISO gives a PRNU; 0 recorded"
+    dsnu = _median(f.get("dsnu_e") for f in figures.values())
+    if dsnu is None:
+        profile_unknown["dsnu_e"] = "no ISO gives a DSNU; 0 recorded"
+    if max(max_code, 0) > white:
+        raise CalibrationError(f"codes up to {max_code} DN do not fit adc_bits={adc_bits}; pass the right adc_bits")
+    profile = CameraProfile(
+        name=name, adc_bits=int(adc_bits), white_level_dn=white, black_level_dn=max(black, 0.0),
+        full_well_e=float(max(wells)), isos=isos, gamma=1.0, cfa_pattern=cfa,
+        dark_current_e_per_s=dark or 0.0, prnu=prnu or 0.0, dsnu_e=dsnu or 0.0, fixed_pattern_seed=0,
+        description=f"Measured by lfproc calibrate {__version__} from {input_path or 'frames'}",
+        bias_frames=bias_frames, unknown=profile_unknown, source=source,
+    )
+    notes = [f"ISO {k}: {n}" for k, f in figures.items() for n in f.get("notes", [])]
+    return CalibrationResult(profile=profile, figures=figures, unknown=unknown, read_noise_model=read_model,
+                             curves=curves, hot_pixels=hot_pixels, notes=notes, source=source)
+
+
+def _calibrate_emva(desc: EmvaDescriptor, *, name, adc_bits, cfa_pattern, iso) -> CalibrationResult:
+    data = reduce_descriptor(desc)
+    res, unk_emva = evaluate(data)
+    key = DEFAULT_ISO_KEY
+    iso_int = int(iso) if iso is not None else 100
+    unknown = {f"isos.{key}.{k}": v for k, v in unk_emva.items()}
+    K = res["K"]
+    fig = {
+        "gain_dn_per_e": K,
+        "read_noise_e": res["sigma_d"],
+        "read_noise_dn": res["sigma_d"] * K,
+        "temporal_dark_noise_dn": res["sigma_y_dark"],
+        "black_level_dn": res["black_level_dn"],
+        "full_well_e": res["u_e_sat"],
+        "saturation_dn": res["u_y_sat"],
+        "dark_current_e_per_s": res["u_I_mean"],
+        "dark_current_var_e_per_s": res["u_I_var"],
+        "dsnu_dn": res["DSNU1288_DN"],
+        "dsnu_e": res["DSNU1288"],
+        "prnu": res["PRNU1288"] / 100 if res["PRNU1288"] is not None else None,
+        "quantum_efficiency": res["QE"],
+        "dynamic_range_emva": res["DR"],
+        "dynamic_range_emva_db": res["DR_dB"],
+        "snr_max": res["SNR_max"],
+        "snr_max_db": res["SNR_max_dB"],
+        "emva1288": {k: v for k, v in res.items() if k != "curves"},
+        "notes": list(data.notes),
+    }
+    if fig["dark_current_e_per_s"] is not None and fig["dark_current_e_per_s"] < 0:
+        fig["notes"].append(f"dark current from the mean is negative ({fig['dark_current_e_per_s']:.4g} e-/s); 0 recorded")
+        fig["dark_current_e_per_s"] = 0.0
+    for src, dst in (("u_e_sat", "full_well_e"), ("u_I_mean", "dark_current_e_per_s"), ("DSNU1288", "dsnu_e"),
+                     ("PRNU1288", "prnu")):
+        if src in unk_emva:
+            unknown[f"isos.{key}.{dst}"] = unk_emva[src]
+    if fig["full_well_e"] and fig["read_noise_e"]:
+        fig["dynamic_range_stops"] = math.log2(fig["full_well_e"] / fig["read_noise_e"])
+    c = res["curves"]
+    curves = {key: {
+        "dark_exposure_s": c["texp_s"], "dark_mean_dn": c["u_ydark"], "dark_var_exposure_s": c["texp_s"],
+        "dark_var_dn2": c["s2_ydark"], "dark_mean_slope_dn_per_s": (res["u_I_mean"] or 0) * K if res["u_I_mean"] is not None else None,
+        "dark_var_slope_dn2_per_s": res["u_I_var"] * K**2 if res["u_I_var"] is not None else None,
+        "black_level_dn": res["black_level_dn"], "read_var_dn2": res["sigma_y_dark"] ** 2,
+        "flat_signal_dn": (np.array(c["u_y"]) - np.array(c["u_ydark"])).tolist(),
+        "flat_var_dn2": (np.array(c["s2_y"]) - np.array(c["s2_ydark"])).tolist(),
+        "flat_clipped_fraction": [0.0] * len(c["u_y"]), "gain_dn_per_e": K,
+    }}
+    unknown_all = dict(unknown)
+    if iso is None:
+        unknown_all["iso"] = f"EMVA 1288 data give no ISO; the figures are stored under ISO {iso_int}"
+    return _build(figures={key: fig}, curves=curves, hot_pixels={}, bias_frames={}, unknown=unknown_all,
+                  name=name or (desc.path.stem if desc.path else "emva1288"), adc_bits=adc_bits or desc.bits,
+                  bits_from="argument" if adc_bits else "descriptor 'n' line", max_code=int(res["u_y_sat"] or 0),
+                  cfa=cfa_pattern, input_path=desc.path, kind="emva1288", iso_keys={key: iso_int},
+                  extra_source={"emva1288_release": desc.release})
