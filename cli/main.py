@@ -25,6 +25,9 @@ COMMANDS = (
     "simulate",
     "merge",
     "dataset",
+    "virtual-illum",
+    "whites",
+    "decode",
 )
 
 
