@@ -331,8 +331,9 @@ class ProjectionOperator:
         if lf.shape != self.in_shape:
             raise ShapeError(f"forward: expected a light field of shape {self.in_shape}, got {lf.shape}")
         dtype = np.result_type(lf.dtype, np.float32)
-        sel = np.take_along_axis(lf, self.cfa_index[None, None, :, :, None], axis=-1)[..., 0]  # (V, U, H, W)
-        return np.einsum("svuhw,vuhw->shw", self.weights.astype(dtype, copy=False), sel.astype(dtype, copy=False))
+        # each pixel's CFA colour, (V, U, H, W), without a broadcast index array
+        sel = np.einsum("vuhwc,hwc->vuhw", lf.astype(dtype, copy=False), self._onehot_map(dtype))
+        return np.einsum("svuhw,vuhw->shw", self.weights.astype(dtype, copy=False), sel)
 
     def adjoint(self, y: np.ndarray) -> np.ndarray:
         """``Phi^T y``: light field ``(V, U, H, W, C)`` from sensor images ``(S, H, W)``."""
