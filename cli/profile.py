@@ -1,0 +1,69 @@
+"""``lfproc profile show PROFILE [--json]``: the figures of a camera profile.
+
+PROFILE is a shipped profile name (``illum``, ``paper-none``, ``paper-low``,
+``paper-medium``, ``paper-high``) or a profile JSON path.
+"""
+
+from __future__ import annotations
+
+from lfproc.errors import ProfileError
+
+from ._common import add_json, emit
+
+_ISO_KEYS = ("gain_dn_per_e", "read_noise_e", "read_noise_dn", "dark_current_e_per_s", "black_level_dn", "full_well_e",
+             "dsnu_dn", "prnu")
+
+
+def register(sub, common) -> None:
+    p = sub.add_parser("profile", parents=[common], help="inspect camera profiles",
+                       description="Camera profiles: 'lfproc profile show PROFILE [--json]'.")
+    actions = p.add_subparsers(dest="profile_command", metavar="ACTION", required=True)
+    show = actions.add_parser("show", parents=[common], help="print a profile's figures",
+                              description="Print a camera profile (shipped name or JSON path): levels, "
+                              "per-ISO gain, read noise, dark current, full well, unknown figures.")
+    show.add_argument("profile", metavar="PROFILE", help="shipped profile name or profile JSON path")
+    add_json(show)
+    show.set_defaults(run=run_show)
+
+
+def describe_profile(profile) -> dict:
+    """The profile as one JSON-ready dict (its JSON form plus the bias frames' shapes)."""
+    doc = profile.to_json()
+    doc["bias_frames"] = {str(iso): list(frame.shape) for iso, frame in sorted(profile.bias_frames.items())}
+    doc["saturation_dn"] = {}
+    for iso in profile.iso_values:
+        try:
+            doc["saturation_dn"][str(iso)] = profile.saturation_dn(iso)
+        except ProfileError:  # an ISO without gain: its saturation is unknown
+            doc["saturation_dn"][str(iso)] = None
+    return doc
+
+
+def run_show(args) -> int:
+    from lfproc.calib.profile import load_profile
+
+    profile = load_profile(args.profile)
+    doc = describe_profile(profile)
+    if args.json:
+        emit(doc, as_json=True)
+        return 0
+    head = {k: doc[k] for k in ("name", "description", "adc_bits", "white_level_dn", "black_level_dn", "full_well_e",
+                                "gamma", "cfa_pattern", "dark_current_e_per_s", "prnu", "dsnu_e")}
+    if doc["bias_frames"]:
+        head["bias_frames"] = ", ".join(f"ISO {k}: {v[0]}x{v[1]}" for k, v in doc["bias_frames"].items())
+    emit(head, as_json=False)
+    print()
+    width = max(len(k) for k in _ISO_KEYS + ("saturation_dn",))
+    isos = [str(i) for i in profile.iso_values]
+    print(f"{'ISO':<{width}}  " + "  ".join(f"{i:>10}" for i in isos))
+    for key in _ISO_KEYS:
+        print(f"{key:<{width}}  " + "  ".join(_cell(doc["isos"][i][key]) for i in isos))
+    print(f"{'saturation_dn':<{width}}  " + "  ".join(_cell(doc["saturation_dn"][i]) for i in isos))
+    for key, why in sorted(doc["unknown"].items()):
+        print(f"unknown {key}: {why}")
+    return 0
+
+
+def _cell(value) -> str:
+    text = "unknown" if value is None else f"{value:.5g}"
+    return f"{text:>10}"
