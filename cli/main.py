@@ -28,6 +28,8 @@ COMMANDS = (
     "virtual-illum",
     "whites",
     "decode",
+    "calibrate",
+    "profile",
 )
 
 
