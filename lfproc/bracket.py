@@ -146,17 +146,14 @@ def _read_raw(path: Path) -> LightField:
                       attrs={"raw_black_level": black, "raw_white_level": white, "exif": exif})
 
 
-def _read_lytro(path: Path, *, white_db, profile) -> LightField:
+def _read_lytro(path: Path, *, white_db) -> LightField:
     try:
-        from .lytro import decode as lytro_decode
+        from .lytro.decode import decode_capture
     except ImportError:
         raise DependencyError(f"{path}: Lytro decoding (lfproc.lytro.decode) is not available in this build") from None
-    if not hasattr(lytro_decode, "decode_capture"):
-        raise DependencyError(f"{path}: lfproc.lytro.decode has no decode_capture function")
-    kwargs: dict[str, Any] = {}
-    if white_db is not None:
-        kwargs["white_db"] = white_db
-    return lytro_decode.decode_capture(path, **kwargs)
+    if white_db is None:
+        raise InputError(f"{path}: decoding a Lytro capture needs a white-image database (--white-db DB)")
+    return decode_capture(path, white_db=white_db)
 
 
 def _check_bias(lfs: list[LightField], names: list[str]) -> None:
@@ -227,7 +224,7 @@ def read_bracket(
         if p.is_dir() or suffix == ".exr":
             lf = read_lightfield(p)
         elif suffix in LYTRO_SUFFIXES:
-            lf = _read_lytro(p, white_db=white_db, profile=profile)
+            lf = _read_lytro(p, white_db=white_db)
         elif suffix in RAW_SUFFIXES:
             lf = _read_raw(p)
         elif suffix in IMAGE_SUFFIXES_LDR:
@@ -267,7 +264,8 @@ def merge_files(
     """Read a bracket of files and merge it (:func:`read_bracket` then :func:`lfproc.merge.merge_lightfields`).
 
     ``method=None`` chooses: ``debevec`` for 8-bit camera images (non-linear) or when no camera
-    profile is known, ``ml`` otherwise. Lytro captures default to the ``illum`` profile.
+    profile is known (unless the inputs carry their own variances, as decoded captures do),
+    ``ml`` otherwise. Lytro captures default to the ``illum`` profile.
 
     Returns the merged light field (``attrs["sources"]`` are the file paths) and the merge
     information (see :func:`lfproc.merge.merge_lightfields`), plus ``method``.
@@ -284,8 +282,10 @@ def merge_files(
     lfs = read_bracket(paths, exposures_s=exposures_s, isos=isos, white_db=white_db, profile=profile)
     if method is None:
         codes8 = any(lf.attrs.get("codes_bits") == 8 for lf in lfs)
-        method = "debevec" if codes8 or profile is None else "ml"
-    if method == "ml" and isos is None and any(lf.iso is None for lf in lfs):
+        with_variance = all(lf.variance is not None and lf.units != "dn" for lf in lfs)
+        method = "debevec" if codes8 or (profile is None and not with_variance) else "ml"
+    own_variance = all(lf.variance is not None and lf.units != "dn" for lf in lfs)
+    if method == "ml" and not own_variance and isos is None and any(lf.iso is None for lf in lfs):
         bad = next(p for p, lf in zip(paths, lfs) if lf.iso is None)
         raise InputError(f"{bad}: no ISO in its metadata; method ml needs one (give --isos)")
     merged, info = merge_lightfields(lfs, method=method, profile=profile, n_iter=n_iter, random_state=random_state,

@@ -58,6 +58,7 @@ __all__ = [
     "recover_response",
     "hat_weight",
     "merge_lightfields",
+    "merge_with_variances",
 ]
 
 MERGE_METHODS = ("ml", "debevec")
@@ -297,6 +298,80 @@ def merge_ml(
         "isos": iso.tolist(),
         "n_iter": int(n_iter),
         "profile": profile.name,
+    })
+    return radiance.reshape(sample_shape), variance.reshape(sample_shape), info
+
+
+def merge_with_variances(
+    values,
+    variances,
+    *,
+    exposures_s: Sequence[float],
+    unusable_variance: float = 1.0e6,
+    saturation_value: float = 0.5,
+    chunk_size: int = _DEFAULT_CHUNK,
+    n_threads: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """Inverse-variance merge of linear inputs that carry their own per-sample variance.
+
+    For decoded captures (e.g. :func:`lfproc.lytro.decode.decode_capture`, whose variances come
+    from the sensor noise model): ``x = sum_i w_i v_i / t_i / sum_i w_i`` with
+    ``w_i = t_i^2 / var_i``, 0 where ``var_i >= unusable_variance`` (saturated or unusable
+    samples, and every longer exposure of a sample unusable-and-bright in a shorter one). The
+    variances are the inputs' own (evaluated at each measurement), so this is the plug-in
+    form of the ML estimator. Samples with no usable exposure take the shortest exposure's
+    ``v / t`` and are flagged as saturated everywhere when that value is at least
+    ``saturation_value``, else as dark everywhere.
+
+    Returns radiance (input units per second), its variance, and info as :func:`merge_ml`.
+    """
+    vals = _as_stack(values, "values")
+    var_in = _as_stack(variances, "variances")
+    if vals.shape != var_in.shape:
+        raise ShapeError(f"variances: shape {var_in.shape} differs from the values {vals.shape}")
+    n = vals.shape[0]
+    t = _per_exposure("exposures_s", exposures_s, n)
+    sample_shape = vals.shape[1:]
+    total = math.prod(sample_shape)
+    fv = vals.reshape(n, total)
+    fvar = var_in.reshape(n, total)
+    order = np.argsort(t, kind="stable")
+    first = int(order[0])
+    t2 = (t**2).astype(np.float32)[:, None]
+    inv_t = (1 / t).astype(np.float32)[:, None]
+    radiance = np.empty(total, np.float32)
+    variance = np.empty(total, np.float32)
+    sat_all = np.empty(total, bool)
+    dark_all = np.empty(total, bool)
+
+    def work(a: int, b: int) -> None:
+        v = fv[:, a:b].astype(np.float32)
+        s2 = fvar[:, a:b].astype(np.float32)
+        bad = ~(s2 < unusable_variance) | ~np.isfinite(v)
+        bright_bad = bad & (v >= saturation_value)
+        bad[order] |= np.logical_or.accumulate(bright_bad[order], axis=0)
+        w = np.where(bad, 0, t2 / np.maximum(s2, 1e-30)).astype(np.float32)
+        wsum = w.sum(axis=0)
+        none = wsum <= 0
+        x = (w * np.where(bad, 0, v) * inv_t).sum(axis=0) / np.where(none, 1, wsum)
+        var = 1 / np.where(none, 1, wsum)
+        fill = np.maximum(np.nan_to_num(v[first]), 0) / t[first]
+        sat = none & (v[first] >= saturation_value)
+        x = np.where(none, fill, x)
+        var = np.where(none, np.maximum(fill, 1e-30) ** 2, var)
+        radiance[a:b] = x
+        variance[a:b] = var
+        sat_all[a:b] = sat
+        dark_all[a:b] = none & ~sat
+
+    _run_chunks(work, total, chunk_size, _n_threads(n_threads))
+    info = _summary(sat_all.reshape(sample_shape), dark_all.reshape(sample_shape))
+    info.update({
+        "method": "ml",
+        "weights": "inverse of the inputs' own variances",
+        "fill": "samples with no usable exposure = shortest exposure's value (lower bound when saturated), "
+                "variance = value^2",
+        "exposures_s": t.tolist(),
     })
     return radiance.reshape(sample_shape), variance.reshape(sample_shape), info
 
@@ -633,6 +708,13 @@ def merge_lightfields(
         if codes8:
             raise InputError("method ml needs linear sensor data (raw codes); 8-bit camera images are non-linear: "
                              "use method debevec")
+        if unit != "dn" and all(lf.variance is not None for lf in lfs):
+            # decoded captures: their own noise-model variances give the weights
+            variances = np.stack([lf.variance for lf in lfs])
+            radiance, variance, info = merge_with_variances(data, variances, exposures_s=t, n_threads=n_threads,
+                                                            chunk_size=chunk_size)
+            return _finish(lfs, names, method, t, iso, prof, "input-variances", radiance, variance, info, unit,
+                           n_iter)
         if prof is None:
             raise InputError("method ml needs a camera profile (--profile): gain and read noise set its weights")
         if iso is None:
@@ -675,6 +757,11 @@ def merge_lightfields(
                                        n_threads=n_threads, chunk_size=chunk_size, **kwargs)
         variance = None
         out_units = "relative"
+    return _finish(lfs, names, method, t, iso, prof, mapping if method == "ml" else ("codes8" if codes8 else unit),
+                   radiance, variance, info, out_units, n_iter)
+
+
+def _finish(lfs, names, method, t, iso, prof, mapping, radiance, variance, info, out_units, n_iter):
     negative = int((radiance < 0).sum())
     data_out = np.maximum(radiance, 0)
     attrs = {
@@ -683,7 +770,7 @@ def merge_lightfields(
         "isos": None if iso is None else iso.tolist(),
         "sources": names,
         "profile": None if prof is None else prof.name,
-        "input_mapping": mapping if method == "ml" else ("codes8" if codes8 else unit),
+        "input_mapping": mapping,
         "saturated_everywhere_count": info["saturated_everywhere_count"],
         "saturated_everywhere_fraction": info["saturated_everywhere_fraction"],
         "dark_everywhere_count": info["dark_everywhere_count"],
@@ -695,8 +782,7 @@ def merge_lightfields(
         attrs["n_iter"] = int(n_iter)
     if info.get("response") is not None:
         attrs["response_g"] = np.asarray(info["response"]).round(6).tolist()
-    first = lfs[0]
-    merged = LightField(data=data_out, variance=variance, units=out_units, colour_space=first.colour_space,
+    merged = LightField(data=data_out, variance=variance, units=out_units, colour_space=lfs[0].colour_space,
                         source=f"merge:{method}", attrs=attrs)
     info["dynamic_range_stops"] = merged.dynamic_range_stops()
     info["negative_clipped"] = negative

@@ -1,0 +1,140 @@
+"""lfproc dataset build: per-scene outputs, manifest, failures, resuming after an interruption."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from lfproc.cli.main import main
+from lfproc.dataset import build_dataset, find_scenes, read_manifest
+from lfproc.io import read_lightfield, write_lightfield
+from lfproc.lightfield import LightField
+from lfproc.sensor import expose
+from lfproc.synth import synthesize
+
+TIMES = [0.01 * 2**k for k in range(5)]
+
+
+def _make_scene(folder, seed, *, size=(24, 32)):
+    """A scene folder: a 5-exposure bracket of raw-code light-field EXRs (and a truth file to ignore)."""
+    folder.mkdir(parents=True)
+    truth = synthesize("lamps", size=size, views=3, random_state=seed)
+    e = truth.data.astype(np.float64) * 2e5
+    flat = e.reshape(-1, e.shape[-2] * e.shape[-1])
+    for k, t in enumerate(TIMES):
+        dn = expose(flat, exposure_s=t, iso=100, profile="illum", random_state=seed * 10 + k).reshape(e.shape)
+        write_lightfield(LightField(data=dn.astype(np.float32), units="dn", exposure_s=t, iso=100),
+                         folder / f"exposure_{k}.exr")
+    write_lightfield(truth, folder / "truth.exr")
+
+
+@pytest.fixture()
+def scenes(tmp_path):
+    root = tmp_path / "scenes"
+    for i in range(3):
+        _make_scene(root / f"scene{i}", seed=i)
+    return root
+
+
+def _record_mtimes(out):
+    return {p.name: p.stat().st_mtime_ns for p in (out / "done").glob("*.json")}
+
+
+def test_build_failure_reported_then_resumed(scenes, tmp_path):
+    broken = scenes / "zbroken"
+    broken.mkdir()
+    (broken / "only.exr").write_bytes(b"not an exr")
+    (broken / "other.exr").write_bytes(b"not an exr either")
+    found = find_scenes(scenes)
+    assert [s.name for s in found] == ["scene0", "scene1", "scene2", "zbroken"]
+    assert [p.name for p in found[0].inputs] == [f"exposure_{k}.exr" for k in range(5)]  # truth.exr left out
+    out = tmp_path / "dataset"
+    report = build_dataset(scenes, out, profile="illum", scheduler="synchronous")
+    assert sorted(report["processed"]) == ["scene0", "scene1", "scene2"]
+    assert list(report["failed"]) == ["zbroken"] and "only.exr" in report["failed"]["zbroken"]
+    rows = read_manifest(out)
+    assert [r["scene"] for r in rows] == ["scene0", "scene1", "scene2"]
+    for row in rows:
+        assert row["method"] == "ml" and row["exposures_s"] == TIMES
+        assert row["dynamic_range_stops"] > 8 and 0 < row["saturated_fraction"] < 0.5
+        assert len(row["sha256"]) == 5 and all(len(h) == 64 for h in row["sha256"])
+        for key in ("hdr", "preview", "histogram"):
+            assert (out / row[key]).is_file()
+        lf = read_lightfield(out / row["hdr"])
+        assert lf.variance is not None and lf.units == "e-/s" and lf.shape == (3, 3, 24, 32, 3)
+    with open(out / "manifest.csv", newline="") as fh:
+        table = list(csv.DictReader(fh))
+    assert [r["scene"] for r in table] == ["scene0", "scene1", "scene2"]
+    assert json.loads((out / "failed.json").read_text()) == report["failed"]
+    # fix the broken scene: only it is processed on the next run
+    before = _record_mtimes(out)
+    (broken / "only.exr").unlink()
+    (broken / "other.exr").unlink()
+    _make_scene(tmp_path / "fixed", seed=7)
+    for p in (tmp_path / "fixed").iterdir():
+        p.rename(broken / p.name)
+    report2 = build_dataset(scenes, out, profile="illum", scheduler="synchronous")
+    assert report2["processed"] == ["zbroken"] and sorted(report2["skipped"]) == ["scene0", "scene1", "scene2"]
+    assert report2["failed"] == {}
+    after = _record_mtimes(out)
+    assert all(after[name] == mtime for name, mtime in before.items())
+    assert len(read_manifest(out)) == 4
+
+
+def test_cli_dataset_build_killed_then_resumed(scenes, tmp_path, capsys):
+    _make_scene(scenes / "scene3", seed=3)
+    out = tmp_path / "dataset"
+    cmd = [sys.executable, "-m", "lfproc.cli.main", "dataset", "build", str(scenes), "-o", str(out),
+           "--workers", "1", "--profile", "illum"]
+    env = dict(os.environ, LFPROC_PROGRESS="0")
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                            env=env)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if list((out / "done").glob("*.json")) if (out / "done").is_dir() else []:
+                break
+            time.sleep(0.05)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)  # the whole session we started: the run and its Dask workers
+        proc.wait(timeout=30)
+    done_at_kill = _record_mtimes(out)
+    assert 1 <= len(done_at_kill) < 4, "the run should have been killed after its first scene"
+    # run again through the CLI (Dask local cluster): finishes the rest, keeps the done scenes
+    assert main(["dataset", "build", str(scenes), "-o", str(out), "--workers", "1", "--profile", "illum",
+                 "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["skipped"] == len(done_at_kill) and doc["processed"] == 4 - len(done_at_kill) and doc["failed"] == 0
+    after = _record_mtimes(out)
+    assert len(after) == 4 and all(after[k] == v for k, v in done_at_kill.items())
+    rows = read_manifest(out)
+    assert [r["scene"] for r in rows] == ["scene0", "scene1", "scene2", "scene3"]
+    for r in rows:
+        assert (out / r["preview"]).is_file() and (out / r["histogram"]).is_file()
+    assert not list(out.glob("scenes/.lfproc-tmp-*"))  # the killed run's temporary folder was cleaned up
+
+
+def test_cli_dataset_errors(tmp_path, capsys):
+    assert main(["dataset", "build", str(tmp_path / "missing"), "-o", str(tmp_path / "o")]) == 2
+    assert "no such scenes folder" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    assert main(["dataset", "build", str(tmp_path / "empty"), "-o", str(tmp_path / "o")]) == 2
+    assert "found none" in capsys.readouterr().err
+    scene = tmp_path / "one" / "s"
+    scene.mkdir(parents=True)
+    write_lightfield(LightField(data=np.ones((1, 1, 4, 4, 3), np.float32), exposure_s=1.0), scene / "a.exr")
+    assert main(["dataset", "build", str(tmp_path / "one"), "-o", str(tmp_path / "o"),
+                 "--scheduler", "synchronous"]) == 2
+    err = capsys.readouterr().err
+    assert "scene s failed" in err and "at least two inputs" in err and "1 of 1 scenes failed" in err
+    assert main(["dataset", "build", str(tmp_path / "one"), "-o", str(tmp_path / "o"), "--workers", "0"]) == 2
+    assert "--workers: expected a positive number" in capsys.readouterr().err
