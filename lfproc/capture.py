@@ -21,8 +21,9 @@ File format (``schema "lfproc.capture"``, ``schema_version 1``; suggested suffix
 followed by ``.npy`` members: ``dn`` (``(S, H, W)`` uint16, black level included), ``iso``
 (``(S, H, W)`` float32 ISO of every pixel), ``mask`` (the codes of
 :class:`lfproc.projection.MaskCode`: ``(S, V, U, Ph, Pw, 3)`` for ``random``, ``(S, Bh, Bw, 3)``
-for ``shifted``; one tile when the mask is periodic) and optionally ``bias`` (``(S, H, W)``
-float32 bias frames in DN).
+for ``shifted``; one tile when the mask is periodic; uint8 levels ``k`` meaning transmittance
+``k / 255`` when every code is such a level, as the simulator's are, else float32) and
+optionally ``bias`` (``(S, H, W)`` float32 bias frames in DN).
 
 Radiance units: ``observations`` returns ``T`` in electrons per second reaching each
 pixel. For a simulated capture, ``L_e = radiance_scale * L_relative``, so a light field
@@ -47,7 +48,7 @@ import numpy as np
 from ._version import __version__
 from .errors import FileFormatError, InputError, MissingFileError, ShapeError
 from .io import atomic_file
-from .projection import CFA_PATTERNS, MaskCode, ProjectionOperator, build_operator, sampling_rate
+from .projection import CFA_PATTERNS, MaskCode, ProjectionOperator, build_operator, decode_levels, encode_levels, sampling_rate
 from .sensor import Observation, calibrated_observation
 
 __all__ = [
@@ -253,7 +254,8 @@ class Capture:
         }
 
     def _arrays(self) -> dict[str, np.ndarray]:
-        out = {"dn": self.dn, "iso": self.iso, "mask": self.mask.codes}
+        levels = encode_levels(self.mask.codes)
+        out = {"dn": self.dn, "iso": self.iso, "mask": self.mask.codes if levels is None else levels}
         if self.bias_dn is not None:
             out["bias"] = self.bias_dn
         return out
@@ -371,7 +373,8 @@ def load_capture(path: str | os.PathLike) -> Capture:
     profile = CameraProfile.from_json(header["profile"], where=f"{path}: embedded profile")
     m = header["mask"]
     try:
-        mask = MaskCode(kind=m["kind"], codes=arrays["mask"], period=m.get("period"), shift=int(m.get("shift", 1)))
+        codes = decode_levels(arrays["mask"]) if arrays["mask"].dtype == np.uint8 else arrays["mask"]
+        mask = MaskCode(kind=m["kind"], codes=codes, period=m.get("period"), shift=int(m.get("shift", 1)))
         capture = Capture(
             dn=arrays["dn"],
             iso=arrays["iso"],

@@ -50,6 +50,9 @@ __all__ = [
     "MaskCode",
     "ProjectionOperator",
     "make_mask",
+    "MASK_LEVELS",
+    "encode_levels",
+    "decode_levels",
     "cfa_index_map",
     "build_operator",
     "sampling_rate",
@@ -57,6 +60,8 @@ __all__ = [
 
 MASK_KINDS = ("random", "shifted")
 CFA_PATTERNS = ("RGGB", "GRBG", "GBRG", "BGGR")
+#: Number of transmittance levels of the masks :func:`make_mask` draws.
+MASK_LEVELS = 256
 _COLOUR_INDEX = {"R": 0, "G": 1, "B": 2}
 
 
@@ -200,6 +205,9 @@ def make_mask(
 ) -> MaskCode:
     """Draw mask codes for ``shots`` shots (each its own code), transmittance uniform in [0, 1].
 
+    Transmittances take the 256 levels ``k / 255`` (a printed mask has finitely many
+    levels), so capture files store them exactly as 8-bit codes (:func:`encode_levels`).
+
     Parameters
     ----------
     kind : {"random", "shifted"}
@@ -226,14 +234,26 @@ def make_mask(
     nv, nu = views
     if kind == "random":
         tile = (period, period) if period is not None else tuple(size)
-        codes = rng.random((shots, nv, nu, *tile, channels), dtype=np.float32)
+        codes = decode_levels(rng.integers(0, MASK_LEVELS, (shots, nv, nu, *tile, channels), dtype=np.uint8))
     else:
         if period is not None:
             base = (period, period)
         else:
             base = (size[0] + shift * (nv - 1), size[1] + shift * (nu - 1))
-        codes = rng.random((shots, *base, channels), dtype=np.float32)
+        codes = decode_levels(rng.integers(0, MASK_LEVELS, (shots, *base, channels), dtype=np.uint8))
     return MaskCode(kind=kind, codes=codes, period=None if period is None else int(period), shift=int(shift))
+
+
+def decode_levels(levels: np.ndarray) -> np.ndarray:
+    """8-bit mask levels -> transmittances ``k / 255`` (float32)."""
+    return np.asarray(levels, dtype=np.uint8).astype(np.float32) / np.float32(MASK_LEVELS - 1)
+
+
+def encode_levels(codes: np.ndarray) -> np.ndarray | None:
+    """Transmittances -> 8-bit levels when every code is exactly ``k / 255``; else None."""
+    levels = np.rint(np.asarray(codes, dtype=np.float32) * np.float32(MASK_LEVELS - 1))
+    levels = np.clip(levels, 0, MASK_LEVELS - 1).astype(np.uint8)
+    return levels if np.array_equal(decode_levels(levels), codes) else None
 
 
 class ProjectionOperator:

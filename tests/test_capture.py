@@ -66,6 +66,16 @@ def test_round_trip_needs_no_seed(tmp_path, capture):
     assert header["arrays"]["dn"] == {"shape": [2, 32, 32], "dtype": "uint16"}
     with np.load(path) as npz:
         np.testing.assert_array_equal(npz["dn"], capture.dn)
+    assert header["arrays"]["mask"]["dtype"] == "uint8"  # levels k/255 are stored as 8-bit codes
+
+
+def test_arbitrary_mask_codes_round_trip_as_float(tmp_path):
+    codes = np.random.default_rng(0).random((1, 5, 5, 4, 4, 3)).astype(np.float32)
+    cap = Capture(dn=np.full((1, 4, 4), 100, np.uint16), iso=100, exposures_s=0.01,
+                  mask=MaskCode("random", codes), profile="paper-low")
+    back = load_capture(cap.save(tmp_path / "f.capture.npz"))
+    assert back.mask.codes.dtype == np.float32
+    np.testing.assert_array_equal(back.mask.codes, codes)
 
 
 def test_save_is_atomic_and_refuses_overwrite(tmp_path, capture):
