@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from ._common import add_json, add_output, emit, parse_floats
@@ -19,6 +20,8 @@ def register(sub, common) -> None:
     p.add_argument("--sensor", choices=("full", "small"), default="full",
                    help="full = the real 7728 x 5368 sensor; small = an 800 x 600 crop for fast tests")
     p.add_argument("--exposures-ev", default="-2,-1,0,1,2", help="exposure offsets in EV (default -2,-1,0,1,2)")
+    # let "--exposures-ev -2,-1,0" through: argparse otherwise takes "-2,-1,0" for an option
+    p._negative_number_matcher = re.compile(r"^-\d[\d.,+-]*$")
     p.add_argument("--seed", type=int, default=0, help="fixes the camera (serial, grid, hot pixels) and the noise")
     p.add_argument("--exposure-s", type=float, default=0.01, help="exposure time of the 0 EV capture (s)")
     p.add_argument("--iso", type=float, default=100, help="ISO of the captures (a value of the illum profile)")

@@ -127,9 +127,13 @@ def demosaic(mosaic: np.ndarray, *, cfa_pattern: str = "GRBG", method: str = "op
     if m.ndim != 2:
         raise ShapeError(f"demosaic: expected an (H, W) mosaic, got shape {m.shape}")
     if method == "malvar2004":
-        import colour_demosaicing
+        import warnings
 
-        rgb = colour_demosaicing.demosaicing_CFA_Bayer_Malvar2004(m, pattern).astype(np.float32)
+        with warnings.catch_warnings():  # colour_demosaicing imports a deprecated scipy namespace
+            warnings.simplefilter("ignore", DeprecationWarning)
+            import colour_demosaicing
+
+            rgb = colour_demosaicing.demosaicing_CFA_Bayer_Malvar2004(m, pattern).astype(np.float32)
         return np.maximum(rgb, 0.0, out=rgb)
     # OpenCV names the pattern by the 2x2 block starting at pixel (1, 1)
     code_name = pattern[3] + pattern[2]
