@@ -285,3 +285,35 @@ def test_cli_merge_ml_light_field_files(tmp_path, capsys):
     assert doc["saturated_everywhere_count"] == lf.attrs["saturated_everywhere_count"]
     valid = lf.data < lf.data.max()
     assert abs(np.median((lf.data[valid] - truth[valid]) / truth[valid])) < 0.01
+
+
+def test_merge_with_variances_decoded_style_inputs():
+    from lfproc.merge import merge_with_variances
+
+    rng = np.random.default_rng(4)
+    x_true = rng.uniform(0.1, 2.0, size=(2000,))
+    times = np.array([0.25, 0.5, 1.0])
+    var = np.stack([np.full_like(x_true, 1e-4) * (1 + k) for k in range(3)])
+    vals = x_true[None] * times[:, None] + rng.standard_normal((3, x_true.size)) * np.sqrt(var)
+    var[2, :10] = 1e6  # unusable (e.g. saturated) in the longest exposure
+    var[:, 10:12] = 1e6  # unusable everywhere
+    vals[:, 10] = [0.9, 1.0, 1.0]  # bright -> saturated everywhere
+    vals[:, 11] = [0.01, 0.02, 0.04]  # dark -> dark everywhere
+    x, v, info = merge_with_variances(vals, var, exposures_s=times)
+    w = np.where(var < 1e6, times[:, None] ** 2 / var, 0)
+    expected = (w * vals / times[:, None]).sum(0) / np.maximum(w.sum(0), 1e-30)
+    np.testing.assert_allclose(x[12:], expected[12:], rtol=1e-5)
+    np.testing.assert_allclose(v[12:], 1 / w[:, 12:].sum(0), rtol=1e-5)
+    assert info["saturated_everywhere"][10] and not info["saturated_everywhere"][11]
+    assert info["dark_everywhere"][11] and info["saturated_everywhere_count"] == 1
+    assert x[10] == pytest.approx(0.9 / 0.25) and v[10] == pytest.approx((0.9 / 0.25) ** 2, rel=1e-5)
+    z = (x[12:] - x_true[12:]) / np.sqrt(v[12:])
+    assert abs(z.var() - 1) < 0.2
+    # light fields carrying variances (decoded captures) take this path with method ml, no profile needed
+    lfs = [LightField(data=np.maximum(vals[k], 0).reshape(1, 1, 40, 50, 1), variance=var[k].reshape(1, 1, 40, 50, 1),
+                      exposure_s=t, source=f"cap{k}.lfr") for k, t in enumerate(times)]
+    merged, minfo = merge_lightfields(lfs, method="ml")
+    assert merged.attrs["input_mapping"] == "input-variances" and merged.variance is not None
+    clipped = np.maximum(vals, 0)  # light fields hold non-negative data
+    expected_lf = (w * clipped / times[:, None]).sum(0) / np.maximum(w.sum(0), 1e-30)
+    np.testing.assert_allclose(merged.data.ravel()[12:], expected_lf[12:], rtol=1e-4)
