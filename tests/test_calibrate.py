@@ -1,0 +1,307 @@
+"""Calibration from bias/dark/flat frames: round trip simulate-frames -> calibrate, bad input,
+report and CLI."""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from lfproc.calib import load_profile
+from lfproc.calib.calibrate import calibrate
+from lfproc.calib.frames import read_manifest
+from lfproc.calib.report import write_report
+from lfproc.calib.simulate_frames import expected_figures, simulate_frames
+from lfproc.cli.main import main
+from lfproc.errors import CalibrationError, FileFormatError, InputError, MissingFileError
+
+ISOS = (100, 400, 1600)
+
+
+def _test_profile():
+    """paper-high with a 100 e-/s dark current (5 % measurable in a few seconds), PRNU and DSNU."""
+    base = load_profile("paper-high")
+    base = replace(base, isos={k: v for k, v in base.isos.items() if k in ISOS})
+    base = base.with_noise(read_noise_e=2.8, dark_current_e_per_s=100.0, name="test-high")
+    return replace(base, prnu=0.01, dsnu_e=1.0, fixed_pattern_seed=5)
+
+
+@pytest.fixture(scope="module")
+def profile():
+    return _test_profile()
+
+
+@pytest.fixture(scope="module")
+def frames(tmp_path_factory, profile):
+    out = tmp_path_factory.mktemp("calib") / "frames"
+    return simulate_frames(profile, out, size=(128, 128), seed=7)
+
+
+@pytest.fixture(scope="module")
+def result(frames):
+    return calibrate(frames)
+
+
+@pytest.mark.parametrize("iso", ISOS)
+def test_round_trip_recovers_the_profile(result, profile, iso):
+    want = expected_figures(profile, iso)
+    got = result.figures[str(iso)]
+    assert got["gain_dn_per_e"] == pytest.approx(want["gain_dn_per_e"], rel=0.02)
+    assert got["read_noise_e"] == pytest.approx(want["read_noise_e"], rel=0.02)
+    assert got["read_noise_dn"] == pytest.approx(want["read_noise_dn"], rel=0.02)
+    assert got["dark_current_e_per_s"] == pytest.approx(want["dark_current_e_per_s"], rel=0.05)
+    assert got["dark_current_var_e_per_s"] == pytest.approx(want["dark_current_e_per_s"], rel=0.05)
+    # measured saturation capacity vs (saturation_dn - black) / gain (ADC clips first here)
+    assert got["saturation_dn"] == want["saturation_dn"]
+    assert got["full_well_e"] == pytest.approx(want["saturation_capacity_e"], rel=0.02)
+    assert got["black_level_dn"] == pytest.approx(want["black_level_dn"], abs=0.05)
+    assert got["dsnu_e"] == pytest.approx(profile.dsnu_e, rel=0.1)
+    assert got["prnu"] == pytest.approx(profile.prnu, rel=0.1)
+    assert got["hot_pixels"] == 0
+    # the EMVA saturation capacity sits at the variance maximum, below the clip level
+    assert got["saturation_capacity_emva_e"] < got["full_well_e"]
+    assert got["channels_differ"] == []
+    assert set(got["channels"]) == {"R", "Gr", "Gb", "B"}
+    for ch in got["channels"].values():
+        assert ch["gain_dn_per_e"] == pytest.approx(want["gain_dn_per_e"], rel=0.05)
+    assert np.isfinite([v for v in got.values() if isinstance(v, float)]).all()
+
+
+def test_profile_and_read_noise_split(result, profile):
+    prof = result.profile
+    assert prof.adc_bits == 12 and prof.white_level_dn == 4095 and prof.cfa_pattern == "RGGB"
+    assert prof.iso_values == list(ISOS)
+    assert prof.bias_frames[400].shape == (128, 128)
+    assert float(prof.bias_frames[400].mean()) == pytest.approx(64, abs=0.1)
+    assert prof.dark_current_e_per_s == pytest.approx(100, rel=0.05)
+    # expose() with the measured profile saturates where the true sensor does
+    for iso in ISOS:
+        assert prof.saturation_dn(iso) == pytest.approx(profile.saturation_dn(iso), abs=1)
+    m = result.read_noise_model
+    assert m["sigma_pre_e"] == pytest.approx(2.8, rel=0.03)
+    assert m["sigma_post_dn"] < 0.3
+    assert result.unknown == {}
+
+
+def test_csv_and_json_manifests_agree(frames, result):
+    other = calibrate(frames.with_name("manifest.json"))
+    assert other.profile.name == "test-high-simulated"
+    for iso in ISOS:
+        assert other.figures[str(iso)]["gain_dn_per_e"] == result.figures[str(iso)]["gain_dn_per_e"]
+
+
+def test_saved_profile_round_trip(result, tmp_path):
+    from lfproc.calib import save_profile
+
+    path = save_profile(result.profile, tmp_path / "measured.json")
+    back = load_profile(path)
+    assert back.isos == result.profile.isos
+    np.testing.assert_array_equal(back.bias_frames[100], result.profile.bias_frames[100])
+
+
+def test_report(result, tmp_path):
+    files = write_report(result, tmp_path / "rep")
+    names = {f.name for f in files}
+    assert {"photon_transfer.png", "dark_level.png", "dark_variance.png", "read_noise_vs_iso.png",
+            "summary.md"} <= names
+    for f in files:
+        assert f.stat().st_size > 0
+    assert cv2.imread(str(tmp_path / "rep" / "photon_transfer.png")) is not None
+    md = (tmp_path / "rep" / "summary.md").read_text()
+    assert "| gain (DN/e-) |" in md and "ISO 1600" in md and "sigma_pre" in md
+
+
+# -- bad input -------------------------------------------------------------------------------
+def _rows(frames: Path):
+    with open(frames) as fh:
+        rows = list(csv.DictReader(fh))
+    for r in rows:
+        r["path"] = str(frames.parent / r["path"])
+    return rows
+
+
+def _manifest(tmp_path, rows, name="m.csv"):
+    p = tmp_path / name
+    with open(p, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    return p
+
+
+def _select(rows, iso, kinds=("bias", "dark", "flat")):
+    return [r for r in rows if float(r["iso"]) == iso and r["kind"] in kinds]
+
+
+def test_missing_iso_or_exposure_names_the_row(frames, tmp_path):
+    rows = _select(_rows(frames), 100)
+    rows[2] = dict(rows[2], iso="")
+    with pytest.raises(InputError, match=r"m.csv line 4: missing ISO"):
+        calibrate(_manifest(tmp_path, rows))
+    rows = _select(_rows(frames), 100)
+    rows[5] = dict(rows[5], exposure_s="fast")
+    with pytest.raises(InputError, match=r"m.csv line 7: exposure_s: expected a number"):
+        read_manifest(_manifest(tmp_path, rows))
+    bad = tmp_path / "nocol.csv"
+    bad.write_text("path,kind\nx.png,bias\n")
+    with pytest.raises(FileFormatError, match="lacks column.*iso"):
+        read_manifest(bad)
+
+
+def test_unreadable_and_missing_frames(frames, tmp_path):
+    rows = _select(_rows(frames), 100)
+    broken = tmp_path / "broken.png"
+    broken.write_bytes(b"\x89PNG\r\n\x1a\n garbage")
+    rows[3] = dict(rows[3], path=str(broken))
+    with pytest.raises(FileFormatError, match="broken.png: cannot read"):
+        calibrate(_manifest(tmp_path, rows))
+    rows[3] = dict(rows[3], path=str(tmp_path / "gone.png"))
+    with pytest.raises(MissingFileError, match="gone.png"):
+        calibrate(_manifest(tmp_path, rows))
+
+
+def test_mixed_sizes_name_the_files(frames, tmp_path):
+    rows = _select(_rows(frames), 100)
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), np.full((64, 64), 64, np.uint16))
+    rows[1] = dict(rows[1], path=str(small))
+    with pytest.raises(CalibrationError, match=r"mixed frames in ISO 100: .*small.png differs from .*iso100_.*png \(size 64x64 vs 128x128"):
+        calibrate(_manifest(tmp_path, rows))
+
+
+def test_single_bias_frame_records_unknown_read_noise(frames, tmp_path):
+    rows = _rows(frames)
+    first_bias = next(r for r in rows if r["kind"] == "bias" and float(r["iso"]) == 400)
+    rows = [r for r in rows if not (r["kind"] == "bias" and float(r["iso"]) == 400) or r is first_bias]
+    # with dark pairs at several exposures the read noise is their intercept at t = 0
+    res = calibrate(_manifest(tmp_path, rows))
+    assert res.figures["400"]["read_noise_method"].startswith("intercept of the dark pair variance")
+    assert res.figures["400"]["read_noise_dn"] == pytest.approx(2.8 * 0.819, rel=0.15)
+    # without darks nothing gives a temporal pair at ISO 400
+    rows = [r for r in rows if not (r["kind"] == "dark" and float(r["iso"]) == 400)]
+    res = calibrate(_manifest(tmp_path, rows))
+    f = res.figures["400"]
+    assert f["read_noise_dn"] is None and f["read_noise_e"] is None and f["gain_dn_per_e"] is None
+    assert "needs a pair of bias frames; ISO 400 has 1 bias frame" in res.unknown["isos.400.read_noise_dn"]
+    assert "dark" in res.unknown["isos.400.dark_current_e_per_s"]
+    assert res.profile.isos[400].read_noise_e is None
+    assert res.figures["100"]["gain_dn_per_e"] is not None  # the other ISOs are unaffected
+
+
+def test_flats_without_pairs_record_unknown_gain(frames, tmp_path):
+    rows = _rows(frames)
+    seen = set()
+    keep = []
+    for r in rows:
+        key = (r["iso"], r["kind"], r["exposure_s"])
+        if r["kind"] == "flat" and float(r["iso"]) == 1600:
+            if key in seen:
+                continue
+            seen.add(key)
+        keep.append(r)
+    res = calibrate(_manifest(tmp_path, keep))
+    assert res.figures["1600"]["gain_dn_per_e"] is None
+    assert "no frame pairs" in res.unknown["isos.1600.gain_dn_per_e"]
+
+
+def test_all_saturated_flats(frames, tmp_path):
+    rows = _rows(frames)
+    saturated = [r for r in rows if r["kind"] != "flat" or float(r["iso"]) == 100
+                 or float(r["exposure_s"]) > 0.0105]
+    res = calibrate(_manifest(tmp_path, saturated))
+    assert res.figures["400"]["gain_dn_per_e"] is None
+    assert "all 8 flat frames at ISO 400 are saturated (clipped at 4095 DN)" == res.unknown["isos.400.gain_dn_per_e"]
+    assert res.figures["400"]["read_noise_dn"] == pytest.approx(2.8 * 0.819, rel=0.03)
+    only = [r for r in saturated if float(r["iso"]) == 400]
+    with pytest.raises(CalibrationError, match="no system gain at any ISO.*saturated"):
+        calibrate(_manifest(tmp_path, only, "only.csv"))
+
+
+def test_no_overexposed_flats(frames, tmp_path):
+    rows = [r for r in _select(_rows(frames), 100) if r["kind"] != "flat" or float(r["exposure_s"]) < 0.0095]
+    with pytest.raises(CalibrationError, match="no saturation level.*no flat frame reaches saturation"):
+        calibrate(_manifest(tmp_path, rows))
+
+
+def test_hot_pixels_are_found_and_masked(tmp_path, profile):
+    out = simulate_frames(profile, tmp_path / "f", size=(64, 64), seed=3, isos=[400])
+    rows = _rows(out)
+    hot = [(5, 7), (40, 33), (20, 60)]
+    for r in rows:
+        if r["kind"] == "dark":
+            img = cv2.imread(r["path"], cv2.IMREAD_UNCHANGED)
+            for y, x in hot:
+                img[y, x] = min(4095, int(img[y, x]) + int(600 * float(r["exposure_s"])))
+            cv2.imwrite(r["path"], img)
+    res = calibrate(out)
+    assert res.figures["400"]["hot_pixels"] == 3
+    assert sorted((int(y), int(x)) for y, x in zip(*np.nonzero(res.hot_pixels["400"]))) == sorted(hot)
+    assert res.figures["400"]["dark_current_e_per_s"] == pytest.approx(100, rel=0.05)
+
+
+# -- CLI ---------------------------------------------------------------------------------------
+def test_cli_calibrate_json(frames, tmp_path, capsys):
+    out = tmp_path / "p.json"
+    assert main(["calibrate", str(frames), "-o", str(out), "--json", "--report", str(tmp_path / "rep")]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    for iso in ("100", "400", "1600"):
+        figs = doc["isos"][iso]
+        for key in ("gain_dn_per_e", "read_noise_dn", "read_noise_e", "black_level_dn", "full_well_e",
+                    "dark_current_e_per_s"):
+            assert isinstance(figs[key], float)
+    assert load_profile(out).isos[400].gain_dn_per_e == pytest.approx(0.819, rel=0.02)
+    assert (tmp_path / "p.bias.npz").is_file() and (tmp_path / "rep" / "summary.md").is_file()
+    assert main(["calibrate", str(frames), "-o", str(out)]) == 2
+    assert "output exists" in capsys.readouterr().err
+
+
+def test_cli_simulate_frames(tmp_path, capsys):
+    assert main(["calibrate", "simulate-frames", "--profile", "paper-medium", "-o", str(tmp_path / "s"),
+                 "--size", "16", "24", "--seed", "2", "--iso", "200", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["format"] == "manifest" and doc["size"] == [16, 24]
+    records, _ = read_manifest(tmp_path / "s" / "manifest.csv")
+    assert {r.kind for r in records} == {"bias", "dark", "flat"}
+    assert {r.iso for r in records} == {200.0}
+    assert len({r.exposure_s for r in records if r.kind == "dark"}) >= 3
+    img = cv2.imread(str(records[0].path), cv2.IMREAD_UNCHANGED)
+    assert img.dtype == np.uint16 and img.shape == (16, 24)
+    params = json.loads((tmp_path / "s" / "simulation.json").read_text())
+    assert params["seed"] == 2 and params["profile"] == "paper-medium" and "lfproc_version" in params
+    assert main(["calibrate", "simulate-frames", "--profile", "paper-medium", "-o", str(tmp_path / "s")]) == 2
+    assert "output exists" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["calibrate", "simulate-frames", "-o", "X"], "--profile is required"),
+        (["calibrate", "M", "-o", "p.json", "--seed", "3"], "--seed: only for 'lfproc calibrate simulate-frames'"),
+        (["calibrate", "nothere.csv", "-o", "p.json"], "nothere.csv: no such manifest"),
+    ],
+)
+def test_cli_errors_one_line(argv, match, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("lfproc calibrate: error:")
+    assert match in err[0]
+
+
+def test_cli_bad_frames_one_line(frames, tmp_path, capsys):
+    rows = _select(_rows(frames), 100)
+    rows[0] = dict(rows[0], exposure_s="")
+    m = _manifest(tmp_path, rows)
+    assert main(["calibrate", str(m), "-o", str(tmp_path / "p.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "m.csv line 2: missing exposure_s" in err[0]
+    only = [r for r in _select(_rows(frames), 400) if r["kind"] != "flat" or float(r["exposure_s"]) > 0.0105]
+    assert main(["calibrate", str(_manifest(tmp_path, only, "sat.csv")), "-o", str(tmp_path / "p.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "saturated" in err[0]
+    assert not (tmp_path / "p.json").exists()
