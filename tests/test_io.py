@@ -186,3 +186,14 @@ def test_radiance_hdr_round_trip(tmp_path):
     back, meta = read_image(write_image(tmp_path / "x.hdr", img))
     assert meta["transfer"] == "linear"
     assert_rgbe_close(back, img)
+
+
+def test_outputs_get_the_usual_permissions(tmp_path):
+    old = os.umask(0o022)
+    try:
+        f = write_lightfield(random_lf(), tmp_path / "p.exr")
+        d = write_lightfield(random_lf(), tmp_path / "pv")
+    finally:
+        os.umask(old)
+    assert (f.stat().st_mode & 0o777) == 0o644
+    assert (d.stat().st_mode & 0o777) == 0o755

@@ -17,6 +17,17 @@ from ..errors import InputError, OutputExistsError
 __all__ = ["check_output", "atomic_file", "atomic_dir"]
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _publish_mode(path: Path, base: int) -> None:
+    """mkstemp/mkdtemp create private (0600/0700) entries; give outputs the usual mode."""
+    os.chmod(path, base & ~_umask())
+
+
 def check_output(path: str | os.PathLike, *, force: bool = False) -> Path:
     """Fail early when ``path`` exists and ``force`` is false, or its folder is missing."""
     path = Path(path)
@@ -44,6 +55,7 @@ def atomic_file(path: str | os.PathLike, *, force: bool = False):
             raise OSError(f"{path}: the writer produced no data")
         if path.exists() and not force:  # appeared while we were working
             raise OutputExistsError(f"{path}: output exists; pass force=True (--force) to overwrite it")
+        _publish_mode(tmp, 0o666)
         os.replace(tmp, path)
     finally:
         if tmp.exists():
@@ -67,6 +79,7 @@ def atomic_dir(path: str | os.PathLike, *, force: bool = False):
                 raise OutputExistsError(f"{path}: output exists; pass force=True (--force) to overwrite it")
             old = path.with_name(f".lfproc-old-{path.name}-{os.getpid()}")
             os.replace(path, old)
+        _publish_mode(tmp, 0o777)
         os.replace(tmp, path)
         if old is not None:
             shutil.rmtree(old) if old.is_dir() else old.unlink()

@@ -27,7 +27,7 @@ import numpy as np
 
 from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
-from ..lightfield import LightField
+from ..lightfield import LightField, clean_nonfinite
 from ._atomic import atomic_dir, atomic_file, check_output
 from .images import IMAGE_SUFFIXES, read_image, write_image
 
@@ -75,7 +75,7 @@ def _meta_kwargs(meta: dict[str, Any]) -> dict[str, Any]:
 
 # -- reading ---------------------------------------------------------------------------
 
-def _read_exr_lightfield(path: Path, nonfinite: str) -> LightField | None:
+def _read_exr_lightfield(path: Path, nonfinite: str, negative: str) -> LightField | None:
     """Read a multi-part lfproc EXR; None when the file is not one (then it is an image)."""
     import OpenEXR
 
@@ -116,9 +116,7 @@ def _read_exr_lightfield(path: Path, nonfinite: str) -> LightField | None:
                                        for u in range(nu)]) for v in range(nv)]).astype(np.float32, copy=False)
     centre = views[(nv // 2, nu // 2)]
     disparity = centre.channels["disparity"].pixels if "disparity" in centre.channels else None
-    from ..lightfield import clean_nonfinite
-
-    data, _ = clean_nonfinite(data, policy=nonfinite, negative="keep", name=str(path))
+    data, _ = clean_nonfinite(data, policy=nonfinite, negative=negative, name=str(path))
     return LightField(data=data, variance=variance, disparity=disparity, **_meta_kwargs(meta))
 
 
@@ -202,7 +200,7 @@ def read_lightfield(
     if path.is_dir():
         return _read_folder(path, nonfinite, negative, transfer)
     if path.suffix.lower() == ".exr" and part is None:
-        lf = _read_exr_lightfield(path, nonfinite)
+        lf = _read_exr_lightfield(path, nonfinite, negative)
         if lf is not None:
             return lf
     if path.suffix.lower() not in IMAGE_SUFFIXES:
