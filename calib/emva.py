@@ -170,6 +170,8 @@ def read_descriptor(path: str | os.PathLike) -> EmvaDescriptor:
                 steps[-1]["images"].append(p if p.is_absolute() else path.parent / p)
             else:
                 raise FileFormatError(f"{where}: unknown item {tag!r}; expected v, n, b, d or i")
+        except FileFormatError:
+            raise
         except ValueError:
             expected = {"n": "n <bits> <width> <height>", "b": "b <exposure_ns> <photons>",
                         "d": "d <exposure_ns>", "i": "i <image path>"}[tag]
