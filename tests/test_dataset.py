@@ -138,3 +138,22 @@ def test_cli_dataset_errors(tmp_path, capsys):
     assert "scene s failed" in err and "at least two inputs" in err and "1 of 1 scenes failed" in err
     assert main(["dataset", "build", str(tmp_path / "one"), "-o", str(tmp_path / "o"), "--workers", "0"]) == 2
     assert "--workers: expected a positive number" in capsys.readouterr().err
+
+
+def test_dataset_build_virtual_illum_brackets(tmp_path):
+    pytest.importorskip("lfproc.lytro.decode", reason="Lytro decoder not in this checkout")
+    pytest.importorskip("lfproc.cli.virtual_illum", reason="virtual Illum not in this checkout")
+    lf = synthesize("lamps", size=(32, 32), views=5, random_state=2)
+    write_lightfield(lf, tmp_path / "lf.exr")
+    (tmp_path / "scenes").mkdir()
+    assert main(["virtual-illum", str(tmp_path / "lf.exr"), "-o", str(tmp_path / "scenes" / "v1"), "--sensor", "small",
+                 "--exposures-ev", "-2,-1,0,1,2"]) == 0
+    out = tmp_path / "dataset"
+    report = build_dataset(tmp_path / "scenes", out, scheduler="synchronous")
+    assert report["failed"] == {} and report["processed"] == ["v1"]
+    (row,) = read_manifest(out)
+    assert row["method"] == "ml" and len(row["sources"]) == 5 and all(s.endswith(".LFR") for s in row["sources"])
+    assert row["exposures_s"] == sorted(row["exposures_s"]) and len(set(row["exposures_s"])) == 5
+    assert (out / row["preview"]).is_file() and (out / row["histogram"]).is_file()
+    merged = read_lightfield(out / row["hdr"])
+    assert merged.views == (5, 5) and merged.variance is not None
