@@ -187,7 +187,7 @@ class CameraProfile:
         signal = figs["gain_dn_per_e"] * figs["full_well_e"]
         if self.gamma != 1:
             signal = self.white_level_dn * (min(signal, self.white_level_dn) / self.white_level_dn) ** (1 / self.gamma)
-        return float(min(self.white_level_dn, round(signal) + figs["black_level_dn"]))
+        return float(min(self.white_level_dn, round(signal + figs["black_level_dn"])))
 
     def with_noise(self, *, read_noise_e: float, dark_current_e_per_s: float, name: str | None = None) -> "CameraProfile":
         """A copy with the same read noise (e-) and dark current (e-/s) at every ISO."""

@@ -115,8 +115,8 @@ def stage_calibrate(ctx: _Context) -> dict[str, Any]:
 
     c = ctx.config
     base = load_profile(f"paper-{c.noise}")
-    truth = replace(base.with_noise(read_noise_e=2.0, dark_current_e_per_s=50.0, name="demo-sensor-truth"),
-                    isos={iso: f for iso, f in base.isos.items() if iso in c.isos})
+    noisy = base.with_noise(read_noise_e=2.0, dark_current_e_per_s=50.0, name="demo-sensor-truth")
+    truth = replace(noisy, isos={iso: f for iso, f in noisy.isos.items() if iso in c.isos})
     manifest = simulate_frames(truth, ctx.path("calibration/frames"), size=(96, 96), seed=c.seed)
     result = calibrate(manifest, name="demo-sensor")
     profile = result.profile

@@ -129,7 +129,9 @@ def expose(
     electrons = np.minimum(electrons + dsnu, m["full_well_e"])
     imax = float(profile.white_level_dn)
     signal = imax * _power(m["gain_dn_per_e"] * electrons / imax, 1.0 / gamma)
-    dn = np.clip(np.rint(signal) + m["black_level_dn"], 0, imax)
+    # Q(signal) + I_0 for an integer I_0; a calibrated (fractional) black level is rounded with
+    # the signal so that codes stay integers and saturation lands exactly on I_max.
+    dn = np.clip(np.rint(signal + m["black_level_dn"]), 0, imax)
     return dn.astype(np.uint16)
 
 
@@ -211,9 +213,13 @@ def calibrated_observation(
         signal = np.maximum(T, 0)
     else:
         raise InputError(f"variance_from: expected 'measurement' or 'estimate', got {variance_from!r}")
-    # quantisation noise (1/12 DN^2 in the code domain) mapped through the power law
-    dq = gamma * np.abs(rel) ** (gamma - 1) if gamma != 1 else 1.0
-    var_q = dq**2 / 12.0
+    # quantisation noise: uniform over one code step, the step's width mapped through the power
+    # law (1/12 DN^2 when gamma = 1; never zero, also at the black level)
+    if gamma == 1:
+        var_q = 1.0 / 12.0
+    else:
+        half = 0.5 / imax
+        var_q = (imax * (_power(rel + half, gamma) - _power(rel - half, gamma))) ** 2 / 12.0
     read_dn2 = (m["read_noise_e"] * h) ** 2
     var_dn = h**2 * t * (signal + m["dark_current_e_per_s"]) + read_dn2 + var_q
     variance = var_dn / (h * t) ** 2
