@@ -32,6 +32,11 @@ def test_stage_figures_are_right(demo_dir):
     assert stages["synthesize"]["dynamic_range_stops"] >= 16
     sanity = stages["metrics sanity"]
     assert sanity["relative_noise_0.01"]["pu21_psnr_db"] > sanity["relative_noise_0.05"]["pu21_psnr_db"]
+    assert stages["white images"]["max_spacing_error_px"] < 0.01
+    assert stages["white images"]["max_rotation_error_rad"] < 1e-4
+    assert stages["decode"]["psnr_0ev_db"] >= 35
+    merge = stages["merge"]
+    assert merge["pu21_psnr_db"] > merge["pu21_psnr_db_0ev_capture_alone"]  # the bracket adds range
     cal = stages["calibrate"]["worst_error_percent"]
     assert cal["gain_error_percent"] < 2 and cal["dark_current_error_percent"] < 5
     assert cal["full_well_error_percent"] < 2
