@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import os
 import signal
@@ -10,6 +11,7 @@ import subprocess
 import sys
 import time
 
+import imageio.v3 as iio
 import numpy as np
 import pytest
 
@@ -157,3 +159,90 @@ def test_dataset_build_virtual_illum_brackets(tmp_path):
     assert (out / row["preview"]).is_file() and (out / row["histogram"]).is_file()
     merged = read_lightfield(out / row["hdr"])
     assert merged.views == (5, 5) and merged.variance is not None
+
+
+def _virtual_illum_scenes(root, tmp_path, n):
+    """``n`` scene folders, each a 5-exposure virtual-Illum bracket (LFR captures, caldata tar, truth)."""
+    root.mkdir()
+    for i in range(n):
+        lf = synthesize("lamps", size=(32, 32), views=5, random_state=20 + i)
+        write_lightfield(lf, tmp_path / f"lf{i}.exr")
+        assert main(["virtual-illum", str(tmp_path / f"lf{i}.exr"), "-o", str(root / f"v{i}"), "--sensor", "small",
+                     "--exposures-ev", "-2,-1,0,1,2", "--seed", str(i), "--json"]) == 0
+    return root
+
+
+def _scene_mtimes(out, names):
+    """mtimes of the done-records and every output file of the scenes ``names``."""
+    files = [out / "done" / f"{name}.json" for name in names]
+    files += [p for name in names for p in sorted((out / "scenes" / name).iterdir())]
+    return {str(p.relative_to(out)): p.stat().st_mtime_ns for p in files}
+
+
+def test_cli_dataset_build_virtual_illum_killed_then_resumed(tmp_path, capsys):
+    pytest.importorskip("lfproc.lytro.decode", reason="Lytro decoder not in this checkout")
+    pytest.importorskip("lfproc.cli.virtual_illum", reason="virtual Illum not in this checkout")
+    names = ["v0", "v1", "v2"]
+    scenes = _virtual_illum_scenes(tmp_path / "scenes", tmp_path, len(names))
+    capsys.readouterr()
+    assert [s.name for s in find_scenes(scenes)] == names
+    out = tmp_path / "dataset"
+    cmd = [sys.executable, "-m", "lfproc.cli.main", "dataset", "build", str(scenes), "-o", str(out),
+           "--workers", "1"]
+    env = dict(os.environ, LFPROC_PROGRESS="0")
+    # first run: a local Dask cluster of one worker (scenes one after the other), killed (the whole process
+    # group: the run and its worker) as soon as the first done-record appears
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                            env=env)
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (out / "done").is_dir() and list((out / "done").glob("*.json")):
+                break
+            time.sleep(0.02)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    done_at_kill = sorted(p.stem for p in (out / "done").glob("*.json"))
+    assert 1 <= len(done_at_kill) < len(names), f"the run should have been killed after its first scene: {done_at_kill}"
+    assert not (out / "manifest.json").exists()  # the killed run never reached its manifest
+    before = _scene_mtimes(out, done_at_kill)
+    assert len(before) == len(done_at_kill) * 5  # done-record + hdr, preview, histogram, record
+    # second run, to completion: the rest is processed, the done scenes are skipped and not rewritten
+    result = subprocess.run(cmd + ["--json"], capture_output=True, text=True, env=env, timeout=120)
+    assert result.returncode == 0, result.stderr
+    doc = json.loads(result.stdout)
+    assert doc["scenes"] == 3 and doc["failed"] == 0
+    assert doc["skipped"] == len(done_at_kill) and doc["processed"] == 3 - len(done_at_kill)
+    assert _scene_mtimes(out, done_at_kill) == before
+    assert not list((out / "scenes").glob(".lfproc-tmp-*"))  # the killed run's temporary folder was removed
+    rows = read_manifest(out)
+    assert [r["scene"] for r in rows] == names
+    with open(out / "manifest.csv", newline="") as fh:
+        assert [r["scene"] for r in csv.DictReader(fh)] == names
+    for row in rows:
+        folder = scenes / row["scene"]
+        truth_info = json.loads((folder / "truth.json").read_text())
+        captures = truth_info["captures"]
+        assert row["method"] == "ml"
+        assert row["exposures_s"] == pytest.approx([c["exposure_s"] for c in captures], rel=1e-9)
+        assert row["sources"] == [str(folder / c["file"]) for c in captures]
+        assert row["sha256"] == [hashlib.sha256((folder / c["file"]).read_bytes()).hexdigest() for c in captures]
+        merged = read_lightfield(out / row["hdr"])
+        assert merged.views == (5, 5) and merged.variance is not None
+        assert row["dynamic_range_stops"] == pytest.approx(merged.dynamic_range_stops(), abs=1e-4)
+        assert row["dynamic_range_stops"] > 15
+        assert row["saturated_fraction"] == merged.attrs["saturated_everywhere_fraction"]
+        assert 0 <= row["saturated_fraction"] < 0.01
+        for key in ("preview", "histogram"):
+            image = iio.imread(out / row[key])
+            assert image.ndim == 3 and image.shape[0] > 16 and image.std() > 0
+        # radiometry: the merge is per second; times the 0 EV exposure it is the 0 EV decode (truth.exr)
+        truth = read_lightfield(folder / "truth.exr")
+        assert truth.shape == merged.shape
+        t0 = next(c["exposure_s"] for c in captures if c["exposure_ev"] == 0)
+        bright = truth.data > 0.1 * truth.data.max()
+        ratio = merged.data[bright] * t0 / truth.data[bright]
+        assert bright.sum() > 1000
+        assert 0.8 < np.median(ratio) < 1.2, (row["scene"], float(np.median(ratio)))
