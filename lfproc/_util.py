@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import math
 import os
+from pathlib import Path
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -10,7 +12,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["check_random_state", "progress", "check_choice", "check_positive"]
+__all__ = ["check_random_state", "progress", "check_choice", "check_positive", "to_jsonable"]
 
 
 def check_random_state(random_state: Any = None) -> np.random.Generator:
@@ -59,3 +61,20 @@ def check_positive(name: str, value: float, *, allow_zero: bool = False) -> floa
     if not ok:
         raise InputError(f"{name}: expected a {'non-negative' if allow_zero else 'positive'} finite number, got {value!r}")
     return v
+
+
+def to_jsonable(obj: Any) -> Any:
+    """Convert numpy scalars/arrays, paths and non-finite floats for ``json.dumps``."""
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return to_jsonable(obj.item())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj

@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from ._util import to_jsonable
 from ._version import __version__
 from .errors import FileFormatError, InputError, MissingFileError, ShapeError
 from .io import atomic_file
@@ -263,7 +264,7 @@ class Capture:
     def save(self, path: str | os.PathLike, *, force: bool = False) -> Path:
         """Write the capture file atomically (refuses to overwrite without ``force``)."""
         path = Path(path)
-        header = json.dumps(_jsonable(self.header()), indent=1).encode()
+        header = json.dumps(to_jsonable(self.header()), indent=1).encode()
         with atomic_file(path, force=force) as tmp:
             with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=6) as zf:
                 zf.writestr(HEADER_NAME, header)
@@ -276,20 +277,6 @@ class Capture:
 
 def _num(v: float):
     return int(v) if float(v).is_integer() else float(v)
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
 
 
 def is_capture_file(path: str | os.PathLike) -> bool:

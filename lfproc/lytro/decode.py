@@ -32,12 +32,11 @@ from __future__ import annotations
 
 import math
 import os
-from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
-from .._util import check_choice, progress
+from .._util import check_choice
 from .._version import __version__
 from ..errors import InputError, ShapeError
 from ..lightfield import LightField

@@ -30,12 +30,12 @@ truth written by ``lfproc virtual-illum`` is exactly what a perfect decoder retu
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from .._util import check_positive, check_random_state
+from .._util import check_positive, check_random_state, progress
 from ..errors import InputError, ShapeError
 from .grid import ILLUM_SPACING_PX, LensletGrid
 
@@ -410,7 +410,7 @@ def make_virtual_illum(lf, out_dir, *, sensor: str = "small", exposures_ev=(-2, 
     with atomic_dir(out_dir, force=force) as tmp:
         frames = []
         white_info = []
-        for k, ((z, f), g) in enumerate(zip(WHITE_STEPS, grids)):
+        for k, ((z, f), g) in enumerate(progress(list(zip(WHITE_STEPS, grids)), desc="virtual Illum: white images")):
             irr = white_irradiance(g, scale_e_per_s=white_scale, optics=optics)
             raw = expose_chunked(irr, exposure_s=white_exposure_s, iso=iso, hot_pixels=hot, random_state=rng)
             del irr
@@ -436,7 +436,7 @@ def make_virtual_illum(lf, out_dir, *, sensor: str = "small", exposures_ev=(-2, 
         irr0 = render_irradiance(views, cap_grid, scale_e_per_s=scale, optics=optics)
         captures = []
         z, f = WHITE_STEPS[CAPTURE_WHITE]
-        for n, ev in enumerate(evs):
+        for n, ev in enumerate(progress(evs, desc="virtual Illum: captures")):
             t = base_exposure_s * 2.0 ** ev
             raw = expose_chunked(irr0, exposure_s=t, iso=iso, hot_pixels=hot, random_state=rng)
             meta = illum_metadata(height=shape[0], width=shape[1], zoom_step=z, focus_step=f, exposure_s=t, iso=iso,
