@@ -20,3 +20,12 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"real test data not found at {SHARED_DATA} (set LFPROC_SHARED_DATA)")
     return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def lytro_dir(shared_data) -> Path:
+    """The real Lytro containers and metadata in ``shared_data / "lytro"``."""
+    folder = shared_data / "lytro"
+    if not folder.is_dir():
+        pytest.skip(f"no Lytro data at {folder}")
+    return folder

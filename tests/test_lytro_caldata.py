@@ -18,14 +18,6 @@ from lfproc.lytro import (WhiteFrame, build_lfp, geometry_correction_bytes, illu
 SERIAL = "B5152102610"
 
 
-@pytest.fixture(scope="module")
-def lytro_dir(shared_data):
-    folder = shared_data / "lytro"
-    if not folder.is_dir():
-        pytest.skip(f"no Lytro data at {folder}")
-    return folder
-
-
 def _frames(h=8, w=16):
     rng = np.random.default_rng(7)
     out = []

@@ -24,14 +24,6 @@ REAL = {
 }
 
 
-@pytest.fixture(scope="module")
-def lytro_dir(shared_data):
-    folder = shared_data / "lytro"
-    if not folder.is_dir():
-        pytest.skip(f"no Lytro data at {folder}")
-    return folder
-
-
 def _capture_meta(h=8, w=16, **kw):
     kw = {"zoom_step": -297, "focus_step": 309, "exposure_s": 0.01, "iso": 200, "modulation_exposure_bias_ev": 0.269,
           "white_balance": {"r": 1.378859, "g": 1.0, "b": 1.148466},
