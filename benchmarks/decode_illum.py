@@ -11,7 +11,20 @@ Usage::
     python benchmarks/decode_illum.py [--work DIR] [--threads 2] [--demosaic opencv-ea]
 
 ``--work`` keeps the rendered capture between runs (rendering takes minutes).
-PlenoptiCam is not run: see the report printed at the end.
+
+PlenoptiCam (PyPI ``plenopticam``, GPL-3.0; never a dependency of lfproc) is tried on the same
+capture when ``$PLENOPTICAM_PYTHON`` (or ``/tmp/pcam/bin/python``) is an interpreter that has it,
+through ``benchmarks/_plenopticam_driver.py`` in a subprocess (``--no-plenopticam`` skips it).
+Result with plenopticam 0.9.1 (numpy 1.26, scipy 1.11 in a throw-away venv) on the full-size
+virtual Illum, seed 0: it reads lfproc's LFR (10-bit GRBG Bayer, metadata) and finds the matching
+white image in the caldata tar by geometry hash, but its white-image calibration fails --
+``LfpCalibrator failed: 'Geometric MLA arrangement not recognized'`` (own micro-image size
+estimate; ~2 min, 7.3 GB peak RSS) and ``'Error in MLA dimension estimation'`` with the size given
+as 14 px -- so no views come out and no time/PSNR can be compared. On the reduced
+``--sensor small`` capture it cannot even decode the white RAW (``LfpDecoder.decode_raw``
+hard-codes the 7728x5368 and 3280x3280 sensor sizes). The benchmark prints PlenoptiCam's one-line
+error (or, should a later version get through, its times and view shape; scoring its views
+against the truth is then still to be written).
 """
 
 from __future__ import annotations
@@ -41,12 +54,38 @@ print(json.dumps({"decode_s": dt, "peak_rss_mb": resource.getrusage(resource.RUS
 """
 
 
+def run_plenopticam(capture: Path, caldata: Path, out: Path, *, env: dict) -> dict | str:
+    """Run ``_plenopticam_driver.py`` under ``$PLENOPTICAM_PYTHON`` (or ``/tmp/pcam/bin/python``).
+
+    Returns the driver's JSON report, or one line saying why PlenoptiCam did not run or failed.
+    """
+    python = os.environ.get("PLENOPTICAM_PYTHON", "/tmp/pcam/bin/python")
+    if not Path(python).is_file():
+        return f"not run: no interpreter at {python} (set PLENOPTICAM_PYTHON to a Python with plenopticam)"
+    driver = Path(__file__).with_name("_plenopticam_driver.py")
+    res = subprocess.run([python, str(driver), str(capture), str(caldata), str(out)],
+                         env=dict(env, PYTHONWARNINGS="ignore", MPLBACKEND="Agg"),
+                         capture_output=True, text=True, check=False)
+    lines = res.stdout.strip().splitlines()
+    try:
+        rep = json.loads(lines[-1])
+    except (IndexError, json.JSONDecodeError):
+        tail = (res.stderr.strip().splitlines() or ["no output"])[-1]
+        return f"failed: driver exited {res.returncode}: {tail}"
+    if "error" in rep:
+        return f"failed: {rep['error']}"
+    rep["views"] = str(out)
+    rep["psnr_db"] = "not computed: scoring PlenoptiCam's views against truth.exr is not written yet"
+    return rep
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--work", type=Path, help="folder to keep the rendered capture and database")
     ap.add_argument("--threads", type=int, default=2, help="threads for numpy/OpenCV (default 2)")
     ap.add_argument("--demosaic", default="opencv-ea", choices=("opencv-ea", "malvar2004", "bilinear"))
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--no-plenopticam", action="store_true", help="do not try PlenoptiCam")
     args = ap.parse_args(argv)
     env = dict(os.environ, OMP_NUM_THREADS=str(args.threads), OPENBLAS_NUM_THREADS=str(args.threads),
                MKL_NUM_THREADS=str(args.threads), LFPROC_BENCH_THREADS=str(args.threads), LFPROC_PROGRESS="0")
@@ -91,7 +130,8 @@ def main(argv=None) -> int:
     report["psnr_db"] = float(10 * np.log10(float(b.max()) ** 2 / float(np.mean((a - b) ** 2))))
     report["usable_fraction"] = float(ok.mean())
     report["target"] = {"decode_s": 20, "peak_rss_mb": 4096}
-    report["plenopticam"] = "not run: not attempted in the time available (optional in issue 3)"
+    report["plenopticam"] = "skipped (--no-plenopticam)" if args.no_plenopticam else run_plenopticam(
+        cam / info["truth_capture"], cam / info["caldata"], work / "plenopticam_views.npy", env=env)
     print(json.dumps(report, indent=2))
     return 0
 
