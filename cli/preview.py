@@ -11,15 +11,19 @@ def register(sub, common) -> None:
     from lfproc.lightfield import LightField
     from lfproc.preview import PREVIEWS, preview_kinds
 
+    import lfproc.capture  # noqa: F401  (registers the capture kinds)
+
     kinds = preview_kinds(LightField)
-    listing = "; ".join(f"{k}: {PREVIEWS[k].description}" for k in kinds)
+    listing = "; ".join(f"{k}: {PREVIEWS[k].description}" for k in PREVIEWS)
     p = sub.add_parser(
         "preview", parents=[common], help="write a tone-mapped preview, contact sheet, EPI or histogram",
         description="Tone mapping: Reinhard et al. 2002 global operator (key 0.18, white at the 99.9th "
                     f"percentile), colour ratios kept, sRGB. Kinds: {listing}.")
-    p.add_argument("input", type=Path, help="light-field file or folder, or an image")
+    p.add_argument("input", type=Path, help="light-field file or folder, an image, or a coded capture")
     add_output(p, help="output image (.png, .jpg or .tif)")
-    p.add_argument("--kind", default="centre", help=f"one of {', '.join(kinds)} (default: centre)")
+    p.add_argument("--kind", default=None,
+                   help=f"light fields: {', '.join(kinds)} (default centre); coded captures: "
+                        f"{', '.join(preview_kinds(lfproc.capture.Capture))} (default capture)")
     p.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="extra exposure in stops")
     p.add_argument("--nonfinite", choices=("raise", "zero", "clip"), default="raise",
                    help="what to do with NaN/Inf samples (default: refuse the file)")
@@ -28,24 +32,25 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from lfproc.io import check_output, read_lightfield
     from lfproc.capture import is_capture_file, write_capture_preview
+    from lfproc.errors import InputError
+    from lfproc.io import check_output, read_lightfield
     from lfproc.preview import PREVIEWS, write_preview
 
-    if is_capture_file(args.input):  # coded captures: sensor image, ISO map, mask
-        emit(write_capture_preview(args.input, args.output, kind=args.kind, force=args.force), as_json=args.json)
-        return 0
-    if args.kind not in PREVIEWS:  # before reading a large input
-        from lfproc.errors import InputError
-
+    if args.kind is not None and args.kind not in PREVIEWS:  # before reading a large input
         raise InputError(f"--kind: expected one of {', '.join(PREVIEWS)}; got {args.kind!r}")
     check_output(args.output, force=args.force)
+    if is_capture_file(args.input):
+        summary = write_capture_preview(args.input, args.output, kind=args.kind or "capture", force=args.force)
+        emit(summary, as_json=args.json)
+        return 0
     lf = read_lightfield(args.input, nonfinite=args.nonfinite)
-    path = write_preview(lf, args.output, kind=args.kind, force=args.force, exposure_ev=args.exposure)
+    kind = args.kind or "centre"
+    path = write_preview(lf, args.output, kind=kind, force=args.force, exposure_ev=args.exposure)
     from PIL import Image
 
     with Image.open(path) as im:
         width, height = im.size
-    emit({"output": str(path), "kind": args.kind, "size": [height, width], "views": list(lf.views),
+    emit({"output": str(path), "kind": kind, "size": [height, width], "views": list(lf.views),
           "dynamic_range_stops": lf.dynamic_range_stops()}, as_json=args.json)
     return 0

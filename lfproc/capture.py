@@ -694,23 +694,39 @@ def write_capture_preview(capture, output: str | os.PathLike, *, kind: str = "ca
                           shot: int = 0) -> dict[str, Any]:
     """Write :func:`render_capture_preview` of a capture (object or file) to a PNG/JPEG/TIFF.
 
-    ``kind="centre"`` (the light-field preview default of ``lfproc preview``) means
-    ``"capture"``. Returns a summary (``output``, ``kind``, ``size`` of the picture, ``shots``).
+    Goes through :func:`lfproc.preview.write_preview` (the capture kinds are registered
+    there). Returns a summary (``output``, ``kind``, ``size`` of the picture, ``shots``, ``isos``).
     """
-    from .io import check_output
-
-    if kind == "centre":
-        kind = "capture"
     from ._util import check_choice
+    from .io import check_output
+    from .preview import write_preview
 
     check_choice("--kind (capture previews)", kind, PREVIEW_KINDS)
-    output = check_output(output, force=force)
+    check_output(output, force=force)
     if not isinstance(capture, Capture):
         capture = load_capture(capture)
-    image = render_capture_preview(capture, kind, shot=shot)
+    path = write_preview(capture, output, kind=kind, force=force, shot=shot)
     from PIL import Image
 
-    with atomic_file(output, force=force) as tmp:
-        Image.fromarray(image).save(tmp)
-    return {"output": str(output), "kind": kind, "size": list(image.shape[:2]), "shots": capture.shots,
+    with Image.open(path) as im:
+        width, height = im.size
+    return {"output": str(path), "kind": kind, "size": [height, width], "shots": capture.shots,
             "isos": [_num(v) for v in capture.isos]}
+
+
+def _register_previews() -> None:
+    from functools import partial
+
+    from .preview import register_preview
+
+    descriptions = {
+        "capture": "a coded capture's sensor image, ISO map and mask side by side",
+        "sensor": "a coded capture's sensor image",
+        "iso": "a coded capture's ISO map",
+        "mask": "a coded capture's mask (centre view, CFA colour)",
+    }
+    for kind, text in descriptions.items():
+        register_preview(kind, partial(render_capture_preview, kind=kind), accepts=Capture, description=text)
+
+
+_register_previews()

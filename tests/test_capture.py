@@ -215,3 +215,7 @@ def test_preview(tmp_path, capsys, capture):
     assert out["kind"] == "capture" and cv2.imread(str(tmp_path / "p.png")).shape[:2] == tuple(out["size"])
     assert main(["preview", str(path), "-o", str(tmp_path / "m.png"), "--kind", "mask"]) == 0
     assert (tmp_path / "m.png").exists()
+    capsys.readouterr()
+    # a light-field kind on a capture: one line, exit 2, nothing written
+    assert main(["preview", str(path), "-o", str(tmp_path / "s.png"), "--kind", "sheet"]) == 2
+    assert "capture previews" in capsys.readouterr().err and not (tmp_path / "s.png").exists()
