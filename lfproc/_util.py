@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 from pathlib import Path
@@ -12,7 +13,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["check_random_state", "progress", "check_choice", "check_positive", "to_jsonable"]
+__all__ = ["check_random_state", "progress", "check_choice", "check_positive", "to_jsonable", "file_sha256"]
 
 
 def check_random_state(random_state: Any = None) -> np.random.Generator:
@@ -78,3 +79,19 @@ def to_jsonable(obj: Any) -> Any:
     if isinstance(obj, Path):
         return str(obj)
     return obj
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    """SHA-256 (hex) of a file, or of a folder: its files' relative names and contents, sorted."""
+    path = Path(path)
+    digest = hashlib.sha256()
+    if path.is_dir():
+        for p in sorted(q for q in path.rglob("*") if q.is_file()):
+            digest.update(str(p.relative_to(path)).encode())
+            digest.update(b"\0")
+            digest.update(bytes.fromhex(file_sha256(p)))
+        return digest.hexdigest()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()

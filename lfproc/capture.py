@@ -32,7 +32,6 @@ reconstructed from ``T`` divided by ``radiance_scale`` is in the input's relativ
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import math
@@ -45,8 +44,9 @@ from typing import Any
 
 import numpy as np
 
-from ._util import to_jsonable
+from ._util import file_sha256, to_jsonable
 from ._version import __version__
+from .calib import load_profile
 from .errors import FileFormatError, InputError, MissingFileError, ShapeError
 from .io import atomic_file
 from .projection import CFA_PATTERNS, MaskCode, ProjectionOperator, build_operator, decode_levels, encode_levels, sampling_rate
@@ -74,29 +74,6 @@ SCHEMA_VERSION = 1
 HEADER_NAME = "lfproc-capture.json"
 PREVIEW_KINDS = ("capture", "sensor", "iso", "mask")
 _ARRAYS = ("dn", "iso", "mask", "bias")
-
-
-def file_sha256(path: str | os.PathLike) -> str:
-    """SHA-256 of a file, or of a folder (its files' relative names and contents, sorted)."""
-    path = Path(path)
-    digest = hashlib.sha256()
-    if path.is_dir():
-        files = sorted(p for p in path.rglob("*") if p.is_file())
-        for p in files:
-            digest.update(str(p.relative_to(path)).encode())
-            digest.update(b"\0")
-            digest.update(hashlib.sha256(p.read_bytes()).digest())
-        return digest.hexdigest()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(chunk)
-    return digest.hexdigest()
-
-
-def _profile(profile):
-    from .calib import load_profile
-
-    return load_profile(profile)
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,7 +123,7 @@ class Capture:
     parameters: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        profile = _profile(self.profile)
+        profile = load_profile(self.profile)
         object.__setattr__(self, "profile", profile)
         dn = np.asarray(self.dn)
         if dn.ndim == 2:

@@ -27,7 +27,6 @@ others. A new run removes the hidden temporary folders a killed run left in ``sc
 from __future__ import annotations
 
 import csv
-import hashlib
 import io
 import json
 import os
@@ -38,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from ._version import __version__
+from ._util import file_sha256
 from .errors import InputError, MissingFileError
 
 __all__ = [
@@ -95,16 +95,6 @@ def find_scenes(scenes_dir: str | os.PathLike) -> list[Scene]:
     if not scenes:
         raise InputError(f"{scenes_dir}: expected one folder per scene, found none")
     return scenes
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    files = sorted(q for q in path.rglob("*") if q.is_file()) if path.is_dir() else [path]
-    for f in files:
-        with open(f, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                h.update(block)
-    return h.hexdigest()
 
 
 def _white_db(scene: Scene, workdir: Path) -> Path | None:
@@ -170,7 +160,7 @@ def process_scene(
             "preview": f"scenes/{scene.name}/preview.png",
             "histogram": f"scenes/{scene.name}/histogram.png",
             "sources": [str(p) for p in scene.inputs],
-            "sha256": [_sha256(p) for p in scene.inputs],
+            "sha256": [file_sha256(p) for p in scene.inputs],
             "lfproc_version": __version__,
             "seconds": round(time.perf_counter() - start, 3),
         }

@@ -27,21 +27,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._util import check_positive, check_random_state
+from .calib import load_profile
 from .errors import InputError, ShapeError
 
 __all__ = ["expose", "calibrated_observation", "Observation", "iso_maps", "fixed_pattern"]
 
 
-def _profile(profile):
-    from .calib import load_profile
-
-    return load_profile(profile)
-
-
 def iso_maps(profile, iso, shape: tuple[int, ...]) -> dict[str, np.ndarray]:
     """Per-pixel gain (DN/e-), read noise (e-), dark current (e-/s), black level (DN),
     full well (e-) and saturation code (DN) for a scalar ISO or an ISO map of ``shape``."""
-    profile = _profile(profile)
+    profile = load_profile(profile)
     iso_arr = np.broadcast_to(np.asarray(iso, dtype=np.float64), shape)
     values, inverse = np.unique(iso_arr, return_inverse=True)
     names = ("gain_dn_per_e", "read_noise_e", "dark_current_e_per_s", "black_level_dn", "full_well_e")
@@ -60,7 +55,7 @@ def fixed_pattern(profile, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarr
 
     Drawn from ``profile.fixed_pattern_seed``, so a profile always gives the same maps.
     """
-    profile = _profile(profile)
+    profile = load_profile(profile)
     rng = np.random.default_rng(profile.fixed_pattern_seed)
     prnu = 1.0 + profile.prnu * rng.standard_normal(shape) if profile.prnu else np.ones(shape)
     dsnu = profile.dsnu_e * rng.standard_normal(shape) if profile.dsnu_e else np.zeros(shape)
@@ -105,7 +100,7 @@ def expose(
     -------
     ndarray of shape (H, W), uint16 (DN, black level included)
     """
-    profile = _profile(profile)
+    profile = load_profile(profile)
     t = check_positive("exposure_s", exposure_s)
     E = np.asarray(irradiance_e_per_s, dtype=np.float64)
     if E.ndim != 2:
@@ -189,7 +184,7 @@ def calibrated_observation(
     -------
     Observation
     """
-    profile = _profile(profile)
+    profile = load_profile(profile)
     t = check_positive("exposure_s", exposure_s)
     dn = np.asarray(dn, dtype=np.float64)
     if dn.ndim != 2:

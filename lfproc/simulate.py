@@ -46,6 +46,7 @@ import numpy as np
 from ._util import check_choice, check_positive, check_random_state
 from ._version import __version__
 from .capture import Capture, _num, file_sha256, observations
+from .calib import load_profile
 from .errors import FileFormatError, InputError, MissingFileError, ShapeError
 from .lightfield import LightField, clean_nonfinite
 from .projection import MASK_KINDS, build_operator, make_mask
@@ -72,12 +73,6 @@ DEFAULT_ISOS = (100, 400, 800, 1600)
 #: ``--noise LEVEL`` -> shipped camera profile (paper Table VI noise levels).
 NOISE_PROFILES = {"none": "paper-none", "low": "paper-low", "medium": "paper-medium", "high": "paper-high"}
 _NEEDED = ("gain_dn_per_e", "read_noise_e", "dark_current_e_per_s", "black_level_dn", "full_well_e")
-
-
-def _profile(profile):
-    from .calib import load_profile
-
-    return load_profile(profile)
 
 
 def _check_isos(profile, isos: Sequence[float]) -> list[float]:
@@ -195,7 +190,7 @@ def auto_radiance_scale(
     mean_transmittance : float
         Expected mask transmittance.
     """
-    profile = _profile(profile)
+    profile = load_profile(profile)
     peak = float(np.asarray(lf, dtype=np.float64).sum(axis=(0, 1)).max())
     if not peak > 0:
         raise InputError("light field: all samples are zero; cannot choose a radiance scale (give radiance_scale)")
@@ -264,7 +259,7 @@ def simulate_capture(
     -------
     Capture
     """
-    profile = _profile(profile)
+    profile = load_profile(profile)
     if isinstance(lf, LightField):
         data = lf.data
     else:

@@ -373,7 +373,7 @@ def make_virtual_illum(lf, out_dir, *, sensor: str = "small", exposures_ev=(-2, 
     from ..io import atomic_dir, write_lightfield
     from ..lightfield import LightField
     from .caldata import geometry_correction_bytes, white_metadata, write_caldata_tar
-    from .container import illum_metadata, write_lfr
+    from .container import illum_metadata, sha1_ref, write_lfr
 
     if not isinstance(lf, LightField):
         raise InputError(f"virtual camera: expected a LightField, got {type(lf).__name__}")
@@ -420,7 +420,7 @@ def make_virtual_illum(lf, out_dir, *, sensor: str = "small", exposures_ev=(-2, 
             name = f"MOD_{k:04d}"
             frames.append(SimpleNamespace(raw=raw, metadata=meta, name=name, is_dark=False))
             white_info.append({"name": name, "zoom_step": z, "focus_step": f, "grid": g.to_dict(),
-                               "geometry_hash": _sha1_ref(geometry_correction_bytes(meta, name))})
+                               "geometry_hash": sha1_ref(geometry_correction_bytes(meta, name))})
         dark_meta = white_metadata(height=shape[0], width=shape[1], zoom_step=0, focus_step=0,
                                    exposure_s=white_exposure_s, iso=iso, mla_rotation_rad=cap_grid.rotation_rad)
         dark = expose_chunked(np.zeros(shape, np.float32), exposure_s=white_exposure_s, iso=iso, hot_pixels=hot,
@@ -472,9 +472,3 @@ def make_virtual_illum(lf, out_dir, *, sensor: str = "small", exposures_ev=(-2, 
         write_lightfield(truth, tmp / "truth.exr")
         (tmp / "truth.json").write_text(json.dumps(info, indent=2))
     return info
-
-
-def _sha1_ref(data: bytes) -> str:
-    import hashlib
-
-    return "sha1-" + hashlib.sha1(data).hexdigest()
