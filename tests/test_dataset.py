@@ -50,6 +50,24 @@ def _record_mtimes(out):
     return {p.name: p.stat().st_mtime_ns for p in (out / "done").glob("*.json")}
 
 
+
+def _run_and_kill_after_first_scene(cmd: list[str], out, *, timeout_s: float) -> None:
+    """Run ``cmd`` in its own process group and SIGKILL the whole group (the run and its Dask
+    workers) as soon as ``out/done`` holds a done-record (or at the timeout)."""
+    env = dict(os.environ, LFPROC_PROGRESS="0")
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                            env=env)
+    try:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (out / "done").is_dir() and list((out / "done").glob("*.json")):
+                break
+            time.sleep(0.02)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+
 def test_build_failure_reported_then_resumed(scenes, tmp_path):
     broken = scenes / "zbroken"
     broken.mkdir()
@@ -96,19 +114,7 @@ def test_cli_dataset_build_killed_then_resumed(scenes, tmp_path, capsys):
     out = tmp_path / "dataset"
     cmd = [sys.executable, "-m", "lfproc.cli.main", "dataset", "build", str(scenes), "-o", str(out),
            "--workers", "1", "--profile", "illum"]
-    env = dict(os.environ, LFPROC_PROGRESS="0")
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
-                            env=env)
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and proc.poll() is None:
-            if list((out / "done").glob("*.json")) if (out / "done").is_dir() else []:
-                break
-            time.sleep(0.05)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)  # the whole session we started: the run and its Dask workers
-        proc.wait(timeout=30)
+    _run_and_kill_after_first_scene(cmd, out, timeout_s=120)
     done_at_kill = _record_mtimes(out)
     assert 1 <= len(done_at_kill) < 4, "the run should have been killed after its first scene"
     # run again through the CLI (Dask local cluster): finishes the rest, keeps the done scenes
@@ -189,28 +195,16 @@ def test_cli_dataset_build_virtual_illum_killed_then_resumed(tmp_path, capsys):
     out = tmp_path / "dataset"
     cmd = [sys.executable, "-m", "lfproc.cli.main", "dataset", "build", str(scenes), "-o", str(out),
            "--workers", "1"]
-    env = dict(os.environ, LFPROC_PROGRESS="0")
-    # first run: a local Dask cluster of one worker (scenes one after the other), killed (the whole process
-    # group: the run and its worker) as soon as the first done-record appears
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
-                            env=env)
-    try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and proc.poll() is None:
-            if (out / "done").is_dir() and list((out / "done").glob("*.json")):
-                break
-            time.sleep(0.02)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=30)
+    # first run: a local Dask cluster of one worker (scenes one after the other), killed as soon as the
+    # first done-record appears
+    _run_and_kill_after_first_scene(cmd, out, timeout_s=60)
     done_at_kill = sorted(p.stem for p in (out / "done").glob("*.json"))
     assert 1 <= len(done_at_kill) < len(names), f"the run should have been killed after its first scene: {done_at_kill}"
     assert not (out / "manifest.json").exists()  # the killed run never reached its manifest
     before = _scene_mtimes(out, done_at_kill)
     assert len(before) == len(done_at_kill) * 5  # done-record + hdr, preview, histogram, record
     # second run, to completion: the rest is processed, the done scenes are skipped and not rewritten
-    result = subprocess.run(cmd + ["--json"], capture_output=True, text=True, env=env, timeout=120)
+    result = subprocess.run(cmd + ["--json"], capture_output=True, text=True, env=dict(os.environ, LFPROC_PROGRESS="0"), timeout=120)
     assert result.returncode == 0, result.stderr
     doc = json.loads(result.stdout)
     assert doc["scenes"] == 3 and doc["failed"] == 0
