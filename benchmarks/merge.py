@@ -4,7 +4,7 @@ Usage: ``python benchmarks/merge.py [--threads N] [--repeat R] [--views V] [--si
 
 Input: 5 exposures (1 EV apart) of a (5, 5, 434, 625, 3) light field as uint16 sensor
 codes from the sensor model (illum profile, ISO 100): a synthetic HDR scene through
-:func:`lfproc.sensor.expose`. Prints the best wall time of ``merge_ml`` (2 iterations, with
+:func:`lfproc.camera.sensor.expose`. Prints the best wall time of ``merge_ml`` (2 iterations, with
 variance) and ``merge_debevec`` (linear response), the peak traced Python memory during the
 merge (tracemalloc, numpy buffers included), the process's max RSS and the ML quality
 (mean relative error and variance calibration) against the known truth. Target: ML <= 3 s on
@@ -24,7 +24,7 @@ import numpy as np
 
 
 def make_bracket(views: int, size: tuple[int, int], seed: int = 0):
-    from lfproc.sensor import expose
+    from lfproc.camera.sensor import expose
     from lfproc.synth import synthesize
 
     lf = synthesize("lamps", size=size, views=views, random_state=seed)

@@ -17,7 +17,7 @@ import tracemalloc
 
 import numpy as np
 
-from lfproc.projection import build_operator, make_mask
+from lfproc.camera.projection import build_operator, make_mask
 
 
 def best(fn, repeat):

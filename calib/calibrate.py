@@ -8,7 +8,7 @@ the frames have a CFA):
 2. **Read noise**: temporal variance of bias pairs, ``mean(((A - mu_A) - (B - mu_B))^2) / 2``
    (the difference removes the fixed pattern), minus the dark-current variance of the bias
    exposure; ``read_noise_dn = sqrt(var - 1/12)`` (quantisation removed, as
-   :mod:`lfproc.sensor` adds it separately); ``read_noise_e = read_noise_dn / K``.
+   :mod:`lfproc.camera.sensor` adds it separately); ``read_noise_e = read_noise_dn / K``.
 3. **DSNU**: spatial variance of the master bias minus ``var_read / N`` (EMVA correction),
    pooled over the 2x2 CFA positions.
 4. **Gain** ``K`` (DN/e-): slope through the origin of ``var - var_dark(t)`` against

@@ -2,7 +2,7 @@
 
 A profile holds, for one sensor, its ADC and levels and, per ISO, the gain, read noise,
 dark current and full well. It sets the noise model of the simulators
-(:mod:`lfproc.sensor`), the weights of the HDR merge and those of the reconstruction.
+(:mod:`lfproc.camera.sensor`), the weights of the HDR merge and those of the reconstruction.
 
 File format: versioned JSON (``schema: "lfproc.camera_profile"``, ``schema_version: 1``)
 with units in the field names; an optional bias frame lives in a sidecar ``.npz`` named in

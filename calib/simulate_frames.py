@@ -1,6 +1,6 @@
 """Calibration frames a camera profile predicts, for round-trip tests of the calibration.
 
-Every frame comes from :func:`lfproc.sensor.expose`, the same noise model as the capture
+Every frame comes from :func:`lfproc.camera.sensor.expose`, the same noise model as the capture
 simulator (Poisson photons and dark current, Gaussian read noise, PRNU/DSNU, full well,
 ADC clipping, rounding, black level). Flats use a uniform irradiance and vary the
 exposure time, as a calibration bench does.
@@ -138,7 +138,7 @@ def simulate_frames(
 
 
 def _write_manifest_set(profile, tmp: Path, iso_list, shape, rng, params) -> str:
-    from lfproc.sensor import expose
+    from lfproc.camera.sensor import expose
 
     frames_dir = tmp / "frames"
     frames_dir.mkdir()
@@ -173,7 +173,7 @@ def _write_manifest_set(profile, tmp: Path, iso_list, shape, rng, params) -> str
 
 
 def _write_emva_set(profile, tmp: Path, iso: float, shape, rng, params) -> str:
-    from lfproc.sensor import expose
+    from lfproc.camera.sensor import expose
 
     fig = expected_figures(profile, iso)
     img = tmp / "images"

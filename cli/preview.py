@@ -11,7 +11,7 @@ def register(sub, common) -> None:
     from lfproc.lightfield import LightField
     from lfproc.preview import PREVIEWS, preview_kinds
 
-    import lfproc.capture  # noqa: F401  (registers the capture kinds)
+    import lfproc.camera.capture  # noqa: F401  (registers the capture kinds)
 
     kinds = preview_kinds(LightField)
     listing = "; ".join(f"{k}: {PREVIEWS[k].description}" for k in PREVIEWS)
@@ -23,7 +23,7 @@ def register(sub, common) -> None:
     add_output(p, help="output image (.png, .jpg or .tif)")
     p.add_argument("--kind", default=None,
                    help=f"light fields: {', '.join(kinds)} (default centre); coded captures: "
-                        f"{', '.join(preview_kinds(lfproc.capture.Capture))} (default capture)")
+                        f"{', '.join(preview_kinds(lfproc.camera.capture.Capture))} (default capture)")
     p.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="extra exposure in stops")
     p.add_argument("--nonfinite", choices=("raise", "zero", "clip"), default="raise",
                    help="what to do with NaN/Inf samples (default: refuse the file)")
@@ -32,7 +32,7 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from lfproc.capture import is_capture_file, write_capture_preview
+    from lfproc.camera.capture import is_capture_file, write_capture_preview
     from lfproc.errors import InputError
     from lfproc.io import check_output, read_lightfield
     from lfproc.preview import PREVIEWS, write_preview

@@ -42,7 +42,7 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from lfproc.simulate import NOISE_PROFILES, simulate_file
+    from lfproc.camera.simulate import NOISE_PROFILES, simulate_file
 
     profile = args.profile or NOISE_PROFILES[args.noise or "low"]
     shots = args.shots if args.shots is not None else (2 if args.baseline == "bracketing" else 1)

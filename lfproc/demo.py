@@ -268,8 +268,8 @@ def stage_simulate(ctx: _Context) -> dict[str, Any]:
     """Simulate the paper's multi-ISO coded-mask camera (random ISO pattern, random colour mask of
     period 4, Bayer RGGB) from the scene with the calibrated profile (or the paper's sensor), and
     check the calibrated observations T against the noiseless projection of the ground truth."""
-    from .capture import observations, write_capture_preview
-    from .simulate import capture_summary, simulate_capture
+    from .camera.capture import observations, write_capture_preview
+    from .camera.simulate import capture_summary, simulate_capture
 
     c = ctx.config
     lf: LightField = ctx.state["scene"]

@@ -61,7 +61,7 @@ def describe(path: str | os.PathLike, **read_options) -> dict[str, Any]:
         from .lytro.capture import describe_lytro
 
         return describe_lytro(path)
-    from .capture import describe_capture, is_capture_file  # coded multi-ISO captures
+    from .camera.capture import describe_capture, is_capture_file  # coded multi-ISO captures
 
     if is_capture_file(path):
         return describe_capture(path)

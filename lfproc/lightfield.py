@@ -12,7 +12,7 @@ Axes (used by every module of lfproc):
 
 Values are linear and scene-referred. ``units`` says what they are:
 ``"relative"`` (linear, arbitrary scale), ``"e-/s"`` (photo-electrons per second,
-the calibrated radiance of :mod:`lfproc.sensor`), ``"cd/m2"`` (absolute luminance)
+the calibrated radiance of :mod:`lfproc.camera.sensor`), ``"cd/m2"`` (absolute luminance)
 or ``"dn"`` (raw sensor counts).
 """
 

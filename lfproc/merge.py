@@ -7,7 +7,7 @@ the bracket's exposures) and processed in chunks to bound memory:
 * :func:`merge_ml` -- the noise-aware maximum-likelihood estimator of linear sensor codes
   (Granados et al. 2010; analysed by Aguerrebere et al. 2014). Each exposure ``i`` gives
   ``T_i`` (e-/s) with variance ``var_i(x) = var_i(0) + x / t_i`` (read noise, dark current and
-  quantisation in ``var_i(0)``, photon noise ``x / t_i``; :func:`lfproc.sensor.calibrated_observation`
+  quantisation in ``var_i(0)``, photon noise ``x / t_i``; :func:`lfproc.camera.sensor.calibrated_observation`
   with ``variance_from="estimate"``). The estimate is the inverse-variance weighted mean
   ``x = sum_i w_i T_i / sum_i w_i`` with ``w_i = 1 / var_i(x)`` evaluated at the current
   estimate: first at ``x = 0`` (read-noise weights), then ``n_iter`` fixed-point updates.
@@ -163,7 +163,7 @@ def merge_ml(
         Power-law response of the codes (default: the profile's).
     bias_dn : float or ndarray broadcastable to the sample shape, optional
         Bias frame (default: black level plus mean dark signal, see
-        :func:`lfproc.sensor.calibrated_observation`).
+        :func:`lfproc.camera.sensor.calibrated_observation`).
     n_iter : int
         Fixed-point updates of the weights after the read-noise start (>= 0).
     saturation_margin_dn : float
@@ -186,7 +186,7 @@ def merge_ml(
         (value given to saturated-everywhere samples), method parameters.
     """
     from .calib import load_profile
-    from .sensor import calibrated_observation, iso_maps
+    from .camera.sensor import calibrated_observation, iso_maps
 
     profile = load_profile(profile)
     stack = _as_stack(dn_stack, "dn_stack")
@@ -636,7 +636,7 @@ def merge_lightfields(
 
     How the data are read, per input ``units`` (all inputs must agree):
 
-    * ``"dn"``: raw sensor codes with the black level included (what :mod:`lfproc.sensor`
+    * ``"dn"``: raw sensor codes with the black level included (what :mod:`lfproc.camera.sensor`
       produces). ``ml`` uses them directly with ``profile``; ``debevec`` normalises them with the
       profile's black and white levels.
     * ``attrs["codes_bits"] == 8``: non-linear 8-bit camera output stored as ``code / 255``

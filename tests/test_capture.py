@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from lfproc.calib import load_profile
-from lfproc.capture import (
+from lfproc.camera.capture import (
     HEADER_NAME,
     Capture,
     capture_from_raw,
@@ -22,8 +22,8 @@ from lfproc.capture import (
 )
 from lfproc.cli.main import main
 from lfproc.errors import FileFormatError, InputError, OutputExistsError, ProfileError, ShapeError
-from lfproc.projection import MaskCode, make_mask
-from lfproc.simulate import simulate_capture
+from lfproc.camera.projection import MaskCode, make_mask
+from lfproc.camera.simulate import simulate_capture
 
 
 def _lf(h=32, w=32, seed=0):

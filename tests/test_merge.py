@@ -12,7 +12,7 @@ from lfproc.errors import InputError, ShapeError
 from lfproc.io import read_lightfield, write_lightfield
 from lfproc.lightfield import LightField
 from lfproc.merge import merge_debevec, merge_lightfields, merge_ml, recover_response
-from lfproc.sensor import calibrated_observation, expose
+from lfproc.camera.sensor import calibrated_observation, expose
 from lfproc.synth import synthesize
 
 TIMES = [0.01 * 2**k for k in range(5)]  # 5 exposures 1 EV apart

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lfproc.errors import InputError, ShapeError
-from lfproc.projection import (
+from lfproc.camera.projection import (
     CFA_PATTERNS,
     MASK_KINDS,
     MaskCode,

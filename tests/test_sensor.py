@@ -7,7 +7,7 @@ import pytest
 
 from lfproc.calib import load_profile
 from lfproc.errors import InputError, ProfileError, ShapeError
-from lfproc.sensor import calibrated_observation, expose
+from lfproc.camera.sensor import calibrated_observation, expose
 
 
 def test_noiseless_codes_follow_the_formula():

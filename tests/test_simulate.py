@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from lfproc.calib import load_profile
-from lfproc.capture import load_capture, observations
+from lfproc.camera.capture import load_capture, observations
 from lfproc.cli.main import main
 from lfproc.errors import InputError, ProfileError
 from lfproc.io import write_image, write_lightfield
 from lfproc.lightfield import LightField
-from lfproc.simulate import (
+from lfproc.camera.simulate import (
     BRACKETING_EXPOSURES,
     ISO_PATTERNS,
     auto_radiance_scale,

@@ -16,7 +16,7 @@ The forward model (the decoder of :mod:`lfproc.lytro.decode` inverts it):
   ``aperture_radius_px`` with a soft edge and a mild fall-off, times a radial main-lens
   vignetting over the sensor.
 * **Sensor.** Bayer GRBG on the camera-RGB light field (values are camera RGB), then
-  :func:`lfproc.sensor.expose` with the ``illum`` profile (black 64, white 1023, 10 bit,
+  :func:`lfproc.camera.sensor.expose` with the ``illum`` profile (black 64, white 1023, 10 bit,
   Poisson and read noise, full well), plus a few hot pixels fixed per camera.
 * **White images** are the same optics looking at a uniform white target whose camera
   response is the sensor's ``normalizedResponses`` (R and B about 0.75 of G).
@@ -274,12 +274,12 @@ def hot_pixel_list(shape: tuple[int, int], serial: str, *, fraction: float = 2e-
 def expose_chunked(irradiance_e_per_s: np.ndarray, *, exposure_s: float, iso: float, profile="illum",
                    hot_pixels: np.ndarray | None = None, hot_pixel_dn: float = 500.0, noise: bool = True,
                    random_state=None, chunk_rows: int = 512) -> np.ndarray:
-    """:func:`lfproc.sensor.expose` in bands of rows (bounded memory), plus hot pixels.
+    """:func:`lfproc.camera.sensor.expose` in bands of rows (bounded memory), plus hot pixels.
 
     Hot pixels add ``hot_pixel_dn`` (clipped at the white level) to the exposed counts.
     Returns uint16 DN ``(H, W)``.
     """
-    from ..sensor import expose
+    from ..camera.sensor import expose
     from ..calib import load_profile
 
     prof = load_profile(profile)

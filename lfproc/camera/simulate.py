@@ -1,10 +1,10 @@
 """Simulated captures of the multi-ISO coded-mask camera (method.md sections 1, 2, 6, 7).
 
 :func:`simulate_capture` projects an HDR light field through the coded mask and the Bayer
-CFA (:mod:`lfproc.projection`) and exposes each shot on a sensor with a per-pixel ISO map
-(:func:`lfproc.sensor.expose`: Poisson photon and dark-current noise, Gaussian read noise,
+CFA (:mod:`lfproc.camera.projection`) and exposes each shot on a sensor with a per-pixel ISO map
+(:func:`lfproc.camera.sensor.expose`: Poisson photon and dark-current noise, Gaussian read noise,
 full well and ADC saturation, power-law response, quantisation, black level). The result is a
-:class:`lfproc.capture.Capture`.
+:class:`lfproc.camera.capture.Capture`.
 
 Radiance scale (lfproc's rule). Light fields are usually in relative units; the sensor
 needs electrons per second. ``L_e = K * L``, with ``K = radiance_scale`` given explicitly, or
@@ -43,12 +43,13 @@ from typing import Any
 
 import numpy as np
 
-from ._util import check_choice, check_positive, check_random_state
-from ._version import __version__
+from .._util import check_choice, check_positive, check_random_state
+from .._version import __version__
+from .iso import DEFAULT_ISOS, ISO_PATTERNS, iso_pattern
 from .capture import Capture, _num, file_sha256, observations
-from .calib import load_profile
-from .errors import FileFormatError, InputError, MissingFileError, ShapeError
-from .lightfield import LightField, clean_nonfinite
+from ..calib import load_profile
+from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
+from ..lightfield import LightField, clean_nonfinite
 from .projection import MASK_KINDS, build_operator, make_mask
 from .sensor import expose
 
@@ -65,11 +66,9 @@ __all__ = [
     "capture_summary",
 ]
 
-ISO_PATTERNS = ("random", "row", "block", "dual")
 BASELINES = ("individual-iso", "bracketing")
 #: Relative exposures of the bracketing baseline by number of shots (method.md section 6).
 BRACKETING_EXPOSURES = {2: (0.5, 8.0), 3: (0.5, 2.0, 8.0), 4: (0.5, 2.0, 4.0, 8.0)}
-DEFAULT_ISOS = (100, 400, 800, 1600)
 #: ``--noise LEVEL`` -> shipped camera profile (paper Table VI noise levels).
 NOISE_PROFILES = {"none": "paper-none", "low": "paper-low", "medium": "paper-medium", "high": "paper-high"}
 _NEEDED = ("gain_dn_per_e", "read_noise_e", "dark_current_e_per_s", "black_level_dn", "full_well_e")
@@ -84,81 +83,6 @@ def _check_isos(profile, isos: Sequence[float]) -> list[float]:
             raise InputError(f"isos: expected positive ISO values, got {v}")
         profile.require(v, *_NEEDED)  # ProfileError: ISO not in profile, or a needed figure missing
     return values
-
-
-def _load_iso_file(path: Path, size: tuple[int, int]) -> np.ndarray:
-    if not path.is_file():
-        raise MissingFileError(f"{path}: no such ISO map file (or use one of {', '.join(ISO_PATTERNS)})")
-    if path.suffix.lower() == ".npy":
-        try:
-            values = np.load(path, allow_pickle=False)
-        except (ValueError, OSError) as exc:
-            raise FileFormatError(f"{path}: not a readable .npy ISO map ({exc})") from None
-    else:
-        import cv2
-
-        values = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if values is None:
-            raise FileFormatError(f"{path}: cannot be read as an ISO map image (.npy, .png, .tif)")
-        if values.ndim != 2:
-            raise FileFormatError(f"{path}: ISO map image: expected one channel, found shape {values.shape}")
-    values = np.asarray(values, dtype=np.float64)
-    if values.shape != tuple(size):
-        raise ShapeError(f"{path}: ISO map of shape {values.shape}; expected the sensor size {tuple(size)}")
-    return values
-
-
-def iso_pattern(
-    kind: str | os.PathLike,
-    *,
-    size: tuple[int, int],
-    isos: Sequence[float] = DEFAULT_ISOS,
-    block_px: int = 4,
-    random_state=None,
-) -> np.ndarray:
-    """ISO of every sensor pixel for a named pattern or a file (see the module documentation).
-
-    Parameters
-    ----------
-    kind : {"random", "row", "block", "dual"} or path
-        Pattern name, or a ``.npy``/integer image file holding the ISO of every pixel.
-    size : (H, W)
-    isos : sequence of float
-        The ISO set.
-    block_px : int
-        Side of the blocks of ``block`` in pixels (even, so Bayer quads share one ISO).
-    random_state : int, Generator or None (``random`` only)
-
-    Returns
-    -------
-    ndarray of shape (H, W), float32
-    """
-    h, w = (int(size[0]), int(size[1]))
-    isos = np.asarray([float(v) for v in isos])
-    if isos.size == 0:
-        raise InputError("isos: expected at least one ISO value")
-    name = str(kind)
-    if name not in ISO_PATTERNS:
-        path = Path(name)
-        if path.suffix or path.exists():
-            return _load_iso_file(path, (h, w)).astype(np.float32)
-        raise InputError(f"iso pattern: expected one of {', '.join(ISO_PATTERNS)} or a file; got {name!r}")
-    rows = np.arange(h)[:, None]
-    cols = np.arange(w)[None, :]
-    if name == "random":
-        index = check_random_state(random_state).integers(0, isos.size, size=(h, w))
-    elif name == "row":
-        index = np.broadcast_to((rows // 2) % isos.size, (h, w))
-    elif name == "dual":
-        isos = np.array([isos.min(), isos.max()])
-        index = np.broadcast_to((rows // 2) % 2, (h, w))
-    else:
-        b = int(block_px)
-        if b < 2 or b % 2 or b != block_px:
-            raise InputError(f"block size: expected an even number of pixels >= 2, got {block_px}")
-        g = math.ceil(math.sqrt(isos.size))
-        index = (((rows // b) % g) * g + (cols // b) % g) % isos.size
-    return isos[index].astype(np.float32)
 
 
 def _saturation_electrons(profile, iso: float) -> float:
@@ -427,7 +351,7 @@ def simulate_file(
     capture : Capture
     summary : dict (:func:`capture_summary`)
     """
-    from .io import check_output, read_lightfield
+    from ..io import check_output, read_lightfield
 
     check_output(output_path, force=force)
     lf = read_lightfield(input_path, nonfinite="raise", negative="raise")

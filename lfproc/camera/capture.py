@@ -20,7 +20,7 @@ File format (``schema "lfproc.capture"``, ``schema_version 1``; suggested suffix
 
 followed by ``.npy`` members: ``dn`` (``(S, H, W)`` uint16, black level included), ``iso``
 (``(S, H, W)`` float32 ISO of every pixel), ``mask`` (the codes of
-:class:`lfproc.projection.MaskCode`: ``(S, V, U, Ph, Pw, 3)`` for ``random``, ``(S, Bh, Bw, 3)``
+:class:`lfproc.camera.projection.MaskCode`: ``(S, V, U, Ph, Pw, 3)`` for ``random``, ``(S, Bh, Bw, 3)``
 for ``shifted``; one tile when the mask is periodic; uint8 levels ``k`` meaning transmittance
 ``k / 255`` when every code is such a level, as the simulator's are, else float32) and
 optionally ``bias`` (``(S, H, W)`` float32 bias frames in DN).
@@ -44,11 +44,11 @@ from typing import Any
 
 import numpy as np
 
-from ._util import file_sha256, to_jsonable
-from ._version import __version__
-from .calib import load_profile
-from .errors import FileFormatError, InputError, MissingFileError, ShapeError
-from .io import atomic_file
+from .._util import file_sha256, to_jsonable
+from .._version import __version__
+from ..calib import load_profile
+from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
+from ..io import atomic_file
 from .projection import CFA_PATTERNS, MaskCode, ProjectionOperator, build_operator, decode_levels, encode_levels, sampling_rate
 from .sensor import Observation, calibrated_observation
 
@@ -201,7 +201,7 @@ class Capture:
         return sampling_rate(shots=self.shots, views=self.views, channels=3)
 
     def operator(self, *, dtype=np.float32) -> ProjectionOperator:
-        """The projection operator ``Phi`` of this capture (:mod:`lfproc.projection`)."""
+        """The projection operator ``Phi`` of this capture (:mod:`lfproc.camera.projection`)."""
         return build_operator(self.mask, views=self.views, size=self.size, cfa_pattern=self.cfa_pattern, dtype=dtype)
 
     # -- file -----------------------------------------------------------------------------
@@ -319,7 +319,7 @@ def _read_array(path: Path, zf: zipfile.ZipFile, name: str, header: dict) -> np.
 
 def load_capture(path: str | os.PathLike) -> Capture:
     """Read a capture file (see the module documentation); errors name the file and field."""
-    from .calib import CameraProfile
+    from ..calib import CameraProfile
 
     path = Path(path)
     if not path.exists():
@@ -373,7 +373,7 @@ def observations(capture: Capture, **options) -> Observation:
     ----------
     capture : Capture
     **options
-        Passed to :func:`lfproc.sensor.calibrated_observation` (``saturation_margin_dn``,
+        Passed to :func:`lfproc.camera.sensor.calibrated_observation` (``saturation_margin_dn``,
         ``variance_from``, ``radiance_estimate`` of shape (S, H, W)...).
 
     Returns
@@ -471,7 +471,7 @@ def read_sensor_frame(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, An
     try:
         import rawpy
     except ImportError:  # pragma: no cover - rawpy is a dependency
-        from .errors import DependencyError
+        from ..errors import DependencyError
 
         raise DependencyError("reading raw files needs rawpy (pip install rawpy)") from None
     try:
@@ -516,7 +516,7 @@ def capture_from_raw(
         The mask codes, or ``{"kind": "random"|"shifted", "codes": array or .npy path,
         "period": P or None, "shift": 1}``.
     iso_layout : float, ndarray (H, W) or (S, H, W), or str
-        ISO of every pixel; a string names a pattern of :func:`lfproc.simulate.iso_pattern`
+        ISO of every pixel; a string names a pattern of :func:`lfproc.camera.simulate.iso_pattern`
         (``row``, ``block``, ``dual``, ``random``) built with ``isos`` (stored explicitly).
     profile : CameraProfile, name or path
     exposures_s : float or sequence of floats (one per shot)
@@ -552,7 +552,7 @@ def capture_from_raw(
         raise InputError(f"mask: expected a MaskCode or a mapping, got {type(mask).__name__}")
     iso_info: dict[str, Any] = {"kind": "given"}
     if isinstance(iso_layout, str):
-        from .simulate import iso_pattern
+        from .iso import iso_pattern
 
         if isos is None:
             raise InputError(f"iso_layout {iso_layout!r}: pass isos= (the ISO values of the pattern)")
@@ -613,7 +613,7 @@ def render_capture_preview(capture: Capture, kind: str = "capture", *, shot: int
     from matplotlib.figure import Figure
     from matplotlib.patches import Patch
 
-    from ._util import check_choice
+    from .._util import check_choice
 
     check_choice("preview kind", kind, PREVIEW_KINDS)
     if not 0 <= shot < capture.shots:
@@ -674,9 +674,9 @@ def write_capture_preview(capture, output: str | os.PathLike, *, kind: str = "ca
     Goes through :func:`lfproc.preview.write_preview` (the capture kinds are registered
     there). Returns a summary (``output``, ``kind``, ``size`` of the picture, ``shots``, ``isos``).
     """
-    from ._util import check_choice
-    from .io import check_output
-    from .preview import write_preview
+    from .._util import check_choice
+    from ..io import check_output
+    from ..preview import write_preview
 
     check_choice("--kind (capture previews)", kind, PREVIEW_KINDS)
     check_output(output, force=force)
@@ -694,7 +694,7 @@ def write_capture_preview(capture, output: str | os.PathLike, *, kind: str = "ca
 def _register_previews() -> None:
     from functools import partial
 
-    from .preview import register_preview
+    from ..preview import register_preview
 
     descriptions = {
         "capture": "a coded capture's sensor image, ISO map and mask side by side",

@@ -26,9 +26,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 import numpy as np
 
-from ._util import check_positive, check_random_state
-from .calib import load_profile
-from .errors import InputError, ShapeError
+from .._util import check_positive, check_random_state
+from ..calib import load_profile
+from ..errors import InputError, ShapeError
 
 __all__ = ["expose", "calibrated_observation", "Observation", "iso_maps", "fixed_pattern"]
 

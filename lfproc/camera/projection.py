@@ -41,8 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._util import check_choice, check_random_state
-from .errors import InputError, ShapeError
+from .._util import check_choice, check_random_state
+from ..errors import InputError, ShapeError
 
 __all__ = [
     "MASK_KINDS",

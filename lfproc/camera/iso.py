@@ -1,0 +1,102 @@
+"""Per-pixel ISO layouts of a multi-ISO sensor (method.md section 7).
+
+Patterns (:func:`iso_pattern`): ``random`` (i.i.d. per pixel), ``row`` (rows alternate ISO
+in 2-row units, so a Bayer quad shares one ISO, as in Magic Lantern's dual ISO), ``block``
+(square blocks of ``block_px`` pixels, an even number; the ISOs of the set are laid out in a
+``g x g`` arrangement of blocks, ``g = ceil(sqrt(n))``), ``dual`` (the row pattern with the
+lowest and the highest ISO of the set: (100, 1600) for the default set), or a file (``.npy``
+or a single-channel integer image, values = ISO).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .._util import check_random_state
+from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
+
+__all__ = ["ISO_PATTERNS", "DEFAULT_ISOS", "iso_pattern"]
+
+ISO_PATTERNS = ("random", "row", "block", "dual")
+DEFAULT_ISOS = (100, 400, 800, 1600)
+
+
+def _load_iso_file(path: Path, size: tuple[int, int]) -> np.ndarray:
+    if not path.is_file():
+        raise MissingFileError(f"{path}: no such ISO map file (or use one of {', '.join(ISO_PATTERNS)})")
+    if path.suffix.lower() == ".npy":
+        try:
+            values = np.load(path, allow_pickle=False)
+        except (ValueError, OSError) as exc:
+            raise FileFormatError(f"{path}: not a readable .npy ISO map ({exc})") from None
+    else:
+        import cv2
+
+        values = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if values is None:
+            raise FileFormatError(f"{path}: cannot be read as an ISO map image (.npy, .png, .tif)")
+        if values.ndim != 2:
+            raise FileFormatError(f"{path}: ISO map image: expected one channel, found shape {values.shape}")
+    values = np.asarray(values, dtype=np.float64)
+    if values.shape != tuple(size):
+        raise ShapeError(f"{path}: ISO map of shape {values.shape}; expected the sensor size {tuple(size)}")
+    return values
+
+
+
+def iso_pattern(
+    kind: str | os.PathLike,
+    *,
+    size: tuple[int, int],
+    isos: Sequence[float] = DEFAULT_ISOS,
+    block_px: int = 4,
+    random_state=None,
+) -> np.ndarray:
+    """ISO of every sensor pixel for a named pattern or a file (see the module documentation).
+
+    Parameters
+    ----------
+    kind : {"random", "row", "block", "dual"} or path
+        Pattern name, or a ``.npy``/integer image file holding the ISO of every pixel.
+    size : (H, W)
+    isos : sequence of float
+        The ISO set.
+    block_px : int
+        Side of the blocks of ``block`` in pixels (even, so Bayer quads share one ISO).
+    random_state : int, Generator or None (``random`` only)
+
+    Returns
+    -------
+    ndarray of shape (H, W), float32
+    """
+    h, w = (int(size[0]), int(size[1]))
+    isos = np.asarray([float(v) for v in isos])
+    if isos.size == 0:
+        raise InputError("isos: expected at least one ISO value")
+    name = str(kind)
+    if name not in ISO_PATTERNS:
+        path = Path(name)
+        if path.suffix or path.exists():
+            return _load_iso_file(path, (h, w)).astype(np.float32)
+        raise InputError(f"iso pattern: expected one of {', '.join(ISO_PATTERNS)} or a file; got {name!r}")
+    rows = np.arange(h)[:, None]
+    cols = np.arange(w)[None, :]
+    if name == "random":
+        index = check_random_state(random_state).integers(0, isos.size, size=(h, w))
+    elif name == "row":
+        index = np.broadcast_to((rows // 2) % isos.size, (h, w))
+    elif name == "dual":
+        isos = np.array([isos.min(), isos.max()])
+        index = np.broadcast_to((rows // 2) % 2, (h, w))
+    else:
+        b = int(block_px)
+        if b < 2 or b % 2 or b != block_px:
+            raise InputError(f"block size: expected an even number of pixels >= 2, got {block_px}")
+        g = math.ceil(math.sqrt(isos.size))
+        index = (((rows // b) % g) * g + (cols // b) % g) % isos.size
+    return isos[index].astype(np.float32)
