@@ -23,6 +23,7 @@ COMMANDS = (
     "preview",
     "evaluate",
     "simulate",
+    "reconstruct",
     "merge",
     "dataset",
     "virtual-illum",
@@ -40,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks of errors")
     parser = argparse.ArgumentParser(
         prog="lfproc",
-        description="High-dynamic-range light fields: decode, merge, calibrate, simulate, evaluate.",
+        description="High-dynamic-range light fields: decode, merge, calibrate, simulate, reconstruct, evaluate.",
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     parser.add_argument("--version", action="version", version=f"lfproc {__version__}")

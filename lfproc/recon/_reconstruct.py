@@ -13,9 +13,14 @@ units: the measurements are divided by ``c_p = sqrt(n) * rms(T_i / r_i)`` over t
 measurements (``r_i`` the total mask transmittance of measurement ``i``: ``T_i / r_i`` is the
 radiance a flat patch would need; ``c_p`` is then the l2 norm of that flat patch, the norm
 the dictionary's atoms and training patches are normalised to), and the weights by their
-root mean square over the usable measurements. ``mu`` is therefore relative to a light-field
-patch of unit l2 norm with weights of mean square one, the same for dark and bright patches;
-the code is scaled back by ``c_p``. ``scale="global"`` uses one ``c`` and one weight scale for
+root mean square over the usable measurements, and the data term is taken as a mean over
+the ``m`` measurements: each patch solves
+``1/(2m) ||W' (Phi_p D b - T_p / c_p)||^2 + mu ||b||_1``. ``mu`` is therefore relative to a
+light-field patch of unit l2 norm with weights of mean square one, the same for dark and
+bright patches, and does not change with the number of shots; the code is scaled back by
+``c_p``. With this reading the paper's ``mu = 1e-4`` is also where the reconstruction of a
+smooth noisy scene is best (tests/test_reconstruct.py; README), whereas ``1e-4`` against the
+summed data term (100x less regularisation) overfits the noise. ``scale="global"`` uses one ``c`` and one weight scale for
 the whole capture instead (the 99.9th percentile of the usable ``T`` over the mean row
 transmittance, and the rms of all usable weights): what normalising the capture to its peak
 would do. The README gives the measured difference.
@@ -109,10 +114,11 @@ def _solve_group(op, y, w, rowsum, settings: _Settings, n: int) -> tuple[np.ndar
     cp, om = c_p[rows], omega[rows]
     yn = (y[rows] / cp[:, None]).astype(np.float32)
     wn = (w[rows] / om[:, None]).astype(np.float32)
+    m = y.shape[1]  # mu weighs the data term's mean over the measurements (module notes)
     if settings.scale == "patch":
-        mu = np.full(len(rows), settings.mu)
+        mu = np.full(len(rows), settings.mu * m)
     else:  # one mu for the raw problem of every patch (module notes)
-        mu = settings.mu * (settings.c_global / cp) * (settings.w_global / om) ** 2
+        mu = settings.mu * m * (settings.c_global / cp) * (settings.w_global / om) ** 2
     if settings.solver == "admm":
         z, it = admm(sub, wn, yn, mu, max_iter=settings.max_iter, tol=settings.tol)
     elif settings.solver == "fista":
@@ -393,8 +399,8 @@ def reconstruct(
                        "atoms": dictionary.n_atoms, "sparsity": dictionary.sparsity},
         "stride": stride,
         "mu": mu,
-        "mu_meaning": "relative to a unit-l2 patch with weights of mean square one" if scale == "patch" else
-                      "relative to the capture normalised to its 99.9th percentile",
+        "mu_meaning": "1/(2m)||W(Phi D b - T)||^2 + mu||b||_1 per patch, T scaled to a unit-l2 patch, W to mean "
+                      "square one" if scale == "patch" else "as 'patch' but with one scale for the whole capture",
         "tol": tol,
         "max_iter": max_iter if solver != "omp" else None,
         "sparsity": sparsity if solver == "omp" else None,
@@ -425,7 +431,7 @@ def _run_dask(tasks, shared, attach_operators, add, bar, *, workers, scheduler) 
     if scheduler and scheduler != "synchronous":
         client = Client(scheduler)
     else:
-        cluster = LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True, dashboard_address=None,
+        cluster = LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True, dashboard_address=":0",
                                silence_logs=logging.ERROR)
         client = Client(cluster)
     try:

@@ -133,31 +133,37 @@ class _Active:
         return keep
 
 
-def auto_rho(bbt: np.ndarray) -> np.ndarray:
-    """lfproc's ADMM penalty per patch: ``sqrt(l_min l_max)`` of ``B B^T`` (``(B, m, m)``, float64).
+def auto_rho(eigenvalues: np.ndarray) -> np.ndarray:
+    """Initial ADMM penalty per patch: ``sqrt(l_min l_max)`` of ``B B^T`` (eigenvalues ``(B, m)``, ascending).
 
     The geometric mean of the extreme eigenvalues is the optimal penalty of ADMM on quadratic
     problems (Ghadimi et al., IEEE TAC 2015); ``l_min`` is taken over the measurements that
-    have weight (zero rows give zero eigenvalues) and the result is kept above ``1e-3 l_max``:
-    a smaller ``rho`` makes the Woodbury step ``(q - B^T S^-1 B q) / rho`` lose float32
-    precision. Measured on a planted 10-sparse patch (tests/test_reconstruct.py): 90 iterations
-    to the lasso optimum within 1e-4, where ``rho = 0.01 mean eigenvalue`` stalls at 1e-3.
+    have weight (zero rows give zero eigenvalues). :func:`admm` then adapts it (residual
+    balancing).
     """
-    ev = np.linalg.eigvalsh(bbt)
-    top = np.maximum(ev[:, -1], 1e-30)
-    low = np.where(ev > 1e-7 * top[:, None], ev, np.inf).min(axis=1)
-    return np.maximum(np.sqrt(low * top), 1e-3 * top)
+    top = np.maximum(eigenvalues[:, -1], 1e-30)
+    low = np.where(eigenvalues > 1e-7 * top[:, None], eigenvalues, np.inf).min(axis=1)
+    return np.sqrt(low * top)
+
+
+#: Residual balancing of :func:`admm` (Boyd et al. 2011, section 3.4.1): every ``_BALANCE_EVERY``
+#: iterations ``rho`` is doubled when the primal residual exceeds ``_BALANCE_RATIO`` times the
+#: dual one, halved in the opposite case.
+_BALANCE_EVERY = 5
+_BALANCE_RATIO = 10.0
 
 
 def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho=None,
          compact_fraction: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
-    """Scaled ADMM for the weighted lasso, Woodbury solve with one ``m x m`` system per patch.
+    """Scaled ADMM for the weighted lasso, Woodbury solve through one ``m x m`` eigendecomposition per patch.
 
     Splitting ``a = z``: ``a <- (B^T B + rho I)^-1 (B^T c + rho (z - u))`` with ``B = W A``,
-    ``c = W y``, through ``(B^T B + rho I)^-1 q = (q - B^T (rho I + B B^T)^-1 B q) / rho``
-    (``B B^T = W (A A^T) W``: with a shared ``A`` the ``m x m`` Gram matrix is computed once);
-    ``z <- soft(a + u, mu / rho)``; ``u <- u + a - z``. Stops a patch when
-    ``||z_k - z_{k-1}|| <= tol ||z_k||``.
+    ``c = W y``, through ``(B^T B + rho I)^-1 q = (q - B^T (rho I + B B^T)^-1 B q) / rho``;
+    ``B B^T = W (A A^T) W`` (with a shared ``A`` the Gram matrix ``A A^T`` is computed once per
+    phase) is diagonalised once per patch, ``Q diag(l) Q^T``, so ``(rho I + B B^T)^-1`` is
+    ``Q diag(1 / (rho + l)) Q^T`` for any ``rho`` and the penalty can adapt (residual balancing)
+    at no cost. ``z <- soft(a + u, mu / rho)``; ``u <- u + a - z``. A patch stops when
+    ``||z_k - z_{k-1}|| <= tol ||z_k||`` and ``||a_k - z_k|| <= tol ||z_k||``.
 
     Parameters
     ----------
@@ -169,7 +175,7 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
     max_iter : int
     tol : float
     rho : ndarray of shape (B,), optional
-        Penalty per patch; default :func:`auto_rho`.
+        Initial penalty per patch; default :func:`auto_rho`.
 
     Returns
     -------
@@ -180,19 +186,20 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
     y = np.asarray(y, dtype=np.float32)
     b_n, m = w.shape
     k_n = op.shape[1]
-    mu = np.broadcast_to(np.asarray(mu, dtype=np.float64), (b_n,))
+    mu = np.broadcast_to(np.asarray(mu, dtype=np.float64).reshape(-1), (b_n,)).astype(np.float32)[:, None]
     btc = op.adj(w * w * y)  # B^T c, (B, K)
     g = op.gram()
     s = w[:, :, None].astype(np.float64) * g * w[:, None, :].astype(np.float64)
-    if rho is None:
-        rho = auto_rho(s)
-    rho = np.asarray(rho, dtype=np.float64).reshape(b_n)
-    s[:, np.arange(m), np.arange(m)] += rho[:, None]
-    sinv = np.linalg.inv(s).astype(np.float32)  # (B, m, m); rho I + B B^T is SPD
-    rho32 = rho.astype(np.float32)[:, None]
+    ev, vec = np.linalg.eigh(s)
+    ev = np.maximum(ev, 0.0)
+    rho = auto_rho(ev) if rho is None else np.asarray(rho, dtype=np.float64).reshape(b_n)
+    rho = rho.astype(np.float32)[:, None]
+    q_t = np.ascontiguousarray(vec.transpose(0, 2, 1), dtype=np.float32)  # Q^T
+    q_m = np.ascontiguousarray(vec, dtype=np.float32)
+    ev = ev.astype(np.float32)
+    inv = 1.0 / (rho + ev)
     p0 = op.fwd(btc)  # A B^T c
-    h = btc / rho32
-    kappa = (mu[:, None] / rho[:, None]).astype(np.float32)
+    h = btc / rho
     z = np.zeros((b_n, k_n), dtype=np.float32)
     u = np.zeros_like(z)
     act = _Active(b_n, k_n)
@@ -200,24 +207,41 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
     it = 0
     for it in range(1, max_iter + 1):
         v = z - u
-        bq = w * (p0 + rho32 * op.fwd(v))
-        r = np.matmul(sinv, bq[:, :, None])[:, :, 0]
-        a = h + v - op.adj(w * r / rho32)
-        a += u  # a + u
-        z_new = _soft(a, kappa)
-        u = a - z_new
-        done = _rel_change(z_new, z) <= tol
+        bq = w * (p0 + rho * op.fwd(v))
+        r = np.matmul(q_m, (inv * np.matmul(q_t, bq[:, :, None])[:, :, 0])[:, :, None])[:, :, 0]
+        a = h + v - op.adj(w * r / rho)
+        x = a + u
+        z_new = _soft(x, mu / rho)
+        u = x - z_new
+        znorm = np.sqrt(np.einsum("bk,bk->b", z_new, z_new))
+        dz = z_new - z
+        change = np.sqrt(np.einsum("bk,bk->b", dz, dz))
+        pr = a - z_new
+        primal = np.sqrt(np.einsum("bk,bk->b", pr, pr))
+        floor = np.maximum(znorm, _TINY)
+        done = (change <= tol * floor) & (primal <= tol * floor)
         z = z_new
         pending += int(done.sum())
         if it == max_iter:
             break
+        if it % _BALANCE_EVERY == 0:
+            dual = rho[:, 0] * change
+            up = primal > _BALANCE_RATIO * dual
+            down = dual > _BALANCE_RATIO * primal
+            if up.any() or down.any():
+                factor = np.where(up, 2.0, np.where(down, 0.5, 1.0)).astype(np.float32)[:, None]
+                rho = rho * factor
+                u = u / factor
+                inv = 1.0 / (rho + ev)
+                h = btc / rho
         if pending and pending >= max(1, compact_fraction * len(act.rows)):
             keep = act.retire(done, z, it)
             pending = 0
             if not keep.all():
                 if not keep.any():
                     return act.out, act.iters
-                z, u, w, p0, h, sinv, rho32, kappa = (x[keep] for x in (z, u, w, p0, h, sinv, rho32, kappa))
+                z, u, w, p0, h, btc, q_m, q_t, ev, inv, rho, mu = (
+                    t[keep] for t in (z, u, w, p0, h, btc, q_m, q_t, ev, inv, rho, mu))
                 op = op.subset(keep)
     act.retire(np.ones(len(act.rows), dtype=bool), z, it)
     return act.out, act.iters
