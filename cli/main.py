@@ -30,6 +30,7 @@ COMMANDS = (
     "decode",
     "calibrate",
     "profile",
+    "dictionary",
 )
 
 
