@@ -23,7 +23,9 @@ followed by ``.npy`` members: ``dn`` (``(S, H, W)`` uint16, black level included
 :class:`lfproc.camera.projection.MaskCode`: ``(S, V, U, Ph, Pw, 3)`` for ``random``, ``(S, Bh, Bw, 3)``
 for ``shifted``; one tile when the mask is periodic; uint8 levels ``k`` meaning transmittance
 ``k / 255`` when every code is such a level, as the simulator's are, else float32) and
-optionally ``bias`` (``(S, H, W)`` float32 bias frames in DN).
+optionally ``bias`` (``(S, H, W)`` float32 bias frames in DN) and the embedded profile's
+measured maps, ``profile_flat_field`` (``(H, W)``) and ``profile_bias_<ISO>`` (its master bias
+frames), which the calibrated observations use (:func:`lfproc.camera.sensor.fixed_pattern_correction`).
 
 Radiance units: ``observations`` returns ``T`` in electrons per second reaching each
 pixel. For a simulated capture, ``L_e = radiance_scale * L_relative``, so a light field
@@ -236,6 +238,10 @@ class Capture:
         out = {"dn": self.dn, "iso": self.iso, "mask": self.mask.codes if levels is None else levels}
         if self.bias_dn is not None:
             out["bias"] = self.bias_dn
+        if self.profile.flat_field is not None:
+            out["profile_flat_field"] = np.asarray(self.profile.flat_field, dtype=np.float32)
+        for iso, frame in sorted(self.profile.bias_frames.items()):
+            out[f"profile_bias_{iso}"] = np.asarray(frame, dtype=np.float32)
         return out
 
     def save(self, path: str | os.PathLike, *, force: bool = False) -> Path:
@@ -332,9 +338,18 @@ def load_capture(path: str | os.PathLike) -> Capture:
             arrays = {name: _read_array(path, zf, name, header) for name in ("dn", "iso", "mask")}
             if "bias" in header["arrays"]:
                 arrays["bias"] = _read_array(path, zf, "bias", header)
+            maps = {name: _read_array(path, zf, name, header) for name in header["arrays"]
+                    if name.startswith("profile_")}
     except zipfile.BadZipFile as exc:
         raise FileFormatError(f"{path}: corrupt capture archive ({exc})") from None
-    profile = CameraProfile.from_json(header["profile"], where=f"{path}: embedded profile")
+    try:
+        profile_bias = {int(name.removeprefix("profile_bias_")): a for name, a in maps.items()
+                        if name.startswith("profile_bias_")}
+    except ValueError:
+        raise FileFormatError(f"{path}: profile bias arrays must be named profile_bias_<ISO>, found "
+                              f"{', '.join(sorted(maps))}") from None
+    profile = CameraProfile.from_json(header["profile"], where=f"{path}: embedded profile", bias_frames=profile_bias,
+                                      flat_field=maps.get("profile_flat_field"))
     m = header["mask"]
     try:
         codes = decode_levels(arrays["mask"]) if arrays["mask"].dtype == np.uint8 else arrays["mask"]
