@@ -179,3 +179,38 @@ def test_capture_observations_correct_prnu_and_survive_the_file(tmp_path):
     again = observations(back, variance_from="estimate", radiance_estimate=truth)
     np.testing.assert_array_equal(again.radiance, obs.radiance)
     np.testing.assert_array_equal(again.variance, obs.variance)
+
+
+def test_capture_file_keeps_a_measured_profiles_maps(tmp_path):
+    """A measured profile's flat field and bias frames travel inside the capture file (the JSON header
+    cannot hold them), so observations after loading equal those before."""
+    truth = _profile(0.02, 3.0)
+    rng = np.random.default_rng(2)
+    flat = (1 + 0.02 * rng.standard_normal(SHAPE)).astype(np.float32)
+    bias = {iso: (64 + rng.normal(0, 0.7, SHAPE)).astype(np.float32) for iso in (100, 400)}
+    measured = replace(truth, source={"kind": "calibrated"}, flat_field=flat, flat_field_std=0.002, bias_frames=bias,
+                       bias_frame_std_dn={100: 0.1, 400: 0.2})
+    iso = np.where(np.arange(SHAPE[0])[:, None] % 4 < 2, 100.0, 400.0) * np.ones(SHAPE)
+    fp = fixed_pattern_correction(measured, SHAPE, iso)
+    assert fp.gain_source == "flat_field" and fp.offset_source == "bias_frames (ISO 100, 400)"
+    np.testing.assert_allclose(fp.gain_var, 0.002**2)
+    h = np.where(iso == 100, truth.isos[100].gain_dn_per_e, truth.isos[400].gain_dn_per_e)
+    np.testing.assert_allclose(fp.offset_var_e2, (np.where(iso == 100, 0.1, 0.2) / h) ** 2)
+    want = np.where(iso == 100, (bias[100] - bias[100].mean()) / h, (bias[400] - bias[400].mean()) / h)
+    np.testing.assert_allclose(fp.offset_e, want, atol=1e-4)  # float32 frames
+    lf = np.full((5, 5, *SHAPE, 3), 0.5, np.float32)
+    np.save(tmp_path / "iso.npy", iso)
+    cap = simulate_capture(lf, profile=measured, iso_pattern_kind=tmp_path / "iso.npy", shots=1, mask_period=4,
+                           random_state=1)
+    back = load_capture(cap.save(tmp_path / "m.capture.npz"))
+    np.testing.assert_array_equal(back.profile.flat_field, flat)
+    assert sorted(back.profile.bias_frames) == [100, 400] and back.profile.bias_frame_std_dn == {100: 0.1, 400: 0.2}
+    a, b = observations(cap), observations(back)
+    np.testing.assert_array_equal(a.radiance, b.radiance)
+    np.testing.assert_array_equal(a.variance, b.variance)
+    # the simulated sensor of a measured profile is the measured one: T is corrected with its own maps
+    truth_lf = cap.operator(dtype=np.float64).forward(lf.astype(np.float64)) * cap.radiance_scale
+    obs = observations(cap, variance_from="estimate", radiance_estimate=truth_lf)
+    ok = obs.weight > 0
+    z = ((obs.radiance - truth_lf) * obs.weight)[ok]
+    assert abs(z.mean()) < 4.5 / np.sqrt(z.size) and z.var() < 1.05
