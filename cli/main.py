@@ -23,6 +23,7 @@ COMMANDS = (
     "preview",
     "evaluate",
     "simulate",
+    "capture",
     "merge",
     "dataset",
     "virtual-illum",
