@@ -302,11 +302,12 @@ def test_dct_dictionary_is_the_orthonormal_dct_ii():
 
 
 def test_evaluate_exact_with_a_complete_basis_and_dct_beaten_by_nothing_trivial():
-    lf = synthesize("layers", size=(24, 24), views=3, random_state=2)
-    full = dct_dictionary((3, 3, 4, 4, 3))  # complete orthonormal basis: sparsity n reproduces exactly
-    r = evaluate_dictionary(full, [lf], sparsity=full.n, compare_dct=False)
+    lf = synthesize("layers", size=(16, 16), views=3, random_state=2)
+    small = lf.data[:, :, 4:12, 4:12]
+    full = dct_dictionary((3, 3, 1, 1, 3))  # complete orthonormal basis: sparsity n reproduces exactly
+    r = evaluate_dictionary(full, [small], sparsity=full.n, compare_dct=False)
     assert r["relative_error"] < 1e-5
-    r10 = evaluate_dictionary(full, [lf], sparsity=10)
+    r10 = evaluate_dictionary(dct_dictionary((3, 3, 4, 4, 3)), [lf], sparsity=10)
     assert 0 < r10["relative_error"] < 1
     assert r10["dct_relative_error"] == pytest.approx(r10["relative_error"], rel=1e-6)  # same dictionary
 

@@ -130,18 +130,29 @@ def _code_all(signals: TrainingSignals, atoms: np.ndarray, sparsity: int, chunk:
     x_norm2 = 0.0
     starts = list(range(0, n_sig, chunk))
     atoms_t = np.ascontiguousarray(atoms.T)  # (K, n): one atom per row
+    pending: dict[int, Any] = {}
     if client is not None:
+        # a window of chunks in flight, so the signals are never all in memory at once
         d_f, g_f = client.scatter([atoms, gram], broadcast=True)
-        futures = [client.submit(_code_chunk, d_f, g_f, signals.rows(s, min(s + chunk, n_sig)), sparsity, pure=False)
-                   for s in starts]
-        results = iter(client.gather(futures))
+        window = 2 * max(1, len(client.scheduler_info().get("workers", {})))
+        upcoming = iter(starts)
+
+        def submit_next():
+            s0 = next(upcoming, None)
+            if s0 is not None:
+                pending[s0] = client.submit(_code_chunk, d_f, g_f, signals.rows(s0, min(s0 + chunk, n_sig)), sparsity,
+                                            pure=False)
+
+        for _ in range(window):
+            submit_next()
     for s in progress(starts, desc=bar_desc):
         e = min(s + chunk, n_sig)
         x = signals.rows(s, e)
         if client is None:
             i, v = omp_codes(atoms, x, sparsity, gram=gram)
         else:
-            i, v = next(results)
+            i, v = pending.pop(s).result()
+            submit_next()
         idx[s:e], val[s:e] = i, v
         r = resid[s:e]
         r[...] = x
@@ -197,12 +208,13 @@ def _clear_atoms(atoms_t, signals: TrainingSignals, resid, idx, unused, *, min_u
     """Replace unused, rarely used and near-duplicate atoms with the worst-represented signals."""
     n_atoms = atoms_t.shape[0]
     usage = np.bincount(idx[idx >= 0], minlength=n_atoms)
-    gram = atoms_t @ atoms_t.T
-    np.fill_diagonal(gram, 0)
     replace = set(unused) | set(np.flatnonzero(usage < min_usage).tolist())
-    # near-duplicates: of each close pair, replace the one with the higher index
-    close = np.argwhere(np.triu(np.abs(gram) > max_coherence))
-    replace |= {int(b) for _, b in close}
+    # near-duplicates: of each close pair (a < b), replace b; the Gram matrix in row blocks (bounded memory)
+    block = max(1, (64 * 2**20) // (4 * n_atoms))
+    for r0 in range(0, n_atoms, block):
+        g = atoms_t[r0:r0 + block] @ atoms_t.T
+        a, b = np.nonzero(np.abs(g) > max_coherence)
+        replace |= {int(j) for j in b[b > a + r0]}
     if not replace:
         return []
     n_sig = resid.shape[0]
