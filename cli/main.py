@@ -24,6 +24,7 @@ COMMANDS = (
     "evaluate",
     "simulate",
     "reconstruct",
+    "capture",
     "merge",
     "dataset",
     "virtual-illum",
@@ -31,6 +32,7 @@ COMMANDS = (
     "decode",
     "calibrate",
     "profile",
+    "dictionary",
 )
 
 

@@ -40,7 +40,7 @@ from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 from ..io import atomic_file
 
-__all__ = ["Dictionary", "load_dictionary", "save_dictionary", "SCHEMA", "SCHEMA_VERSION", "SHIPPED",
+__all__ = ["is_dictionary_file", "Dictionary", "load_dictionary", "save_dictionary", "SCHEMA", "SCHEMA_VERSION", "SHIPPED",
            "shipped_path"]
 
 SCHEMA = "lfproc.dictionary"
@@ -192,6 +192,24 @@ class Dictionary:
         if self.usage is not None:
             out["unused_atoms"] = int((self.usage == 0).sum())
         return out
+
+
+def is_dictionary_file(path: str | os.PathLike) -> bool:
+    """True for a shipped name or a ZIP archive whose first member is the dictionary header."""
+    if str(path) in SHIPPED and not Path(path).exists():
+        return True
+    path = Path(path)
+    if not path.is_file():
+        return False
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(4) != b"PK\x03\x04":
+                return False
+        with zipfile.ZipFile(path) as zf:
+            infos = zf.infolist()
+            return bool(infos) and infos[0].filename == HEADER_NAME
+    except (OSError, zipfile.BadZipFile):
+        return False
 
 
 def shipped_path(name: str) -> Path:
