@@ -24,6 +24,7 @@ COMMANDS = (
     "evaluate",
     "simulate",
     "reconstruct",
+    "bench",
     "capture",
     "merge",
     "dataset",
