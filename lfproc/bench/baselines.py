@@ -31,7 +31,10 @@ the bench report):
 * **Re-exposure and saturation guard.** A reconstructed view sample ``L`` is mapped to the
   code a pixel of the shot's ISO ``i`` and exposure ``t`` would give if it saw that view
   with the mask's mean total transmittance ``r`` (``sum over views`` of the mean code:
-  about 12.5 for 5 x 5 views of a uniform [0, 1] mask): ``e = t (K r L + I_dark)`` electrons
+  about 12.5 for 5 x 5 views of a uniform [0, 1] mask; one ``r`` for all the shots merged,
+  lowered if needed so that the least exposed shot's reconstruction stays below saturation:
+  a view brighter than the mean of the views at its pixel must not come out clipped in every
+  shot): ``e = t (K r L + I_dark)`` electrons
   (``K`` the capture's ``radiance_scale``), clipped at the full well, times the gain
   ``h(i)``, through the profile's power law, plus the black level, clipped at the white
   level. Samples above the shot's saturation come out saturated, so both merges ignore
@@ -99,7 +102,8 @@ def _radiance_scale(capture) -> float:
     return float(capture.radiance_scale)
 
 
-def reexpose(lf: LightField, shot, *, guard: np.ndarray | None = None) -> np.ndarray:
+def reexpose(lf: LightField, shot, *, transmittance: float | None = None,
+             guard: np.ndarray | None = None) -> np.ndarray:
     """Sensor codes (DN, float64) one shot would record for every view sample of ``lf`` (module notes).
 
     Parameters
@@ -109,6 +113,10 @@ def reexpose(lf: LightField, shot, *, guard: np.ndarray | None = None) -> np.nda
     shot : Capture
         A single-shot capture with one global ISO (what :func:`split_shots` returns for the
         individual-ISO and bracketing captures).
+    transmittance : float, optional
+        Total transmittance of the ideal pixel (sum over views); default: the shot's mean.
+        Shots that are merged must share one value (:func:`merge_reconstructions` passes the
+        mean over all of them), else each shot's mask draw would bias its share.
     guard : ndarray of bool, shape (H, W), optional
         Sensor pixels whose samples are set to the white level (saturated).
 
@@ -124,7 +132,9 @@ def reexpose(lf: LightField, shot, *, guard: np.ndarray | None = None) -> np.nda
     prof = shot.profile
     figs = prof.require(iso, "gain_dn_per_e", "black_level_dn", "full_well_e", "dark_current_e_per_s")
     t = float(shot.exposures_s[0])
-    scale = _radiance_scale(shot) * _mean_view_transmittance(shot)
+    if transmittance is None:
+        transmittance = _mean_view_transmittance(shot)
+    scale = _radiance_scale(shot) * float(transmittance)
     electrons = t * (lf.data.astype(np.float64) * scale + figs["dark_current_e_per_s"])
     electrons = np.minimum(electrons, figs["full_well_e"])
     imax = float(prof.white_level_dn)
@@ -134,6 +144,25 @@ def reexpose(lf: LightField, shot, *, guard: np.ndarray | None = None) -> np.nda
     if guard is not None:
         dn[:, :, np.asarray(guard, dtype=bool), :] = imax
     return dn
+
+
+def _ideal_transmittance(reconstructions, shots) -> float:
+    """One ideal pixel for every shot: the mean total transmittance, lowered where needed so the
+    least exposed shot's reconstruction saturates it nowhere (module notes)."""
+    from ..camera.simulate import _saturation_electrons
+
+    r = float(np.mean([_mean_view_transmittance(s) for s in shots]))
+    prof = shots[0].profile
+    isos = [float(np.unique(s.iso)[0]) for s in shots]
+    gains = [prof.require(i, "gain_dn_per_e")["gain_dn_per_e"] for i in isos]
+    ref = int(np.argmin([s.exposures_s[0] * g for s, g in zip(shots, gains)]))
+    t = float(shots[ref].exposures_s[0])
+    dark = prof.require(isos[ref], "dark_current_e_per_s")["dark_current_e_per_s"]
+    peak = float(reconstructions[ref].data.max())
+    room = _saturation_electrons(prof, isos[ref]) / t - dark
+    if peak > 0 and room > 0:
+        r = min(r, 0.98 * room / (_radiance_scale(shots[ref]) * peak))
+    return r
 
 
 def _guard(shot, dilate: int) -> np.ndarray:
@@ -175,10 +204,12 @@ def merge_reconstructions(
     if isinstance(guard_px, bool) or int(guard_px) != guard_px or guard_px < 0:
         raise InputError(f"guard_px: expected a non-negative integer, got {guard_px!r}")
     prof = shots[0].profile
-    stack = np.stack([reexpose(lf, s, guard=_guard(s, int(guard_px))) for lf, s in zip(reconstructions, shots)])
+    r = _ideal_transmittance(reconstructions, shots)
+    stack = np.stack([reexpose(lf, s, transmittance=r, guard=_guard(s, int(guard_px)))
+                      for lf, s in zip(reconstructions, shots)])
     t = np.array([s.exposures_s[0] for s in shots])
     iso = np.array([float(np.unique(s.iso)[0]) for s in shots])
-    scale = _radiance_scale(shots[0]) * _mean_view_transmittance(shots[0])
+    scale = _radiance_scale(shots[0]) * r
     if merge == "ml":
         # the codes are ideal (noise-free) samples; merge_ml weighs them by the noise each shot
         # would have had there, which is what tells a short, low-gain shot from a long one

@@ -316,7 +316,9 @@ def run_bench(
                    "mask_period": preset.mask_period, "exposure_s": preset.exposure_s, "seed": int(seed)}
         ids[c] = cell_id(c, context)
     jobs = group_jobs(cells)
-    todo = [j for j in jobs if not all(_is_done(_cell_path(cells_dir, ids[c])) for c in j.cells)]
+    # a job whose cells are partly done (killed between its cells) computes only the missing ones
+    todo = [Job(key=j.key, cells=missing) for j in jobs
+            if (missing := [c for c in j.cells if not _is_done(_cell_path(cells_dir, ids[c]))])]
     todo.sort(key=lambda j: -j.cost)  # longest first packs the workers better
     meta = {
         "kind": "lfproc-bench", "lfproc_version": __version__, "preset": preset.name,
