@@ -24,6 +24,7 @@ COMMANDS = (
     "evaluate",
     "simulate",
     "capture",
+    "reconstruct",
     "merge",
     "dataset",
     "virtual-illum",
@@ -42,7 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks of errors")
     parser = argparse.ArgumentParser(
         prog="lfproc",
-        description="High-dynamic-range light fields: decode, merge, calibrate, simulate, evaluate.",
+        description="High-dynamic-range light fields: decode, merge, calibrate, simulate, reconstruct, evaluate.",
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     parser.add_argument("--version", action="version", version=f"lfproc {__version__}")
