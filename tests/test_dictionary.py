@@ -402,3 +402,22 @@ def test_cli_train_killed_then_resumed_gives_the_uninterrupted_dictionary(tmp_pa
     straight = tmp_path / "s.npz"
     subprocess.run(base + ["-o", str(straight)], env=env, check=True)
     np.testing.assert_array_equal(load_dictionary(killed).atoms, load_dictionary(straight).atoms)
+
+
+def test_training_sources_files_view_folders_and_datasets(tmp_path):
+    from lfproc.dictionary import collect_lightfields
+    from lfproc.io import write_lightfield
+
+    lf = synthesize("layers", size=(16, 16), views=5, random_state=1)
+    ds = tmp_path / "dataset"
+    for name in ("a", "b"):
+        (ds / "scenes" / name).mkdir(parents=True)
+        write_lightfield(lf, ds / "scenes" / name / "hdr.exr")
+    (ds / "manifest.json").write_text("[]")
+    single = write_lightfield(lf, tmp_path / "one.exr")
+    found = collect_lightfields([ds, single])
+    assert [p.relative_to(tmp_path).as_posix() for p in found] == ["dataset/scenes/a/hdr.exr",
+                                                                   "dataset/scenes/b/hdr.exr", "one.exr"]
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="no light fields"):
+        collect_lightfields([tmp_path / "empty"])

@@ -58,7 +58,7 @@ class Preset:
 PRESETS: dict[str, Preset] = {
     "tiny": Preset(patch=(5, 5, 4, 4, 3), atoms=1200, sparsity=6, iterations=4, patches=6000, synthetic_scenes=8,
                    synthetic_size=(64, 64)),
-    "default": Preset(patch=(5, 5, 8, 8, 3), atoms=2560, sparsity=10, iterations=20, patches=60000,
+    "default": Preset(patch=(5, 5, 8, 8, 3), atoms=2560, sparsity=10, iterations=10, patches=32000,
                       synthetic_scenes=48, synthetic_size=(128, 128)),
     "paper": Preset(patch=(5, 5, 9, 9, 3), atoms=16402, sparsity=10, iterations=20, patches=300000,
                     synthetic_scenes=240, synthetic_size=(160, 160)),
