@@ -30,6 +30,10 @@ def register(sub, common) -> None:
     p.add_argument("--sparsity", type=int, default=None, help="atoms per patch for omp (default: the dictionary's)")
     p.add_argument("--scale", default="patch", metavar="patch|global",
                    help="per-patch scale normalisation (default) or one scale for the capture")
+    p.add_argument("--per-shot", default=None, metavar="debevec|ml", dest="per_shot",
+                   help="the paper's baselines (captures of global-ISO shots: simulate --baseline individual-iso|"
+                        "bracketing): reconstruct every shot alone and merge them view by view with Debevec hat "
+                        "weights or the noise-aware ML merge (lfproc.bench.reconstruct_per_shot)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=None,
                        help="solve blocks of patches on a local Dask cluster of N processes")
@@ -48,9 +52,14 @@ def run(args) -> int:
     check_output(args.output, force=args.force)
     capture = load_capture(args.capture)
     dictionary = load_dictionary(args.dictionary)
-    lf = reconstruct(capture, dictionary, solver=args.solver, stride=args.stride, mu=args.mu,
-                     max_iter=args.max_iter, tol=args.tol, sparsity=args.sparsity, scale=args.scale,
-                     workers=args.workers, scheduler=args.scheduler)
+    options = dict(solver=args.solver, stride=args.stride, mu=args.mu, max_iter=args.max_iter, tol=args.tol,
+                   sparsity=args.sparsity, scale=args.scale, workers=args.workers, scheduler=args.scheduler)
+    if args.per_shot is not None:
+        from lfproc.bench import reconstruct_per_shot
+
+        lf = reconstruct_per_shot(capture, dictionary, merges=[args.per_shot], **options)[args.per_shot]
+    else:
+        lf = reconstruct(capture, dictionary, **options)
     lf = lf.replace(source=str(args.capture))
     write_lightfield(lf, args.output, force=args.force)
     rec = lf.attrs["reconstruction"]

@@ -326,3 +326,25 @@ def test_bench_bad_input_one_line_exit_2(tiny_inputs, tmp_path, capsys):
     with pytest.raises(InputError, match="at least one"):
         run_bench([], tmp_path / "lib", dictionary=dictionary)
     assert set(PRESETS) == {"quick", "paper"}
+
+
+def test_cli_reconstruct_per_shot_mode(ramp, dct8, tmp_path, capsys):
+    """`lfproc reconstruct --per-shot ml` on a bracketing capture file equals the library's result."""
+    truth = tmp_path / "ramp.exr"
+    lfproc.write_lightfield(ramp, truth)
+    capture = simulate_capture(ramp, profile="paper-low", baseline="bracketing", shots=2, mask_period=4,
+                               random_state=3)
+    cap_path = tmp_path / "b.capture.npz"
+    capture.save(cap_path)
+    dpath = tmp_path / "d.npz"
+    save_dictionary(dct8, dpath, dtype="float32")
+    out = tmp_path / "out.exr"
+    assert main(["reconstruct", str(cap_path), "-o", str(out), "--dictionary", str(dpath), "--per-shot", "ml",
+                 "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["patches"] == 2 * 15 and doc["units"] == "relative"
+    lib = reconstruct_per_shot(capture, lfproc.dictionary.load_dictionary(dpath), merges=("ml",))["ml"]
+    np.testing.assert_allclose(lfproc.read_lightfield(out).data, lib.data, rtol=1e-5, atol=1e-6 * lib.data.max())
+    assert main(["reconstruct", str(cap_path), "-o", str(tmp_path / "x.exr"), "--dictionary", str(dpath),
+                 "--per-shot", "median"]) == 2
+    assert "merge" in capsys.readouterr().err

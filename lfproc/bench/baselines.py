@@ -265,7 +265,8 @@ def reconstruct_per_shot(
     dict
         merge name -> LightField in the units of the simulated light field;
         ``attrs["per_shot_merge"]`` records the merge, and ``attrs["reconstruction"]`` the
-        per-shot reconstruction records and the total seconds.
+        first shot's reconstruction settings, the per-shot records (``per_shot``), the
+        patches and empty patches summed over the shots, and the total seconds.
     """
     from ..camera.capture import Capture, load_capture
     from ..dictionary import Dictionary, load_dictionary
@@ -294,8 +295,12 @@ def reconstruct_per_shot(
     for m in merges:
         t0 = time.perf_counter()
         lf = merge_reconstructions(recs, shots, merge=m, guard_px=guard_px)
-        record = {"per_shot": [r.attrs["reconstruction"] for r in recs],
-                  "seconds": recon_seconds + time.perf_counter() - t0,
+        per = [r.attrs["reconstruction"] for r in recs]
+        # the first shot's settings, with the figures summed or averaged over the shots
+        record = {**per[0], "patches": int(sum(p["patches"] for p in per)),
+                  "empty_patches": int(sum(p["empty_patches"] for p in per)),
+                  "iterations_mean": float(np.mean([p["iterations_mean"] for p in per])),
+                  "per_shot": per, "seconds": recon_seconds + time.perf_counter() - t0,
                   "mode": "per-shot", "merge": m}
         out[m] = lf.replace(attrs={**lf.attrs, "reconstruction": record})
     if not all(math.isfinite(float(v.data.max())) for v in out.values()):
