@@ -137,7 +137,8 @@ class Cell:
             parts.append(self.merge)
         if self.method in ("joint", "dual-iso"):
             parts.append(self.iso_pattern)
-        parts += [f"{self.shots} shot{'s' if self.shots > 1 else ''}", f"ISO {_iso_text(self.isos)}", f"noise {self.noise}"]
+        parts += [f"{self.shots} shot{'s' if self.shots > 1 else ''}", f"ISO {_iso_text(self.isos)}",
+                  f"noise {self.noise}"]
         if self.exposure != 1.0:
             parts.append(f"exposure x{self.exposure:g}")
         return ", ".join(parts)

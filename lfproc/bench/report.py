@@ -94,6 +94,19 @@ def mean_metric(rows, metric: str = "pu21_psnr_db", **want) -> float:
     return float(np.mean(vals)) if vals else float("nan")
 
 
+def _total(rows, key) -> float:
+    """Sum over jobs (the per-shot merges of one job share its time)."""
+    seen, total = set(), 0.0
+    for r in rows:
+        job = (r.get("scene"), r.get("method"), r.get("iso_pattern"), r.get("shots"), r.get("isos"), r.get("noise"),
+               r.get("exposure"))
+        v = _num(r, key)
+        if job not in seen and math.isfinite(v):
+            seen.add(job)
+            total += v
+    return total
+
+
 def _ref(**extra) -> dict:
     return {"isos": REF_ISOS, "noise": REFERENCE["noise"], "exposure": REFERENCE["exposure"], **extra}
 
@@ -278,7 +291,8 @@ def _plot_noise(rows, path: Path) -> None:
                 ax.plot(x, ys, marker=marker, color=colour, alpha=0.4 + 0.2 * shots,
                         label=f"{pattern}, {shots} shot{'s' if shots > 1 else ''}")
     for merge, style in (("debevec", "--"), ("ml", ":")):
-        ys = [mean_metric(rows, method="bracketing", shots=4, merge=merge, isos=REF_ISOS, noise=n) for n in NOISE_LEVELS]
+        ys = [mean_metric(rows, method="bracketing", shots=4, merge=merge, isos=REF_ISOS, noise=n)
+              for n in NOISE_LEVELS]
         if sum(math.isfinite(y) for y in ys) >= 2:
             ax.plot(x, ys, style, color="k", label=f"bracketing 4, {merge}")
     ax.set_xticks(x, NOISE_LEVELS)
@@ -437,6 +451,9 @@ def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict) 
     _plot_best_worst(rows, out, meta, out / plots["best_worst"])
 
     n_scenes = len({r["scene"] for r in rows})
+    crop = f"central {'x'.join(map(str, meta['crop']))} pixels of each view" if meta["crop"] else "none"
+    mask = (f"period {meta['mask_period']} px (patches share one operator per phase)" if meta["mask_period"]
+            else "not tiled (the paper's mask)")
     lines = [f"# lfproc bench: preset `{meta['preset']}`", ""]
     lines += [
         f"{len(rows)} cells on {n_scenes} scene(s); lfproc {meta['lfproc_version']}; every number below is computed "
@@ -449,8 +466,8 @@ def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict) 
         "## Settings",
         "",
         f"- Preset `{meta['preset']}`: {meta['preset_description']}.",
-        f"- Crop: {'central ' + 'x'.join(map(str, meta['crop'])) + ' pixels of each view' if meta['crop'] else 'none'}; "
-        f"mask: random, {'period ' + str(meta['mask_period']) + ' px (patches share one operator per phase)' if meta['mask_period'] else 'not tiled (the paper mask)'}; "
+        f"- Crop: {crop}; "
+        f"mask: random, {mask}; "
         f"exposure {meta['exposure_s']} s; radiance scale automatic (the brightest expected signal just saturates "
         "ISO 100 at exposure 1).",
         f"- Dictionary `{meta['dictionary']}` (patch {' x '.join(map(str, meta['dictionary_patch']))}, "
@@ -458,8 +475,11 @@ def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict) 
         "(ADMM, mu 1e-4, stride 4 unless given).",
         f"- Reference settings of Tables I, III, IV: ISO set ({REF_ISOS}), noise `{REFERENCE['noise']}`, exposure 1.",
         f"- Bench seed {meta['seed']}; each cell's seed is in results.csv.",
-        f"- Reconstruction time per cell (`seconds`): total {sum(_num(r, 'seconds') for r in rows):.0f} s, "
-        f"median {np.median([_num(r, 'seconds') for r in rows]):.1f} s, on a shared machine (upper bounds).",
+        f"- Reconstruction time per cell (`seconds`, wall): total {_total(rows, 'seconds'):.0f} s, median "
+        f"{np.nanmedian([_num(r, 'seconds') for r in rows]):.1f} s; CPU time of the reconstructions "
+        f"(`cpu_seconds`, independent of other work on the machine): total {_total(rows, 'cpu_seconds'):.0f} s "
+        "(the two merges of a per-shot baseline share their reconstructions and both carry its time). Wall "
+        "times on a shared machine are upper bounds.",
         "",
         "Scenes:",
         "",
@@ -498,7 +518,7 @@ def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict) 
                        _paper(("two-step", ""), "ssim", 2)]]), ""]
 
     lines += ["## Table III: dual-ISO rows against the multi-ISO patterns", "",
-              f"Dual ISO uses the lowest and highest ISO of the set: (100, 1600) at the reference set. Entries "
+              "Dual ISO uses the lowest and highest ISO of the set: (100, 1600) at the reference set. Entries "
               "`1 ; 2 ; 3 shots`.", ""]
     body = [["dual ISO rows (100, 1600)", _series(rows, "pu21_psnr_db", "dual-iso", "dual", shots3),
              _series(rows, "pu21_ssim", "dual-iso", "dual", shots3, digits=4),
@@ -545,8 +565,8 @@ def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict) 
         body.append([f"{method} {pattern}"] + cells)
     lines += [_table(["method"] + [f"ISO {','.join(map(str, s))}" for s in ISO_SETS], body), ""]
     exp_rows = sorted({_num(r, "exposure") for r in rows if r.get("method") == "joint"
-                       and r.get("iso_pattern") == "random" and int(r.get("shots", 0)) == 2 and r.get("isos") == REF_ISOS
-                       and r.get("noise") == REFERENCE["noise"]})
+                       and r.get("iso_pattern") == "random" and int(r.get("shots", 0)) == 2
+                       and r.get("isos") == REF_ISOS                       and r.get("noise") == REFERENCE["noise"]})
     if len(exp_rows) > 1:
         lines += ["Saturation sweep (lfproc's addition: the same scene exposed longer, joint random, 2 shots, "
                   f"ISO {REF_ISOS}):", ""]
@@ -570,7 +590,8 @@ def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict) 
                 body.append([f"{method} {pattern}, {shots} shot{'s' if shots > 1 else ''}"] + [_fmt(v) for v in vals])
     for method, merge, shots in (("individual-iso", "debevec", 4), ("individual-iso", "ml", 4),
                                  ("bracketing", "debevec", 4), ("bracketing", "ml", 4), ("bracketing-joint", "", 4)):
-        vals = [mean_metric(rows, method=method, merge=merge, shots=shots, isos=REF_ISOS, noise=n) for n in NOISE_LEVELS]
+        vals = [mean_metric(rows, method=method, merge=merge, shots=shots, isos=REF_ISOS, noise=n)
+                for n in NOISE_LEVELS]
         if sum(math.isfinite(v) for v in vals) >= 2:
             body.append([f"{method}{' ' + merge if merge else ''}, {shots} shots"] + [_fmt(v) for v in vals])
     lines += [_table(["acquisition"] + list(NOISE_LEVELS), body), ""]
