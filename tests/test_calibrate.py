@@ -85,7 +85,8 @@ def test_profile_and_read_noise_split(result, profile):
     m = result.read_noise_model
     assert m["sigma_pre_e"] == pytest.approx(2.8, rel=0.03)
     assert m["sigma_post_dn"] < 0.3
-    assert result.unknown == {}
+    assert list(result.unknown) == ["quantum_efficiency"]  # frames carry no photon counts
+    assert "photon counts" in result.unknown["quantum_efficiency"]
 
 
 def test_csv_and_json_manifests_agree(frames, result):
