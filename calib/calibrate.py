@@ -49,13 +49,13 @@ import numpy as np
 
 from lfproc._util import check_positive, progress
 from lfproc._version import __version__
-from lfproc.errors import CalibrationError, InputError
+from lfproc.errors import CalibrationError, InputError, MissingFileError
 
 from .emva import SIGMA2_Q, EmvaDescriptor, evaluate, is_descriptor, read_descriptor, reduce_descriptor
 from .frames import FrameChecker, FrameRecord, _channel_names, read_frame, read_manifest
 from .profile import MONO, CameraProfile, IsoFigures
 
-__all__ = ["calibrate", "CalibrationResult", "DEFAULT_ISO_KEY"]
+__all__ = ["calibrate", "find_calibration_input", "CalibrationResult", "DEFAULT_ISO_KEY", "MANIFEST_NAMES"]
 
 DEFAULT_ISO_KEY = "default"
 #: EMVA 1288 figures copied into the profile's ``source["emva1288"]`` (per ISO key) for ``profile show``.
@@ -526,6 +526,42 @@ def _median(values):
 
 
 # -- public entry ------------------------------------------------------------------------------
+MANIFEST_NAMES = ("manifest.json", "manifest.csv")
+
+
+def find_calibration_input(path: str | os.PathLike) -> Path:
+    """The calibration input ``path`` names: the file itself, or, for a folder, the frame manifest
+    (``manifest.json``, else ``manifest.csv``) or the one EMVA 1288 descriptor inside it.
+
+    Raises
+    ------
+    MissingFileError
+        ``path`` does not exist.
+    InputError
+        A folder holding neither, or several descriptors and no manifest (they are named).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise MissingFileError(f"{path}: no such file or folder; expected a frame manifest (.csv/.json), an EMVA "
+                               "1288 descriptor, or a folder holding one")
+    if not path.is_dir():
+        return path
+    for name in MANIFEST_NAMES:
+        if (path / name).is_file():
+            return path / name
+    descriptors = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in (".txt", "")
+                         and is_descriptor(p))
+    if len(descriptors) == 1:
+        return descriptors[0]
+    if descriptors:
+        raise InputError(f"{path}: a folder with {len(descriptors)} EMVA 1288 descriptors "
+                         f"({', '.join(p.name for p in descriptors)}); name the one to use")
+    found = sorted(p.name for p in path.iterdir())
+    listing = ", ".join(found[:6]) + (" ..." if len(found) > 6 else "") if found else "nothing"
+    raise InputError(f"{path}: a folder; expected a frame manifest ({' or '.join(MANIFEST_NAMES)}) or an EMVA 1288 "
+                     f"descriptor (a .txt file starting with 'v' and 'n' lines) inside it, found {listing}")
+
+
 def calibrate(
     frames_or_manifest,
     *,
@@ -540,7 +576,8 @@ def calibrate(
     Parameters
     ----------
     frames_or_manifest : str, Path, list of FrameRecord or EmvaDescriptor
-        A manifest (CSV or JSON), an EMVA 1288 descriptor file, frame records (see
+        A manifest (CSV or JSON), an EMVA 1288 descriptor file, a folder holding one of them
+        (:func:`find_calibration_input`), frame records (see
         :func:`lfproc.calib.frames.read_manifest`) or a parsed descriptor.
     name : str, optional
         Profile name (default: the manifest's ``name``, else the input's file stem).
@@ -574,7 +611,7 @@ def calibrate(
     if isinstance(frames_or_manifest, EmvaDescriptor):
         return _calibrate_emva(frames_or_manifest, name=name, adc_bits=adc_bits, cfa_pattern=cfa_pattern, iso=iso)
     if isinstance(frames_or_manifest, (str, os.PathLike)):
-        source_path = Path(frames_or_manifest)
+        source_path = find_calibration_input(frames_or_manifest)
         if source_path.is_file() and source_path.suffix.lower() not in (".csv", ".json") and is_descriptor(source_path):
             return _calibrate_emva(read_descriptor(source_path), name=name, adc_bits=adc_bits,
                                    cfa_pattern=cfa_pattern, iso=iso)

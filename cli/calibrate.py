@@ -1,7 +1,8 @@
 """``lfproc calibrate``: measure a camera profile, or simulate the frames a profile predicts.
 
 * ``lfproc calibrate INPUT -o PROFILE.json [--report DIR] [--json] [--force]``: INPUT is a
-  frame manifest (CSV/JSON) or an EMVA 1288 descriptor.
+  frame manifest (CSV/JSON), an EMVA 1288 descriptor, or a folder holding one of them (as
+  ``calibrate simulate-frames`` writes).
 * ``lfproc calibrate simulate-frames --profile PROFILE -o DIR [--format manifest|emva]
   [--seed N] [--size H W] [--iso ISO ...] [--force]``.
 
@@ -27,7 +28,8 @@ def register(sub, common) -> None:
         "saturation and full well per ISO from a frame manifest (CSV/JSON) or an EMVA 1288 descriptor. "
         f"lfproc calibrate {SIMULATE} --profile PROFILE -o DIR: write the frames a profile predicts.",
     )
-    p.add_argument("input", metavar="INPUT", help=f"manifest (.csv/.json), EMVA 1288 descriptor, or the word {SIMULATE}")
+    p.add_argument("input", metavar="INPUT", help="manifest (.csv/.json), EMVA 1288 descriptor, a folder holding one "
+                   f"(manifest.json, manifest.csv or one descriptor), or the word {SIMULATE}")
     p.add_argument("-o", "--output", required=True, type=Path,
                    help="profile JSON to write (calibrate) or output folder (simulate-frames)")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from lfproc.calib import load_profile
-from lfproc.calib.calibrate import calibrate
+from lfproc.calib.calibrate import calibrate, find_calibration_input
 from lfproc.calib.frames import read_manifest
 from lfproc.calib.report import write_report
 from lfproc.calib.simulate_frames import expected_figures, simulate_frames
@@ -90,8 +90,10 @@ def test_profile_and_read_noise_split(result, profile):
 
 
 def test_csv_and_json_manifests_agree(frames, result):
-    other = calibrate(frames.with_name("manifest.json"))
-    assert other.profile.name == "test-high-simulated"
+    # the folder simulate-frames wrote: calibrate finds its manifest.json
+    assert find_calibration_input(frames.parent) == frames.with_name("manifest.json")
+    other = calibrate(frames.parent)
+    assert other.profile.name == "test-high-simulated" and other.source["input"].endswith("manifest.json")
     for iso in ISOS:
         assert other.figures[str(iso)]["gain_dn_per_e"] == result.figures[str(iso)]["gain_dn_per_e"]
 
@@ -283,7 +285,9 @@ def test_cli_simulate_frames(tmp_path, capsys):
     [
         (["calibrate", "simulate-frames", "-o", "X"], "--profile is required"),
         (["calibrate", "M", "-o", "p.json", "--seed", "3"], "--seed: only for 'lfproc calibrate simulate-frames'"),
-        (["calibrate", "nothere.csv", "-o", "p.json"], "nothere.csv: no such manifest"),
+        (["calibrate", "nothere.csv", "-o", "p.json"], "nothere.csv: no such file or folder; expected a frame manifest"),
+        (["calibrate", ".", "-o", "p.json"], ".: a folder; expected a frame manifest (manifest.json or manifest.csv) "
+                                             "or an EMVA 1288 descriptor"),
     ],
 )
 def test_cli_errors_one_line(argv, match, tmp_path, capsys, monkeypatch):

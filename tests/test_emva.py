@@ -124,7 +124,8 @@ def test_calibrate_emva_to_profile(emva_set, tmp_path, capsys):
     assert res.profile.isos[100].full_well_e == pytest.approx(want["saturation_capacity_e"], rel=0.015)
     assert f["saturation_capacity_emva_e"] == pytest.approx(f["emva1288"]["u_e_sat"])
     assert f["saturation_capacity_emva_e"] < res.profile.isos[100].full_well_e
-    assert main(["calibrate", str(emva_set), "-o", str(tmp_path / "p.json"), "--json"]) == 0
+    # the folder holding the descriptor is accepted as well
+    assert main(["calibrate", str(emva_set.parent), "-o", str(tmp_path / "p.json"), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     figs = doc["isos"]["default"]
     for key in ("gain_dn_per_e", "read_noise_dn", "read_noise_e", "black_level_dn", "full_well_e",
