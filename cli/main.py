@@ -28,6 +28,7 @@ COMMANDS = (
     "virtual-illum",
     "whites",
     "decode",
+    "extract",
     "calibrate",
     "profile",
 )

@@ -468,6 +468,9 @@ def decode_capture(capture: str | os.PathLike, *, white_db: str | os.PathLike | 
 
     Raises
     ------
+    LfpFormatError
+        The file holds no raw lenslet image (a processed focal stack or depth map: the message
+        says what it holds; :func:`lfproc.lytro.extract.extract_lfp` writes it out).
     InputError
         Neither ``white_db`` nor ``white`` given, or a bad option.
     NoWhiteImageError
@@ -480,9 +483,9 @@ def decode_capture(capture: str | os.PathLike, *, white_db: str | os.PathLike | 
 
     check_choice("colour", colour, ("linear", "srgb"))
     check_choice("demosaic method", demosaic_method, DEMOSAIC_METHODS)
+    cap = read_capture(capture, verify=verify)  # first: a file without a raw image is named as such
     if white_db is None and white is None:
         raise InputError("decode: give a white-image database (--white-db DB_DIR) or a white image (--white FILE)")
-    cap = read_capture(capture, verify=verify)
     if white is not None:
         wraw, entry = read_white_file(white)
         how = "explicit file"
