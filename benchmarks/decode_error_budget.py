@@ -20,8 +20,11 @@ sensor) set to 0 instead of inpainted from their usable neighbours.
 What stays when all are ideal is the slicing itself (bilinear sampling of the sensor image at
 each view's position, which mixes neighbouring views) and the forward model's own sampling.
 Scores follow :mod:`lfproc.lytro.score` (99.9th-percentile peak, clipped truth left out,
-4-pixel border), centre view and all 25 views; the border's share is shown by scoring with
-borders of 0, 4 and 12 pixels.
+4-pixel border), centre view and all 25 views, over all scored samples and split (on the same
+peak) into those within 5 px of a clipped truth sample (``near``: next to the sun, where the
+sensor pixels that record a sample also see the clipped highlight through neighbouring views
+and pixels) and the rest (``away``); the border's share is shown by scoring with borders of 0,
+4 and 12 pixels.
 
 Usage::
 
@@ -32,7 +35,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 
