@@ -36,10 +36,14 @@ from lfproc.errors import FileFormatError, MissingFileError, ProfileError
 from lfproc.io._atomic import atomic_file
 
 __all__ = [
+    "MONO",
+    "BAYER_PATTERNS",
+    "describe_profile",
     "CameraProfile",
     "IsoFigures",
     "load_profile",
     "save_profile",
+    "is_profile_file",
     "paper_gain_dn_per_e",
     "SHIPPED_PROFILES",
     "SCHEMA",
@@ -50,7 +54,10 @@ SCHEMA = "lfproc.camera_profile"
 SCHEMA_VERSION = 1
 _PROFILE_DIR = Path(__file__).resolve().parent / "profiles"
 SHIPPED_PROFILES = ("illum", "paper-none", "paper-low", "paper-medium", "paper-high")
-_CFA = ("RGGB", "GRBG", "GBRG", "BGGR")
+#: ``cfa_pattern`` of a monochrome sensor (no colour filter array).
+MONO = "mono"
+BAYER_PATTERNS = ("RGGB", "GRBG", "GBRG", "BGGR")
+_CFA = BAYER_PATTERNS + (MONO,)
 
 
 def paper_gain_dn_per_e(iso: float, *, adc_bits: int, full_well_e: float) -> float:
@@ -93,7 +100,9 @@ class CameraProfile:
     gamma : float
         Power-law response exponent (1 = linear raw).
     cfa_pattern : str
-        Bayer layout as a row-major string from the top-left pixel, e.g. ``"RGGB"``.
+        Bayer layout as a row-major string from the top-left pixel, e.g. ``"RGGB"``, or
+        ``"mono"`` for a monochrome sensor (no colour filters; the coded-mask camera simulator
+        needs a Bayer layout and refuses it).
     isos : dict
         ISO (int) -> :class:`IsoFigures`.
     dark_current_e_per_s : float
@@ -174,6 +183,11 @@ class CameraProfile:
     @property
     def iso_values(self) -> list[int]:
         return sorted(self.isos)
+
+    @property
+    def is_mono(self) -> bool:
+        """True for a monochrome sensor (``cfa_pattern == "mono"``)."""
+        return self.cfa_pattern == MONO
 
     def iso_figures(self, iso: float) -> IsoFigures:
         """Figures of one ISO; :class:`ProfileError` naming the available ISOs otherwise."""
@@ -332,6 +346,36 @@ def _check_number(value, name: str, *, integer: bool = False, low=None, high=Non
         raise ProfileError(f"field {name!r}: expected a value {'>' if strict else '>='} {low}, found {value!r}")
     if high is not None and value > high:
         raise ProfileError(f"field {name!r}: expected a value <= {high}, found {value!r}")
+
+
+def describe_profile(profile: CameraProfile) -> dict[str, Any]:
+    """The profile as one JSON-ready dict: its JSON form, the bias frames' shapes and the
+    saturation code of every ISO (:meth:`CameraProfile.saturation_dn`, ``None`` when unknown).
+    ``lfproc profile show`` and ``lfproc info`` print it."""
+    doc = profile.to_json()
+    doc = {"kind": "camera_profile", **doc}
+    doc["bias_frames"] = {str(iso): list(frame.shape) for iso, frame in sorted(profile.bias_frames.items())}
+    doc["flat_field"] = None if profile.flat_field is None else list(profile.flat_field.shape)
+    doc["saturation_dn"] = {}
+    for iso in profile.iso_values:
+        try:
+            doc["saturation_dn"][str(iso)] = profile.saturation_dn(iso)
+        except ProfileError:  # an ISO without gain: its saturation is unknown
+            doc["saturation_dn"][str(iso)] = None
+    return doc
+
+
+def is_profile_file(path: str | os.PathLike) -> bool:
+    """True when ``path`` is a JSON file whose ``schema`` is a camera profile's."""
+    path = Path(path)
+    if not path.is_file() or path.suffix.lower() != ".json":
+        return False
+    try:
+        with open(path, encoding="utf-8") as fh:
+            head = fh.read(4096)
+    except (OSError, UnicodeDecodeError):
+        return False
+    return f'"{SCHEMA}"' in head
 
 
 def load_profile(name_or_path: str | os.PathLike | CameraProfile) -> CameraProfile:

@@ -30,6 +30,7 @@ COMMANDS = (
     "virtual-illum",
     "whites",
     "decode",
+    "extract",
     "calibrate",
     "profile",
     "dictionary",

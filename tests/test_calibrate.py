@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from lfproc.calib import load_profile
-from lfproc.calib.calibrate import calibrate
+from lfproc.calib.calibrate import calibrate, find_calibration_input
 from lfproc.calib.frames import read_manifest
 from lfproc.calib.report import write_report
 from lfproc.calib.simulate_frames import expected_figures, simulate_frames
@@ -85,12 +85,15 @@ def test_profile_and_read_noise_split(result, profile):
     m = result.read_noise_model
     assert m["sigma_pre_e"] == pytest.approx(2.8, rel=0.03)
     assert m["sigma_post_dn"] < 0.3
-    assert result.unknown == {}
+    assert list(result.unknown) == ["quantum_efficiency"]  # frames carry no photon counts
+    assert "photon counts" in result.unknown["quantum_efficiency"]
 
 
 def test_csv_and_json_manifests_agree(frames, result):
-    other = calibrate(frames.with_name("manifest.json"))
-    assert other.profile.name == "test-high-simulated"
+    # the folder simulate-frames wrote: calibrate finds its manifest.json
+    assert find_calibration_input(frames.parent) == frames.with_name("manifest.json")
+    other = calibrate(frames.parent)
+    assert other.profile.name == "test-high-simulated" and other.source["input"].endswith("manifest.json")
     for iso in ISOS:
         assert other.figures[str(iso)]["gain_dn_per_e"] == result.figures[str(iso)]["gain_dn_per_e"]
 
@@ -357,7 +360,9 @@ def test_cli_simulate_frames(tmp_path, capsys):
     [
         (["calibrate", "simulate-frames", "-o", "X"], "--profile is required"),
         (["calibrate", "M", "-o", "p.json", "--seed", "3"], "--seed: only for 'lfproc calibrate simulate-frames'"),
-        (["calibrate", "nothere.csv", "-o", "p.json"], "nothere.csv: no such manifest"),
+        (["calibrate", "nothere.csv", "-o", "p.json"], "nothere.csv: no such file or folder; expected a frame manifest"),
+        (["calibrate", ".", "-o", "p.json"], ".: a folder; expected a frame manifest (manifest.json or manifest.csv) "
+                                             "or an EMVA 1288 descriptor"),
     ],
 )
 def test_cli_errors_one_line(argv, match, tmp_path, capsys, monkeypatch):

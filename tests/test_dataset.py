@@ -240,3 +240,58 @@ def test_cli_dataset_build_virtual_illum_killed_then_resumed(tmp_path, capsys):
         ratio = merged.data[bright] * t0 / truth.data[bright]
         assert bright.sum() > 1000
         assert 0.8 < np.median(ratio) < 1.2, (row["scene"], float(np.median(ratio)))
+
+
+def _png_bracket(folder, n=2):
+    """``n`` 8-bit PNGs without EXIF (a bracket whose exposure times only a file can give)."""
+    folder.mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    base = rng.random((20, 30, 3))
+    for k in range(n):
+        iio.imwrite(folder / f"img{k}.png", (np.clip(base * 2.0**k * 0.3, 0, 1) * 255).astype(np.uint8))
+
+
+def test_exposure_file_forms_and_errors(tmp_path):
+    from lfproc.dataset import read_exposure_file
+    from lfproc.errors import InputError
+
+    inputs = [tmp_path / "b.png", tmp_path / "a.png", tmp_path / "c.png"]
+    f = tmp_path / "exposures.txt"
+    f.write_text("# name seconds\na.png 1/8\nb.png 0.5\nc.png 2  # long\n")
+    assert read_exposure_file(f, inputs) == [0.5, 0.125, 2.0]
+    f.write_text("1/8\n0.5\n2\n")  # bare seconds: in the order of the sorted names a, b, c
+    assert read_exposure_file(f, inputs) == [0.5, 0.125, 2.0]
+    j = tmp_path / "exposures.json"
+    j.write_text(json.dumps({"a.png": 0.125, "b.png": "1/2", "c.png": 2}))
+    assert read_exposure_file(j, inputs) == [0.5, 0.125, 2.0]
+    j.write_text(json.dumps([0.125, 0.5, 2]))
+    assert read_exposure_file(j, inputs) == [0.5, 0.125, 2.0]
+    for text, match in (("a.png 1/8\nb.png 0.5\n", "no exposure time for c.png"),
+                        ("a.png 1\nb.png 1\nc.png 1\nd.png 1\n", "names not in the bracket: d.png"),
+                        ("1\n2\n", "2 exposure time\\(s\\) for 3 inputs"),
+                        ("a.png 1\n2\n3\n", "mixes"),
+                        ("a.png -1\nb.png 1\nc.png 1\n", "line 1: expected a positive exposure time"),
+                        ("a.png x\nb.png 1\nc.png 1\n", "line 1: expected seconds")):
+        f.write_text(text)
+        with pytest.raises(InputError, match=match):
+            read_exposure_file(f, inputs)
+
+
+def test_bracket_without_exif_points_to_the_exposure_file(tmp_path):
+    """No EXIF: the build says to write SCENE/exposures.txt (lfproc merge's --exposures-s does not exist
+    here) in one line, with no Dask traceback; with the file the scene is built with its times."""
+    _png_bracket(tmp_path / "scenes" / "s")
+    out = tmp_path / "ds"
+    cmd = [sys.executable, "-m", "lfproc.cli.main", "dataset", "build", str(tmp_path / "scenes"), "-o", str(out),
+           "--workers", "1"]  # a Dask local cluster in a process of its own, as a user runs it
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300,
+                         env=dict(os.environ, LFPROC_PROGRESS="0", PYTHONWARNINGS="ignore"))
+    assert res.returncode == 2
+    err = res.stderr
+    assert "exposures.txt" in err and "img0.png" in err and "--exposures-s" not in err
+    assert "Traceback" not in err and "distributed.worker" not in err
+    (tmp_path / "scenes" / "s" / "exposures.txt").write_text("img0.png 1/100\nimg1.png 1/50\n")
+    assert main(["dataset", "build", str(tmp_path / "scenes"), "-o", str(out), "--scheduler", "synchronous"]) == 0
+    (row,) = read_manifest(out)
+    assert row["exposures_s"] == pytest.approx([0.01, 0.02])
+    assert row["exposure_file"].endswith("exposures.txt")

@@ -14,7 +14,7 @@ from lfproc.calib.emva import (EmvaDescriptor, EmvaStep, evaluate_descriptor, fo
                                read_descriptor, saturation_index, write_descriptor)
 from lfproc.calib.simulate_frames import expected_figures, simulate_frames
 from lfproc.cli.main import main
-from lfproc.errors import CalibrationError, FileFormatError, OutputExistsError
+from lfproc.errors import CalibrationError, FileFormatError, InputError, OutputExistsError
 
 
 @pytest.fixture(scope="module")
@@ -118,8 +118,14 @@ def test_calibrate_emva_to_profile(emva_set, tmp_path, capsys):
     assert f["read_noise_e"] == pytest.approx(2.8, rel=0.02)
     assert res.profile.iso_values == [100] and "no ISO" in res.profile.unknown["iso"]
     assert res.profile.adc_bits == 12
-    assert res.profile.isos[100].full_well_e == pytest.approx(f["emva1288"]["u_e_sat"])
-    assert main(["calibrate", str(emva_set), "-o", str(tmp_path / "p.json"), "--json"]) == 0
+    # the profile's full well reaches the code where the over-exposed pairs pile up (the ADC
+    # clip, 4095 DN); the EMVA saturation capacity at the variance maximum lies below it
+    want = expected_figures(load_profile("paper-high"), 100)
+    assert res.profile.isos[100].full_well_e == pytest.approx(want["saturation_capacity_e"], rel=0.015)
+    assert f["saturation_capacity_emva_e"] == pytest.approx(f["emva1288"]["u_e_sat"])
+    assert f["saturation_capacity_emva_e"] < res.profile.isos[100].full_well_e
+    # the folder holding the descriptor is accepted as well
+    assert main(["calibrate", str(emva_set.parent), "-o", str(tmp_path / "p.json"), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     figs = doc["isos"]["default"]
     for key in ("gain_dn_per_e", "read_noise_dn", "read_noise_e", "black_level_dn", "full_well_e",
@@ -168,3 +174,61 @@ def test_wrong_frame_size_is_named(tmp_path):
     cv2.imwrite(str(tmp_path / "dark1_1.png"), np.zeros((4, 8), np.uint16))
     with pytest.raises(CalibrationError, match=r"dark1_1.png: frame is 4x8 pixels; the descriptor's 'n' line says 8x8"):
         evaluate_descriptor(path)
+
+
+def test_emva_figures_shown_and_consistent_everywhere(emva_set, tmp_path, capsys):
+    """QE, sigma_y.dark and the saturation capacity appear in the calibrate output, the report
+    summary and profile show, and the saturation code is the same number in all of them."""
+    prof = tmp_path / "p.json"
+    report = tmp_path / "report"
+    assert main(["calibrate", str(emva_set), "-o", str(prof), "--report", str(report), "--json"]) == 0
+    figs = json.loads(capsys.readouterr().out)["isos"]["default"]
+    assert figs["quantum_efficiency"] == pytest.approx(1.0, rel=0.02)  # lfproc's sensor has QE 1
+    assert figs["temporal_dark_noise_dn"] == pytest.approx(np.hypot(0.5733, np.sqrt(1 / 12)), rel=0.03)
+    assert figs["saturation_capacity_emva_e"] is not None
+    # the simulated set's brightest pairs clip at the 12-bit ADC code (test_simulated_emva_set_layout)
+    assert figs["saturation_dn"] == 4095
+    assert main(["profile", "show", str(prof), "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["saturation_dn"]["100"] == figs["saturation_dn"]
+    assert shown["source"]["emva1288"]["100"]["quantum_efficiency"] == pytest.approx(figs["quantum_efficiency"])
+    summary = (report / "summary.md").read_text()
+    qe_row = next(line for line in summary.splitlines() if line.startswith("| QE"))
+    assert f"{figs['quantum_efficiency']:.5g}" in qe_row
+    cap_row = next(line for line in summary.splitlines() if "mu_e.sat" in line)
+    assert "unknown" not in cap_row and f"{figs['saturation_capacity_emva_e']:.5g}" in cap_row
+    sat_row = next(line for line in summary.splitlines() if line.startswith("| saturation (DN)"))
+    assert "| 4095 |" in sat_row
+    # text outputs
+    assert main(["calibrate", str(emva_set), "-o", str(prof), "--force"]) == 0
+    text = capsys.readouterr().out
+    assert "quantum_efficiency" in text and "temporal_dark_noise_dn" in text and "monochrome" in text
+    assert main(["profile", "show", str(prof)]) == 0
+    text = capsys.readouterr().out
+    qe = next(line for line in text.splitlines() if line.startswith("quantum_efficiency"))
+    assert f"{figs['quantum_efficiency']:.5g}" in qe
+    sat = next(line for line in text.splitlines() if line.startswith("saturation_dn"))
+    assert sat.split()[1] == "4095"
+
+
+def test_emva_sensor_stays_monochrome(emva_set, tmp_path, capsys):
+    res = calibrate(emva_set)
+    assert res.profile.cfa_pattern == "mono" and res.profile.is_mono
+    assert "cfa_pattern" not in res.profile.unknown
+    from lfproc.calib import save_profile
+
+    save_profile(res.profile, tmp_path / "m.json")
+    assert load_profile(tmp_path / "m.json").cfa_pattern == "mono"
+    assert main(["profile", "show", str(tmp_path / "m.json")]) == 0
+    out = capsys.readouterr().out
+    assert "RGGB" not in out and "mono" in out
+    # a Bayer sensor measured per channel: --cfa says so
+    assert calibrate(emva_set, cfa_pattern="GRBG").profile.cfa_pattern == "GRBG"
+    # the coded-mask camera needs a Bayer sensor: one line naming the reason
+    from lfproc.synth import synthesize
+
+    lf = synthesize("layers", size=(16, 16), views=3, random_state=0)
+    with pytest.raises(InputError, match="monochrome"):
+        from lfproc.camera.simulate import simulate_capture
+
+        simulate_capture(lf, profile=res.profile, isos=[100], random_state=0)

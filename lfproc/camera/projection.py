@@ -87,6 +87,9 @@ def cfa_index_map(pattern: str, size: tuple[int, int], *, offset: tuple[int, int
     -------
     ndarray of shape (H, W), int8
     """
+    if str(pattern).lower() == "mono":
+        raise InputError("cfa_pattern: the camera profile is monochrome ('mono'); the coded-mask camera simulates a "
+                         f"Bayer colour sensor: use a colour profile or give one of {', '.join(CFA_PATTERNS)}")
     pattern = check_choice("cfa_pattern", str(pattern).upper(), CFA_PATTERNS)
     tile = np.array([_COLOUR_INDEX[ch] for ch in pattern], dtype=np.int8).reshape(2, 2)
     rows = (np.arange(size[0]) + offset[0]) % 2
