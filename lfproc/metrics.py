@@ -114,6 +114,7 @@ __all__ = [
     "pu2_psnr",
     "log_psnr",
     "mean_relative_error",
+    "log_luminance_error",
     "evaluate",
 ]
 
@@ -474,6 +475,34 @@ def log_psnr(result: Any, reference: Any, *, peak_luminance: float | None = 1000
     y_res, y_ref, display_peak = _scaled_luminance(result, reference, peak_luminance, channel_axis)
     mse = np.mean(np.square(_log_luminance(y_res) - _log_luminance(y_ref)))
     return float(_psnr_from_mse(mse, _log_peak(display_peak)))
+
+
+def log_luminance_error(result: Any, reference: Any, *, mask: Any = None, align: str = "gain") -> float:
+    """RMS of the natural-log luminance difference, after one fitted gain (``align="gain"``).
+
+    ``sqrt(mean((ln Y_res - ln Y_ref - c)^2))`` over the samples of ``mask`` (default: all)
+    whose reference luminance is positive; ``c`` is the mean log ratio (the least-squares gain,
+    since a merged radiance map from 8-bit images has an arbitrary scale) or 0 with
+    ``align="none"``. Luminance with :data:`PU21_LUMA` weights (RGB on the last axis; one
+    channel as is). Result luminances below 1e-12 of the reference mean are clamped there.
+    """
+    check_choice("align", align, ("gain", "none"))
+    res, ref = _check_pair(result, reference)
+    y_res = metric_luminance(res) if res.shape[-1] in (1, 3) and res.ndim > 1 else res
+    y_ref = metric_luminance(ref) if ref.shape[-1] in (1, 3) and ref.ndim > 1 else ref
+    keep = y_ref > 0
+    if mask is not None:
+        m = np.asarray(mask, dtype=bool)
+        if m.shape != keep.shape:
+            raise ShapeError(f"mask: expected shape {keep.shape} (the luminance), got {m.shape}")
+        keep &= m
+    if not keep.any():
+        raise InputError("log_luminance_error: no sample with a positive reference luminance in the mask")
+    floor = 1e-12 * float(y_ref[keep].mean())
+    d = np.log(np.maximum(y_res[keep], floor)) - np.log(y_ref[keep])
+    if align == "gain":
+        d = d - d.mean()
+    return float(np.sqrt(np.mean(d * d)))
 
 
 def mean_relative_error(result: Any, reference: Any, *, epsilon_relative: float = 1e-3) -> float:
