@@ -60,6 +60,7 @@ __all__ = [
     "hat_weight",
     "merge_lightfields",
     "merge_with_variances",
+    "check_exposure_order",
 ]
 
 MERGE_METHODS = ("ml", "debevec")
@@ -902,6 +903,50 @@ def _exposure_of(lf: LightField, i: int, given, what: str) -> float:
     return float(value)
 
 
+def check_exposure_order(
+    stack,
+    exposures_s: Sequence[float],
+    *,
+    names: Sequence[str] | None = None,
+    saturation: Sequence[float | None] | None = None,
+    max_samples: int = 1_000_000,
+) -> None:
+    """Refuse exposure times that contradict the images (a longer exposure must not be darker).
+
+    For every two exposures adjacent in the given times (equal times are skipped), the samples
+    that are neither 0 nor clipped (``>= saturation``, default: that image's maximum) in both are
+    compared: if the longer exposure is darker in more than half of them and in more than twice as
+    many as it is brighter, the times are in the wrong order (typically ``1/t`` given for ``t``,
+    or files listed against their times) and :class:`InputError` names the two inputs. Up to
+    ``max_samples`` samples per image are compared (a regular subsample).
+    """
+    arr = _as_stack(stack, "stack")
+    n = arr.shape[0]
+    t = _per_exposure("exposures_s", exposures_s, n)
+    names = list(names) if names is not None else [f"input {i + 1}" for i in range(n)]
+    flat = arr.reshape(n, -1)
+    step = max(1, flat.shape[1] // max_samples)
+    flat = flat[:, ::step].astype(np.float32)
+    sat = [None] * n if saturation is None else list(saturation)
+    top = np.array([float(flat[i].max()) if sat[i] is None else float(sat[i]) for i in range(n)], np.float32)
+    order = np.argsort(t, kind="stable")
+    for a, b in zip(order[:-1], order[1:]):
+        if t[b] <= t[a]:
+            continue
+        ok = (flat[a] > 0) & (flat[b] > 0) & (flat[a] < top[a]) & (flat[b] < top[b])
+        count = int(ok.sum())
+        if count < 16:
+            continue
+        darker = float(np.mean(flat[b][ok] < flat[a][ok]))
+        brighter = float(np.mean(flat[b][ok] > flat[a][ok]))
+        if darker > 0.5 and darker > 2 * brighter:
+            raise InputError(
+                f"exposure times contradict the images: {names[b]} ({t[b]:g} s) is darker than {names[a]} "
+                f"({t[a]:g} s) in {darker:.0%} of the pixels usable in both; give the times in seconds, one per "
+                "input in the inputs' order (1/t given for t?)"
+            )
+
+
 def merge_lightfields(
     lfs: Sequence[LightField],
     *,
@@ -985,6 +1030,7 @@ def merge_lightfields(
         raise InputError("inputs mix 8-bit non-linear images with linear data")
     codes8 = codes8[0]
     data = np.stack([lf.data for lf in lfs])
+    check_exposure_order(data, t, names=names, saturation=[1.0 if codes8 else lf.saturation_level for lf in lfs])
     prof = None
     if profile is not None:
         from .calib import load_profile

@@ -392,3 +392,29 @@ def test_cli_merge_ml_8bit_without_iso(tmp_path, capsys):
     assert doc["method"] == "ml" and doc["has_variance"]
     lf = read_lightfield(out)
     assert lf.attrs["input_mapping"] == "codes8" and lf.variance is not None
+
+
+def test_exposure_times_contradicting_the_images_are_refused(tmp_path, capsys):
+    """1/t passed for t: the longest 'time' is the darkest image; main merged it silently."""
+    from lfproc.merge import check_exposure_order
+
+    pngs = _write_png_bracket(tmp_path)  # written at 0.25, 0.5, 1 s (brighter with time)
+    out = tmp_path / "o.exr"
+    assert main(["merge", *map(str, pngs), "-o", str(out), "--exposures-s", "4,2,1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "exposure times contradict the images" in err
+    assert f"{pngs[1]} (2 s) is darker than {pngs[2]} (1 s)" in err
+    assert not out.exists()
+    # listing the files against their times is the same mistake
+    assert main(["merge", str(pngs[2]), str(pngs[1]), str(pngs[0]), "-o", str(out), "--exposures-s",
+                 "0.25,0.5,1"]) == 2
+    assert "contradict" in capsys.readouterr().err
+    # the right order passes, for every estimator and linear data
+    assert main(["merge", *map(str, pngs), "-o", str(out), "--exposures-s", "0.25,0.5,1"]) == 0
+    truth, dn = _bracket(size=(16, 20), views=1, seed=2)
+    check_exposure_order(dn, TIMES)
+    with pytest.raises(InputError, match=r"input 4 \(0.02 s\) is darker than input 5 \(0.01 s\)"):
+        check_exposure_order(dn, TIMES[::-1])
+    with pytest.raises(InputError, match="darker"):
+        merge_lightfields([LightField(data=d.astype(np.float32), units="dn", exposure_s=t, iso=100)
+                           for d, t in zip(dn, TIMES[::-1])], method="ml", profile="illum")
