@@ -1045,14 +1045,16 @@ def merge_lightfields(
             radiance, variance, info = merge_ml_codes8(stack, exposures_s=t, response=response,
                                                        random_state=random_state, n_threads=n_threads,
                                                        chunk_size=chunk_size)
-            return _finish(lfs, names, method, t, iso, prof, "codes8", radiance, variance, info, "relative", n_iter)
+            return _finish(lfs, names, method, t, iso, prof, "codes8", radiance, variance, info, "relative", n_iter,
+                           per_second_iso=None)
         if unit != "dn" and all(lf.variance is not None for lf in lfs):
             # decoded captures: their own noise-model variances give the weights
             variances = np.stack([lf.variance for lf in lfs])
             radiance, variance, info = merge_with_variances(data, variances, exposures_s=t, n_threads=n_threads,
                                                             chunk_size=chunk_size)
+            same_iso = None if iso is None or len(set(iso.tolist())) != 1 else float(iso[0])
             return _finish(lfs, names, method, t, iso, prof, "input-variances", radiance, variance, info, unit,
-                           n_iter)
+                           n_iter, per_second_iso=same_iso)
         if prof is None:
             raise InputError("method ml needs a camera profile (--profile): gain and read noise set its weights")
         if iso is None:
@@ -1096,10 +1098,15 @@ def merge_lightfields(
         variance = None
         out_units = "relative"
     return _finish(lfs, names, method, t, iso, prof, mapping if method == "ml" else ("codes8" if codes8 else unit),
-                   radiance, variance, info, out_units, n_iter)
+                   radiance, variance, info, out_units, n_iter,
+                   per_second_iso=(100.0 if iso is not None else None) if method == "debevec" else None)
 
 
-def _finish(lfs, names, method, t, iso, prof, mapping, radiance, variance, info, out_units, n_iter):
+def _finish(lfs, names, method, t, iso, prof, mapping, radiance, variance, info, out_units, n_iter, *,
+            per_second_iso=None):
+    """The merged light field. Relative (not e-/s) output is a radiance per second: it carries
+    ``exposure_s = 1`` (and the ISO it refers to, when known), so later stages (``evaluate
+    --align exposure``) can compare it with a capture of another exposure."""
     negative = int((radiance < 0).sum())
     data_out = np.maximum(radiance, 0)
     attrs = {
@@ -1120,7 +1127,10 @@ def _finish(lfs, names, method, t, iso, prof, mapping, radiance, variance, info,
         attrs["n_iter"] = int(n_iter)
     if info.get("response") is not None:
         attrs["response_g"] = np.asarray(info["response"]).round(6).tolist()
+    per_second = out_units == "relative"
+    attrs["value_per"] = "second of exposure" if per_second else out_units
     merged = LightField(data=data_out, variance=variance, units=out_units, colour_space=lfs[0].colour_space,
+                        exposure_s=1.0 if per_second else None, iso=per_second_iso if per_second else None,
                         source=f"merge:{method}", attrs=attrs)
     info["dynamic_range_stops"] = merged.dynamic_range_stops()
     info["negative_clipped"] = negative
