@@ -12,8 +12,10 @@ def register(sub, common) -> None:
         "merge", parents=[common], help="merge an exposure bracket into an HDR light field",
         description="Merge INPUTs (Lytro captures, lfproc light-field EXRs or view folders, camera raws, 8/16-bit "
                     "JPEG/PNG/TIFF with EXIF) taken with different exposures into one HDR light field (1x1 views "
-                    "for 2-D images). ml: noise-aware maximum likelihood (needs a camera profile; writes the "
-                    "variance); debevec: hat weights, with camera-response recovery for 8-bit images. Default: "
+                    "for 2-D images). ml: noise-aware inverse-variance estimator, writes the variance (raw or "
+                    "linear data: needs a camera profile and ISOs; 8-bit images: recovered camera response, "
+                    "noise measured on the bracket, no profile or ISO); debevec: Debevec & Malik hat weights in "
+                    "the log domain, with camera-response recovery for 8-bit images. Default: "
                     "debevec for 8-bit images or without a profile, ml otherwise. Pixels saturated in every "
                     "exposure get the shortest exposure's saturation value and are counted.")
     p.add_argument("inputs", nargs="+", type=Path, metavar="INPUT", help="the bracket, one file per exposure")

@@ -110,3 +110,78 @@ def test_scale_mismatch_and_bad_peak(bedroom, tmp_path, shared_data, capsys):
     assert "all-black reference" in line
     line = _error(capsys, ["evaluate", str(bright), str(bright), "--peak-luminance", "0"])
     assert "peak_luminance: expected a positive finite number, got 0.0" in line
+
+
+# -- units and exposures between stages (issue 14) --------------------------------------------------
+
+def _pair(tmp_path):
+    """A 'decode' (relative, 0.01 s, ISO 100) and a 'merge' of it: per second, exposure 1 s, 100x larger."""
+    from lfproc.lightfield import LightField
+
+    rng = np.random.default_rng(3)
+    data = rng.uniform(0.01, 1.0, size=(3, 3, 24, 24, 3)).astype(np.float32)
+    ref = LightField(data=data, units="relative", exposure_s=0.01, iso=100)
+    noisy = data * (1 + 0.05 * rng.standard_normal(data.shape)).astype(np.float32)
+    res = LightField(data=np.clip(noisy, 0, None) * 100, units="relative", exposure_s=1.0, iso=100)
+    write_lightfield(ref, tmp_path / "truth.exr")
+    write_lightfield(res, tmp_path / "hdr.exr")
+    return ref, res
+
+
+def test_exposure_mismatch_refused_or_aligned(tmp_path, capsys):
+    """main scored a per-second merge against a 0.01 s capture with exit 0 (5.5 dB in README's pipeline)."""
+    ref, res = _pair(tmp_path)
+    a, b = str(tmp_path / "hdr.exr"), str(tmp_path / "truth.exr")
+    assert main(["evaluate", a, b]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "exposure 1 s at ISO 100 differs from the reference's 0.01 s" in err
+    assert "--align exposure" in err
+    by_exposure = _json(capsys, ["evaluate", a, b, "--align", "exposure", "--json"])
+    assert by_exposure["align"] == "exposure" and by_exposure["gain"] == pytest.approx(0.01)
+    by_gain = _json(capsys, ["evaluate", a, b, "--align", "gain", "--json"])
+    assert by_gain["align"] == "gain" and by_gain["gain"] == pytest.approx(0.01, rel=0.01)  # fitted
+    # aligned: the scores are those of the 5 % noise, not of a 100x scale error
+    assert by_exposure["pu21_psnr_db"] > 25 and by_exposure["mean_relative_error"] < 0.06
+    assert by_gain["pu21_psnr_db"] == pytest.approx(by_exposure["pu21_psnr_db"], abs=0.2)
+    # linear PSNR beside PU21: its definition (peak = reference 99.9th percentile)
+    aligned = res.data * 0.01
+    peak = np.percentile(ref.data, 99.9)
+    mse = np.mean((aligned.astype(np.float64) - ref.data) ** 2, axis=(2, 3, 4))
+    assert by_exposure["linear_psnr_db"] == pytest.approx(float(np.mean(10 * np.log10(peak**2 / mse))), abs=1e-3)
+    assert by_exposure["linear_psnr_peak"] == pytest.approx(peak)
+    # the table says what was done
+    assert main(["evaluate", a, b, "--align", "gain"]) == 0
+    out = capsys.readouterr().out
+    assert "align gain (result x0.0099" in out and "lin-PSNR dB" in out
+
+
+def test_units_mismatch_needs_gain(tmp_path, capsys):
+    from lfproc.lightfield import LightField
+
+    ref, res = _pair(tmp_path)
+    write_lightfield(LightField(data=res.data * 50, units="e-/s"), tmp_path / "e.exr")
+    a, b = str(tmp_path / "e.exr"), str(tmp_path / "truth.exr")
+    assert main(["evaluate", a, b]) == 2
+    assert "result is in 'e-/s', reference in 'relative'" in capsys.readouterr().err
+    assert main(["evaluate", a, b, "--align", "exposure"]) == 2
+    assert "needs the same units" in capsys.readouterr().err
+    doc = _json(capsys, ["evaluate", a, b, "--align", "gain", "--json"])
+    assert doc["gain"] == pytest.approx(1 / 5000, rel=0.01) and doc["units"] == "relative"
+
+
+def test_merge_output_carries_its_exposure(tmp_path):
+    """A relative merge is a radiance per second: exposure_s = 1 (None on main)."""
+    from lfproc.lightfield import LightField
+    from lfproc.merge import merge_lightfields
+
+    rng = np.random.default_rng(0)
+    scene = rng.uniform(0.05, 2.0, size=(1, 1, 16, 16, 3))
+    lfs = [LightField(data=np.clip(scene * t * 10, 0, 1).astype(np.float32), units="relative", exposure_s=t,
+                      iso=200, saturation_level=1.0, variance=np.full(scene.shape, 1e-6, np.float32))
+           for t in (0.01, 0.02, 0.04)]
+    merged, _ = merge_lightfields(lfs, method="ml")
+    assert merged.units == "relative" and merged.exposure_s == 1.0 and merged.iso == 200
+    np.testing.assert_allclose(merged.data, np.minimum(scene, 1 / 0.4) * 10, rtol=1e-3)
+    path = tmp_path / "m.exr"
+    write_lightfield(merged, path)
+    assert read_lightfield(path).exposure_s == 1.0
