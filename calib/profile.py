@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from lfproc._util import FrozenDict, frozen_array
 from lfproc._version import __version__
 from lfproc.errors import FileFormatError, MissingFileError, ProfileError
 from lfproc.io._atomic import atomic_file
@@ -98,8 +99,12 @@ class CameraProfile:
         non-uniformity (std of the per-pixel offset, electrons). 0 = uniform sensor.
     fixed_pattern_seed : int
         Seed of the sensor's fixed-pattern maps (the same sensor always has the same maps).
-    bias_frame : ndarray, optional
-        Master bias frame (DN) keyed by ISO in ``bias_frames``.
+    bias_frames : dict, optional
+        ISO -> master bias frame (DN, a finite 2-D array).
+
+    ``isos`` and ``bias_frames`` are stored as read-only mappings and the bias frames as
+    read-only arrays (copied once unless already read-only), so a validated profile
+    cannot be changed; use :func:`dataclasses.replace` to derive a new one.
     unknown : dict
         Field name -> reason, for figures the calibration could not determine.
     """
@@ -146,6 +151,17 @@ class CameraProfile:
                 value = getattr(figs, f.name)
                 if value is not None:
                     _check_number(value, f"isos.{iso}.{f.name}", low=0, strict=f.name == "gain_dn_per_e")
+        object.__setattr__(self, "isos", FrozenDict(self.isos))
+        frames = {}
+        for iso, frame in dict(self.bias_frames).items():
+            arr = np.asarray(frame)
+            if arr.ndim != 2 or arr.size == 0 or not (np.issubdtype(arr.dtype, np.number) and np.isfinite(arr).all()):
+                raise ProfileError(
+                    f"profile {self.name}: bias frame of ISO {iso}: expected a finite 2-D array, found "
+                    f"{arr.dtype} of shape {arr.shape}"
+                )
+            frames[iso] = frozen_array(frame)
+        object.__setattr__(self, "bias_frames", FrozenDict(frames))
 
     # -- lookups ---------------------------------------------------------------------
     @property

@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from ._util import check_choice, check_random_state
+from ._util import check_choice, check_random_state, freeze
 from ._version import __version__
 from .errors import InputError, ShapeError
 from .lightfield import LightField
@@ -782,7 +782,7 @@ def _finish(lfs, names, method, t, iso, prof, mapping, radiance, variance, info,
         attrs["n_iter"] = int(n_iter)
     if info.get("response") is not None:
         attrs["response_g"] = np.asarray(info["response"]).round(6).tolist()
-    merged = LightField(data=data_out, variance=variance, units=out_units, colour_space=lfs[0].colour_space,
+    merged = LightField(data=freeze(data_out), variance=None if variance is None else freeze(variance), units=out_units, colour_space=lfs[0].colour_space,
                         source=f"merge:{method}", attrs=attrs)
     info["dynamic_range_stops"] = merged.dynamic_range_stops()
     info["negative_clipped"] = negative

@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from .._util import file_sha256, to_jsonable
+from .._util import ReadOnlyState, file_sha256, freeze, frozen_array, to_jsonable
 from .._version import __version__
 from ..calib import load_profile
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
@@ -77,7 +77,7 @@ _ARRAYS = ("dn", "iso", "mask", "bias")
 
 
 @dataclass(frozen=True, eq=False)
-class Capture:
+class Capture(ReadOnlyState):
     """A coded multi-ISO capture (see the module documentation).
 
     Parameters
@@ -130,18 +130,36 @@ class Capture:
             dn = dn[None]
         if dn.ndim != 3:
             raise ShapeError(f"capture dn: expected sensor images of shape (S, H, W), got {dn.shape}")
+        if dn.size == 0:
+            raise ShapeError(f"capture dn: every axis needs at least one element, got shape {dn.shape}")
         if dn.dtype != np.uint16:
-            if not np.issubdtype(dn.dtype, np.integer) or dn.min(initial=0) < 0 or dn.max(initial=0) > 65535:
+            if np.issubdtype(dn.dtype, np.floating):
+                bad = int(np.count_nonzero(~np.isfinite(dn)))
+                frac = int(np.count_nonzero(np.isfinite(dn) & (dn != np.round(dn))))
+                if bad or frac:
+                    raise InputError(
+                        f"capture dn: expected integer sensor codes, found {bad} NaN or Inf and {frac} fractional values"
+                    )
+            elif not np.issubdtype(dn.dtype, np.integer):
                 raise InputError(f"capture dn: expected uint16 sensor codes, got {dn.dtype}")
-            dn = dn.astype(np.uint16)
+            if dn.min() < 0 or dn.max() > 65535:
+                raise InputError(
+                    f"capture dn: expected codes in [0, 65535], found range [{dn.min():g}, {dn.max():g}]"
+                )
+        dn = frozen_array(self.dn, dtype=np.uint16)
+        if dn.ndim == 2:
+            dn = dn[None]
         s, h, w = dn.shape
         iso = np.asarray(self.iso, dtype=np.float32)
         try:
-            iso = np.broadcast_to(iso, dn.shape).copy() if iso.ndim < 3 else iso
+            iso = np.broadcast_to(iso, dn.shape) if iso.ndim < 3 else iso
         except ValueError:
             raise ShapeError(f"capture iso: expected a scalar, (H, W) or (S, H, W) = {dn.shape} map, got {iso.shape}") from None
         if iso.shape != dn.shape:
             raise ShapeError(f"capture iso: expected shape {dn.shape}, got {iso.shape}")
+        if not np.isfinite(iso).all():
+            raise InputError("capture iso: expected finite ISO values, found NaN or Inf")
+        iso = frozen_array(iso)  # broadcast views and caller arrays are copied once, fresh conversions kept
         for value in np.unique(iso):
             profile.iso_figures(float(value))  # ProfileError naming the available ISOs
         exposures = np.atleast_1d(np.asarray(self.exposures_s, dtype=np.float64))
@@ -166,9 +184,12 @@ class Capture:
         if self.bias_dn is not None:
             bias = np.asarray(self.bias_dn, dtype=np.float32)
             try:
-                bias = np.broadcast_to(bias, dn.shape).copy()
+                bias = np.broadcast_to(bias, dn.shape)
             except ValueError:
                 raise ShapeError(f"capture bias_dn: expected a map broadcastable to {dn.shape}, got {bias.shape}") from None
+            if not np.isfinite(bias).all():
+                raise InputError("capture bias_dn: expected finite bias codes, found NaN or Inf")
+            bias = frozen_array(bias)
         if self.radiance_scale is not None and not (math.isfinite(self.radiance_scale) and self.radiance_scale > 0):
             raise InputError(f"capture radiance_scale: expected a positive number, got {self.radiance_scale}")
         object.__setattr__(self, "dn", dn)
@@ -399,7 +420,7 @@ def observations(capture: Capture, **options) -> Observation:
             bias_dn=None if capture.bias_dn is None else capture.bias_dn[s],
             **kw,
         ))
-    return Observation(*(np.stack([getattr(o, f) for o in per_shot]) for f in
+    return Observation(*(freeze(np.stack([getattr(o, f) for o in per_shot])) for f in
                          ("radiance", "variance", "weight", "saturated", "black_clipped")))
 
 

@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_choice, check_positive, check_random_state
+from .._util import check_choice, check_positive, check_random_state, freeze
 from .._version import __version__
 from .iso import DEFAULT_ISOS, ISO_PATTERNS, iso_pattern
 from .capture import Capture, _num, file_sha256, observations
@@ -285,8 +285,8 @@ def simulate_capture(
         "light_field_source": lf.source if isinstance(lf, LightField) else None,
     }
     return Capture(
-        dn=dn,
-        iso=iso_maps,
+        dn=freeze(dn),
+        iso=freeze(iso_maps),
         exposures_s=exposures,
         mask=code,
         profile=profile,
