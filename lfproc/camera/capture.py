@@ -265,12 +265,25 @@ class Capture(ReadOnlyState):
         header = json.dumps(to_jsonable(self.header()), indent=1).encode()
         with atomic_file(path, force=force) as tmp:
             with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=6) as zf:
-                zf.writestr(HEADER_NAME, header)
+                zf.writestr(_member(HEADER_NAME), header, compresslevel=6)
                 for name, array in self._arrays().items():
                     buf = io.BytesIO()
                     np.lib.format.write_array(buf, np.ascontiguousarray(array), allow_pickle=False)
-                    zf.writestr(f"{name}.npy", buf.getvalue())
+                    zf.writestr(_member(f"{name}.npy"), buf.getvalue(), compresslevel=6)
         return path
+
+
+#: Timestamp of every member of a capture file: fixed, so that the same capture always gives
+#: the same bytes (files can be compared by hash); 1980-01-01 is the earliest a ZIP can hold.
+_ZIP_DATE_TIME = (1980, 1, 1, 0, 0, 0)
+
+
+def _member(name: str) -> zipfile.ZipInfo:
+    info = zipfile.ZipInfo(name, date_time=_ZIP_DATE_TIME)
+    info.compress_type = zipfile.ZIP_DEFLATED
+    info.external_attr = 0o644 << 16  # a regular file, rw-r--r--
+    info.create_system = 3  # Unix, whatever the writing machine
+    return info
 
 
 def _num(v: float):
