@@ -5,13 +5,14 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import warnings
 from pathlib import Path
 from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
 
-from .errors import InputError
+from .errors import SATURATION_WARNING_FRACTION, ConvergenceWarning, InputError, SaturationWarning
 
 __all__ = [
     "check_random_state",
@@ -25,6 +26,8 @@ __all__ = [
     "is_frozen",
     "FrozenDict",
     "ReadOnlyState",
+    "warn_saturation",
+    "warn_convergence",
 ]
 
 
@@ -107,6 +110,29 @@ def file_sha256(path: str | os.PathLike) -> str:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
             digest.update(chunk)
     return digest.hexdigest()
+
+
+def warn_saturation(fraction: float, what: str, *, consequence: str, samples: str = "samples",
+                    stacklevel: int = 3) -> bool:
+    """Emit :class:`SaturationWarning` when ``fraction`` exceeds :data:`SATURATION_WARNING_FRACTION`.
+
+    ``what`` names the data ("capture", "exposure bracket"...), ``consequence`` says what it
+    means for the result. Returns whether a warning was emitted.
+    """
+    if not fraction > SATURATION_WARNING_FRACTION:
+        return False
+    warnings.warn(
+        f"{what}: {100 * fraction:.1f} % of the {samples} are saturated (more than "
+        f"{100 * SATURATION_WARNING_FRACTION:g} %); {consequence}",
+        SaturationWarning,
+        stacklevel=stacklevel,
+    )
+    return True
+
+
+def warn_convergence(message: str, *, stacklevel: int = 3) -> None:
+    """Emit :class:`ConvergenceWarning` (an iterative estimate stopped before its tolerance)."""
+    warnings.warn(message, ConvergenceWarning, stacklevel=stacklevel)
 
 
 # -- read-only arrays of the core types ---------------------------------------------------------

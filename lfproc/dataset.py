@@ -32,13 +32,14 @@ import json
 import os
 import shutil
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ._version import __version__
 from ._util import file_sha256
-from .errors import InputError, MissingFileError
+from .errors import InputError, LfprocWarning, MissingFileError
 
 __all__ = [
     "Scene",
@@ -125,7 +126,9 @@ def process_scene(
 ) -> dict[str, Any]:
     """Decode, merge and write one scene; return its manifest row (also written as records).
 
-    Writes ``scenes/<name>/`` (atomically, as a whole) and then ``done/<name>.json``.
+    Writes ``scenes/<name>/`` (atomically, as a whole) and then ``done/<name>.json``. lfproc's
+    warnings raised while merging (:class:`lfproc.errors.SaturationWarning`...) are recorded
+    in the row's ``warnings`` (``"Category: message"`` strings) instead of being emitted.
     """
     from .bracket import merge_files
     from .io import atomic_dir, atomic_file, write_lightfield
@@ -140,8 +143,15 @@ def process_scene(
     (out_dir / "done").mkdir(parents=True, exist_ok=True)
     with atomic_dir(scene_out, force=True) as tmp:
         white_db = _white_db(scene, tmp)
-        merged, info = merge_files(scene.inputs, method=method, profile=profile, white_db=white_db,
-                                   n_threads=n_threads)
+        # lfproc's warnings (saturation, convergence) belong to the scene: kept in its row, not
+        # printed by (or raised in) a worker process
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", LfprocWarning)
+            merged, info = merge_files(scene.inputs, method=method, profile=profile, white_db=white_db,
+                                       n_threads=n_threads)
+        other = [w for w in caught if not issubclass(w.category, LfprocWarning)]
+        for w in other:  # not ours: pass them on as they were
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         if white_db is not None:
             shutil.rmtree(white_db, ignore_errors=True)
         write_lightfield(merged, tmp / "hdr.exr")
@@ -163,6 +173,7 @@ def process_scene(
             "sha256": [file_sha256(p) for p in scene.inputs],
             "lfproc_version": __version__,
             "seconds": round(time.perf_counter() - start, 3),
+            "warnings": [f"{w.category.__name__}: {w.message}" for w in caught if issubclass(w.category, LfprocWarning)],
         }
         (tmp / "record.json").write_text(json.dumps(row, indent=2))
     with atomic_file(out_dir / "done" / f"{scene.name}.json", force=True) as tmp:

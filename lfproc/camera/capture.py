@@ -221,6 +221,28 @@ class Capture(ReadOnlyState):
         """``S / (3 V U)``, a fraction."""
         return sampling_rate(shots=self.shots, views=self.views, channels=3)
 
+    def saturated_fraction(self, *, pixels: str = "all", saturation_margin_dn: float = 0.5) -> float:
+        """Share of saturated pixels: at or above their ISO's saturation code minus the margin (the
+        ``saturated`` mask of :func:`observations`, without computing the rest).
+
+        ``pixels="all"`` counts every pixel of every shot; ``"least-sensitive"`` only the pixels
+        of the lowest ISO x exposure of the capture, where highlights must come from: a
+        saturated one there has lost its radiance for good (this is what
+        :class:`lfproc.errors.SaturationWarning` tests).
+        """
+        from .._util import check_choice
+
+        check_choice("pixels", pixels, ("all", "least-sensitive"))
+        codes = np.zeros(self.iso.shape, np.float64)
+        for value in self.isos:
+            codes[self.iso == value] = self.profile.saturation_dn(value)
+        saturated = self.dn >= codes - saturation_margin_dn
+        if pixels == "all":
+            return float(saturated.mean())
+        sensitivity = self.iso * np.asarray(self.exposures_s, np.float32)[:, None, None]
+        least = sensitivity <= sensitivity.min() * (1 + 1e-6)
+        return float(saturated[least].mean())
+
     def operator(self, *, dtype=np.float32) -> ProjectionOperator:
         """The projection operator ``Phi`` of this capture (:mod:`lfproc.camera.projection`)."""
         return build_operator(self.mask, views=self.views, size=self.size, cfa_pattern=self.cfa_pattern, dtype=dtype)
@@ -400,12 +422,15 @@ def load_capture(path: str | os.PathLike) -> Capture:
 
 # -- calibrated observations --------------------------------------------------------------
 
-def observations(capture: Capture, **options) -> Observation:
+def observations(capture: Capture, *, warn_saturation: bool = True, **options) -> Observation:
     """Radiance estimates ``T`` (e-/s), their variance and weights for every shot (method.md section 3).
 
     Parameters
     ----------
     capture : Capture
+    warn_saturation : bool
+        Emit :class:`lfproc.errors.SaturationWarning` when more than
+        :data:`lfproc.errors.SATURATION_WARNING_FRACTION` of the pixels are saturated.
     **options
         Passed to :func:`lfproc.camera.sensor.calibrated_observation` (``saturation_margin_dn``,
         ``variance_from``, ``radiance_estimate`` of shape (S, H, W)...).
@@ -433,14 +458,29 @@ def observations(capture: Capture, **options) -> Observation:
             bias_dn=None if capture.bias_dn is None else capture.bias_dn[s],
             **kw,
         ))
-    return Observation(*(freeze(np.stack([getattr(o, f) for o in per_shot])) for f in
-                         ("radiance", "variance", "weight", "saturated", "black_clipped")))
+    obs = Observation(*(freeze(np.stack([getattr(o, f) for o in per_shot])) for f in
+                        ("radiance", "variance", "weight", "saturated", "black_clipped")))
+    if warn_saturation:
+        _warn_saturation(capture, stacklevel=4)
+    return obs
+
+
+def _warn_saturation(capture: Capture, *, stacklevel: int) -> None:
+    """SaturationWarning when too many of the least sensitive pixels (lowest ISO x exposure) saturate."""
+    from .._util import warn_saturation
+
+    sens = capture.iso * np.asarray(capture.exposures_s, np.float32)[:, None, None]
+    at = np.unravel_index(int(np.argmin(sens)), sens.shape)
+    where = f"ISO {_num(capture.iso[at])} at {capture.exposures_s[at[0]]:g} s"
+    warn_saturation(capture.saturated_fraction(pixels="least-sensitive"), "capture",
+                    samples=f"least sensitive pixels ({where})", stacklevel=stacklevel + 1,
+                    consequence="their radiance is lost for good; use a shorter exposure or a smaller radiance scale")
 
 
 def describe_capture(path: str | os.PathLike) -> dict[str, Any]:
     """Figures of a capture file for ``lfproc info`` (first key ``kind = "capture"``)."""
     capture = load_capture(path)
-    obs = observations(capture)
+    obs = observations(capture, warn_saturation=False)  # the figures below report it
     per_iso = {}
     for value in capture.isos:
         sel = capture.iso == value
