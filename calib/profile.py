@@ -29,13 +29,14 @@ import numpy as np
 from lfproc._util import FrozenDict, frozen_array
 from lfproc._version import __version__
 from lfproc.errors import FileFormatError, MissingFileError, ProfileError
-from lfproc.io._atomic import atomic_file
+from lfproc.io._atomic import atomic_outputs
 
 __all__ = [
     "CameraProfile",
     "IsoFigures",
     "load_profile",
     "save_profile",
+    "bias_sidecar_path",
     "paper_gain_dn_per_e",
     "SHIPPED_PROFILES",
     "SCHEMA",
@@ -331,16 +332,22 @@ def load_profile(name_or_path: str | os.PathLike | CameraProfile) -> CameraProfi
     return CameraProfile.from_json(doc, where=str(path), bias_frames=bias)
 
 
+def bias_sidecar_path(path: str | os.PathLike) -> Path:
+    """Where :func:`save_profile` writes the bias frames of a profile saved at ``path``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.bias.npz")
+
+
 def save_profile(profile: CameraProfile, path: str | os.PathLike, *, force: bool = False) -> Path:
-    """Write a profile as JSON (atomically), its bias frames in a sidecar ``<stem>.bias.npz``."""
+    """Write a profile as JSON, its bias frames in a sidecar ``<stem>.bias.npz``; both or neither
+    (:func:`lfproc.io.atomic_outputs`)."""
     path = Path(path)
     doc = profile.to_json()
-    if profile.bias_frames:
-        side = path.with_name(f"{path.stem}.bias.npz")
-        with atomic_file(side, force=force) as tmp:
-            with open(tmp, "wb") as fh:
+    outputs = [path, bias_sidecar_path(path)] if profile.bias_frames else [path]
+    with atomic_outputs(outputs, force=force) as staged:
+        if profile.bias_frames:
+            with open(staged[1], "wb") as fh:
                 np.savez_compressed(fh, **{f"iso_{iso}": frame for iso, frame in profile.bias_frames.items()})
-        doc["bias_frame_file"] = side.name
-    with atomic_file(path, force=force) as tmp:
-        tmp.write_text(json.dumps(doc, indent=2))
+            doc["bias_frame_file"] = outputs[1].name
+        staged[0].write_text(json.dumps(doc, indent=2))
     return path
