@@ -20,8 +20,8 @@ Layout of ``DATASET_DIR`` (every file written atomically)::
 Resuming: a scene whose done-record and outputs exist is skipped; its output folder is
 written as a whole (temporary folder, then rename) before the done-record, so an interrupted
 run leaves either a finished scene or none. A failed scene is reported and does not stop the
-others. A new run removes the hidden temporary folders a killed run left in ``scenes/``
-(run one build per data set at a time).
+others. A new run removes the hidden temporaries a killed run left (those whose process is gone:
+:func:`lfproc.io.clean_stale`).
 """
 
 from __future__ import annotations
@@ -262,8 +262,10 @@ def build_dataset(
         from .calib import load_profile
 
         profile = load_profile(profile)
-    for stale in (out / "scenes").glob(".lfproc-tmp-*") if (out / "scenes").is_dir() else []:
-        shutil.rmtree(stale, ignore_errors=True)  # left by a killed run (one build per data set at a time)
+    from .io import clean_stale
+
+    for folder in (out, out / "scenes", out / "done"):
+        clean_stale(folder)  # temporaries left by killed runs (their process is gone)
     todo = [s for s in scenes if not _is_done(s, out)]
     skipped = [s.name for s in scenes if s not in todo]
     processed: list[str] = []
