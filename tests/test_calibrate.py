@@ -281,6 +281,11 @@ def test_cli_simulate_frames(tmp_path, capsys):
     assert len({r.exposure_s for r in records if r.kind == "dark"}) >= 3
     img = cv2.imread(str(records[0].path), cv2.IMREAD_UNCHANGED)
     assert img.dtype == np.uint16 and img.shape == (16, 24)
+    # the frames are the profile's sensor: paper-medium at ISO 200 has black level 64 DN and read
+    # noise 2 e- x 0.4095 DN/e- = 0.819 DN, 0.868 DN with the rounding's 1/12 DN^2
+    bias = [cv2.imread(str(r.path), cv2.IMREAD_UNCHANGED).astype(float) for r in records if r.kind == "bias"][:2]
+    assert np.mean(bias) == pytest.approx(64, abs=0.15)
+    assert np.std(bias[0] - bias[1]) / np.sqrt(2) == pytest.approx(np.sqrt(0.819**2 + 1 / 12), rel=0.12)
     params = json.loads((tmp_path / "s" / "simulation.json").read_text())
     assert params["seed"] == 2 and params["profile"] == "paper-medium" and "lfproc_version" in params
     assert main(["calibrate", "simulate-frames", "--profile", "paper-medium", "-o", str(tmp_path / "s")]) == 2
