@@ -164,6 +164,13 @@ class CameraProfile:
             frames[iso] = frozen_array(frame)
         object.__setattr__(self, "bias_frames", FrozenDict(frames))
 
+    def __setstate__(self, state):
+        # pickle and copy.deepcopy bring new (writeable) bias arrays: make them read-only again
+        for name, value in state.items():
+            if name == "bias_frames":
+                value = FrozenDict({k: frozen_array(v) for k, v in value.items()})
+            object.__setattr__(self, name, value)
+
     # -- lookups ---------------------------------------------------------------------
     @property
     def iso_values(self) -> list[int]:

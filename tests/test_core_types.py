@@ -106,6 +106,11 @@ def test_copies_and_pickles_stay_read_only(clone):
             with pytest.raises(ValueError, match="read-only"):
                 getattr(other, name)[...] = 0
     np.testing.assert_array_equal(clone(lf).data, lf.data)
+    profile = clone(replace(load_profile("paper-low"), bias_frames={100: np.full((2, 2), 64.0)}))
+    with pytest.raises(ValueError, match="read-only"):
+        profile.bias_frames[100][0, 0] = 0
+    with pytest.raises(TypeError, match="read-only"):
+        profile.isos[1] = None
 
 
 # -- capture, mask, operator, observation, profile -------------------------------------------
