@@ -31,9 +31,10 @@ from typing import Any
 
 import numpy as np
 
+from lfproc._util import FrozenDict, frozen_array
 from lfproc._version import __version__
 from lfproc.errors import FileFormatError, MissingFileError, ProfileError
-from lfproc.io._atomic import atomic_file
+from lfproc.io._atomic import atomic_outputs
 
 __all__ = [
     "MONO",
@@ -44,6 +45,7 @@ __all__ = [
     "load_profile",
     "save_profile",
     "is_profile_file",
+    "bias_sidecar_path",
     "paper_gain_dn_per_e",
     "SHIPPED_PROFILES",
     "SCHEMA",
@@ -121,6 +123,12 @@ class CameraProfile:
         Measured per-pixel PRNU gain map (mean 1 per CFA position) from flat frames.
     flat_field_std : float
         Relative standard deviation of each value of ``flat_field`` as an estimate (0 = exact).
+
+        ISO -> master bias frame (DN, a finite 2-D array).
+
+    ``isos`` and ``bias_frames`` are stored as read-only mappings and the bias frames as
+    read-only arrays (copied once unless already read-only), so a validated profile
+    cannot be changed; use :func:`dataclasses.replace` to derive a new one.
     unknown : dict
         Field name -> reason, for figures the calibration could not determine.
     """
@@ -167,6 +175,7 @@ class CameraProfile:
             if ff.ndim != 2 or not np.issubdtype(ff.dtype, np.floating) or not np.isfinite(ff).all() or (ff <= 0).any():
                 raise ProfileError(f"profile {self.name}: flat_field: expected an (H, W) map of positive finite gains, "
                                    f"found {ff.dtype} of shape {ff.shape}")
+            object.__setattr__(self, "flat_field", frozen_array(self.flat_field))
         if self.cfa_pattern not in _CFA:
             raise ProfileError(f"profile {self.name}: cfa_pattern: expected one of {', '.join(_CFA)}, got {self.cfa_pattern!r}")
         if not self.isos:
@@ -178,6 +187,24 @@ class CameraProfile:
                 value = getattr(figs, f.name)
                 if value is not None:
                     _check_number(value, f"isos.{iso}.{f.name}", low=0, strict=f.name == "gain_dn_per_e")
+        object.__setattr__(self, "isos", FrozenDict(self.isos))
+        frames = {}
+        for iso, frame in dict(self.bias_frames).items():
+            arr = np.asarray(frame)
+            if arr.ndim != 2 or arr.size == 0 or not (np.issubdtype(arr.dtype, np.number) and np.isfinite(arr).all()):
+                raise ProfileError(
+                    f"profile {self.name}: bias frame of ISO {iso}: expected a finite 2-D array, found "
+                    f"{arr.dtype} of shape {arr.shape}"
+                )
+            frames[iso] = frozen_array(frame)
+        object.__setattr__(self, "bias_frames", FrozenDict(frames))
+
+    def __setstate__(self, state):
+        # pickle and copy.deepcopy bring new (writeable) bias arrays: make them read-only again
+        for name, value in state.items():
+            if name == "bias_frames":
+                value = FrozenDict({k: frozen_array(v) for k, v in value.items()})
+            object.__setattr__(self, name, value)
 
     # -- lookups ---------------------------------------------------------------------
     @property
@@ -418,23 +445,29 @@ def load_profile(name_or_path: str | os.PathLike | CameraProfile) -> CameraProfi
     return CameraProfile.from_json(doc, where=str(path), bias_frames=bias, flat_field=flat)
 
 
+def bias_sidecar_path(path: str | os.PathLike) -> Path:
+    """Where :func:`save_profile` writes the bias frames of a profile saved at ``path``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.bias.npz")
+
+
 def save_profile(profile: CameraProfile, path: str | os.PathLike, *, force: bool = False) -> Path:
-    """Write a profile as JSON (atomically), its bias frames in a sidecar ``<stem>.bias.npz`` and its
-    flat-field map in ``<stem>.flat.npz``."""
+    """Write a profile as JSON, its bias frames in a sidecar ``<stem>.bias.npz`` and its flat-field
+    map in ``<stem>.flat.npz``; all or none (:func:`lfproc.io.atomic_outputs`)."""
     path = Path(path)
     doc = profile.to_json()
-    if profile.bias_frames:
-        side = path.with_name(f"{path.stem}.bias.npz")
-        with atomic_file(side, force=force) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez_compressed(fh, **{f"iso_{iso}": frame for iso, frame in profile.bias_frames.items()})
-        doc["bias_frame_file"] = side.name
+    outputs = [path, bias_sidecar_path(path)] if profile.bias_frames else [path]
+    flat_at = len(outputs)
     if profile.flat_field is not None:
-        side = path.with_name(f"{path.stem}.flat.npz")
-        with atomic_file(side, force=force) as tmp:
-            with open(tmp, "wb") as fh:
+        outputs.append(path.with_name(f"{path.stem}.flat.npz"))
+    with atomic_outputs(outputs, force=force) as staged:
+        if profile.bias_frames:
+            with open(staged[1], "wb") as fh:
+                np.savez_compressed(fh, **{f"iso_{iso}": frame for iso, frame in profile.bias_frames.items()})
+            doc["bias_frame_file"] = outputs[1].name
+        if profile.flat_field is not None:
+            with open(staged[flat_at], "wb") as fh:
                 np.savez_compressed(fh, flat_field=np.asarray(profile.flat_field, dtype=np.float32))
-        doc["flat_field_file"] = side.name
-    with atomic_file(path, force=force) as tmp:
-        tmp.write_text(json.dumps(doc, indent=2))
+            doc["flat_field_file"] = outputs[flat_at].name
+        staged[0].write_text(json.dumps(doc, indent=2))
     return path

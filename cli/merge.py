@@ -39,7 +39,7 @@ def run(args) -> int:
 
     from lfproc.bracket import merge_files
     from lfproc.errors import InputError
-    from lfproc.io import check_output, write_lightfield
+    from lfproc.io import atomic_outputs, check_output, write_lightfield
     from lfproc.lightfield import LightField
 
     if args.output.suffix.lower() != ".exr":
@@ -51,13 +51,14 @@ def run(args) -> int:
     isos = parse_floats(args.isos, option="--isos") if args.isos else None
     merged, info = merge_files(args.inputs, method=args.method, profile=args.profile, exposures_s=exposures,
                                isos=isos, white_db=args.white_db, n_iter=args.iterations, random_state=args.seed)
-    write_lightfield(merged, args.output, force=args.force)
-    if args.mask is not None:
-        mask = np.asarray(info["saturated_everywhere"], dtype=np.float32)
-        if mask.ndim == 5:
-            mask = mask.max(axis=-1, keepdims=True)
-        write_lightfield(LightField(data=mask, source=f"saturated-everywhere mask of {args.output}"), args.mask,
-                         force=args.force)
+    outputs = [args.output] if args.mask is None else [args.output, args.mask]
+    with atomic_outputs(outputs, force=args.force) as staged:  # both outputs or neither
+        write_lightfield(merged, staged[0])
+        if args.mask is not None:
+            mask = np.asarray(info["saturated_everywhere"], dtype=np.float32)
+            if mask.ndim == 5:
+                mask = mask.max(axis=-1, keepdims=True)
+            write_lightfield(LightField(data=mask, source=f"saturated-everywhere mask of {args.output}"), staged[1])
     v, u = merged.views
     h, w = merged.size
     result = {

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from ._util import freeze
 from .errors import DependencyError, FileFormatError, InputError, MissingFileError
 from .lightfield import LightField
 
@@ -118,7 +119,7 @@ def _read_ldr(path: Path) -> LightField:
     else:
         raise FileFormatError(f"{path}: expected 8- or 16-bit samples, found {raw.dtype}")
     attrs["exif"] = exif
-    return LightField(data=np.ascontiguousarray(data)[None, None], units="relative",
+    return LightField(data=freeze(np.ascontiguousarray(data))[None, None], units="relative",
                       colour_space="camera-rgb" if data.shape[-1] == 3 else "luminance",
                       exposure_s=exif["exposure_s"], iso=exif["iso"], saturation_level=1.0, source=str(path),
                       attrs=attrs)
@@ -144,7 +145,7 @@ def _read_raw(path: Path) -> LightField:
     exif = read_exif_exposure(path)
     t = float(t) if t else exif["exposure_s"]
     iso = float(iso) if iso else exif["iso"]
-    return LightField(data=(rgb.astype(np.float32) / 65535)[None, None], units="relative", colour_space="camera-rgb",
+    return LightField(data=freeze(rgb.astype(np.float32) / 65535)[None, None], units="relative", colour_space="camera-rgb",
                       exposure_s=t, iso=iso, saturation_level=1.0, source=str(path),
                       attrs={"raw_black_level": black, "raw_white_level": white, "exif": exif})
 

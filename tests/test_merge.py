@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lfproc.cli.main import main
-from lfproc.errors import InputError, ShapeError
+from lfproc.errors import ConvergenceWarning, InputError, SaturationWarning, ShapeError
 from lfproc.io import read_lightfield, write_lightfield
 from lfproc.lightfield import LightField
 from lfproc.merge import merge_debevec, merge_lightfields, merge_ml, recover_response
@@ -70,19 +70,24 @@ def test_ml_saturated_everywhere_filled_with_shortest_saturation(bracket):
 
 def test_ml_lookup_path_equals_float_path_and_any_shape():
     truth, dn = _bracket(size=(16, 20), views=3, seed=3)
-    x16, v16, _ = merge_ml(dn, exposures_s=TIMES, isos=100, profile="illum", chunk_size=1000)
-    xf, vf, _ = merge_ml(dn.astype(np.float64), exposures_s=TIMES, isos=100, profile="illum", n_threads=2)
+    # a small crop where the lamps cover 20 % of the samples, saturated in every exposure
+    with pytest.warns(SaturationWarning, match=r"exposure bracket: 20.0 % of the samples \(in every exposure\)"):
+        x16, v16, _ = merge_ml(dn, exposures_s=TIMES, isos=100, profile="illum", chunk_size=1000)
+    with pytest.warns(SaturationWarning):
+        xf, vf, _ = merge_ml(dn.astype(np.float64), exposures_s=TIMES, isos=100, profile="illum", n_threads=2)
     np.testing.assert_allclose(x16, xf, rtol=1e-5, atol=1e-3)
     np.testing.assert_allclose(v16, vf, rtol=1e-5)
     # 2-D sample shape: the same numbers per pixel (the merge is per sample)
-    x2, _, _ = merge_ml(list(dn.reshape(5, -1, 3)), exposures_s=TIMES, isos=100, profile="illum")
+    with pytest.warns(SaturationWarning):
+        x2, _, _ = merge_ml(list(dn.reshape(5, -1, 3)), exposures_s=TIMES, isos=100, profile="illum")
     np.testing.assert_allclose(x2.reshape(x16.shape), x16, rtol=1e-6)
 
 
 def test_ml_single_exposure_weights_match_sensor_model():
     # one usable exposure per pixel: the merge returns that exposure's calibrated value and variance
     dn = np.array([[500, 1023], [1023, 1023]], dtype=np.uint16)[:, None, :]  # (2 exposures, 1, 2)
-    x, var, info = merge_ml(dn, exposures_s=[0.01, 0.02], isos=100, profile="illum", n_iter=3)
+    with pytest.warns(SaturationWarning, match="50.0 %"):  # one of the two samples
+        x, var, info = merge_ml(dn, exposures_s=[0.01, 0.02], isos=100, profile="illum", n_iter=3)
     obs = calibrated_observation(np.array([[500.0]]), exposure_s=0.01, iso=100, profile="illum",
                                  variance_from="estimate", radiance_estimate=np.array([[x[0, 0]]]))
     assert x[0, 0] == pytest.approx(float(obs.radiance[0, 0]), rel=1e-5)
@@ -301,7 +306,12 @@ def test_cli_merge_ml_light_field_files(tmp_path, capsys):
         paths.append(str(p))
     out = tmp_path / "hdr.exr"
     assert main(["merge", *paths, "-o", str(out), "--profile", "illum", "--json"]) == 0
-    doc = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    doc = json.loads(captured.out)
+    # the lamps clip in every exposure on 14 % of the samples: one warning line, exit 0
+    assert captured.err == ("lfproc merge: warning: exposure bracket: 14.4 % of the samples (in every exposure) are "
+                            "saturated (more than 10 %); their merged values are lower bounds (the saturation "
+                            "level of the shortest exposure); add a shorter exposure\n")
     assert doc["method"] == "ml" and doc["has_variance"] and doc["units"] == "e-/s"
     lf = read_lightfield(out)
     assert lf.variance is not None and lf.shape == truth.shape

@@ -261,6 +261,25 @@ def test_cli_simulate_prints_the_sampling_rate(tmp_path, capsys, lf_file):
     assert json.loads(capsys.readouterr().out)["radiance_scale"] == 1000
 
 
+def test_same_seed_gives_byte_identical_capture_files(tmp_path, capsys, lf_file, monkeypatch):
+    import time
+    import zipfile
+
+    from lfproc._util import file_sha256
+
+    args = ["simulate", str(lf_file), "--seed", "7", "--shots", "2", "--iso-pattern", "random"]
+    assert main([*args, "-o", str(tmp_path / "a.capture.npz")]) == 0
+    real = time.time
+    monkeypatch.setattr(time, "time", lambda: real() + 86400 + 3)  # a later day: ZIP stamps would differ
+    assert main([*args, "-o", str(tmp_path / "b.capture.npz")]) == 0
+    assert main([*args[:3], "8", *args[4:], "-o", str(tmp_path / "c.capture.npz")]) == 0
+    capsys.readouterr()
+    sha = {name: file_sha256(tmp_path / f"{name}.capture.npz") for name in "abc"}
+    assert sha["a"] == sha["b"] and sha["a"] != sha["c"]
+    with zipfile.ZipFile(tmp_path / "b.capture.npz") as zf:
+        assert {info.date_time for info in zf.infolist()} == {(1980, 1, 1, 0, 0, 0)}
+
+
 def _nan_image(tmp_path, value):
     image = np.ones((8, 8, 3), np.float32)
     image[2, 3, 1] = value

@@ -49,10 +49,10 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_choice, check_positive, check_random_state
+from .._util import check_choice, check_positive, check_random_state, freeze
 from .._version import __version__
 from .iso import DEFAULT_ISOS, ISO_PATTERNS, iso_pattern
-from .capture import Capture, _num, file_sha256, observations
+from .capture import Capture, _num, _warn_saturation, file_sha256, observations
 from ..calib import load_profile
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 from ..lightfield import LightField, clean_nonfinite
@@ -304,9 +304,9 @@ def simulate_capture(
         "light_field_source": lf.source if isinstance(lf, LightField) else None,
         "light_field_units": lf.units if isinstance(lf, LightField) else None,
     }
-    return Capture(
-        dn=dn,
-        iso=iso_maps,
+    capture = Capture(
+        dn=freeze(dn),
+        iso=freeze(iso_maps),
         exposures_s=exposures,
         mask=code,
         profile=profile,
@@ -318,11 +318,13 @@ def simulate_capture(
         iso_pattern=iso_info,
         parameters=parameters,
     )
+    _warn_saturation(capture, stacklevel=4)
+    return capture
 
 
 def capture_summary(capture: Capture, *, path: str | os.PathLike | None = None) -> dict[str, Any]:
     """Figures of a capture: shots, size, sampling rate, saturated and black-clipped fractions."""
-    obs = observations(capture)
+    obs = observations(capture, warn_saturation=False)  # reported in the figures
     per_iso = {}
     for value in capture.isos:
         sel = capture.iso == value

@@ -29,6 +29,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from .._util import freeze
 from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 from ..lightfield import LightField, clean_nonfinite
@@ -123,7 +124,8 @@ def _read_exr_lightfield(path: Path, nonfinite: str, negative: str) -> LightFiel
     centre = views[(nv // 2, nu // 2)]
     disparity = centre.channels["disparity"].pixels if "disparity" in centre.channels else None
     data, _ = clean_nonfinite(data, policy=nonfinite, negative=negative, name=str(path))
-    return LightField(data=data, variance=variance, disparity=disparity, **_meta_kwargs(meta))
+    return LightField(data=freeze(data), variance=None if variance is None else freeze(variance), disparity=disparity,
+                      **_meta_kwargs(meta))
 
 
 def _view_files(folder: Path) -> dict[tuple[int, int], Path]:
@@ -182,7 +184,7 @@ def _read_folder(folder: Path, nonfinite: str, negative: str, transfer: str) -> 
         if disparity.shape != data.shape[2:4]:
             raise ShapeError(f"{folder / DISPARITY_FILE}: disparity size {disparity.shape} differs from the views "
                              f"{data.shape[2:4]}")
-    return LightField(data=data, disparity=disparity, **kwargs)
+    return LightField(data=freeze(data), disparity=disparity, **kwargs)
 
 
 def read_lightfield(
@@ -223,7 +225,7 @@ def read_lightfield(
     image, meta = read_image(path, part=part, nonfinite=nonfinite, negative=negative, transfer=transfer)
     attrs = {k: meta[k] for k in ("format", "part_name", "view") if meta.get(k) is not None}
     return LightField(
-        data=image[None, None],
+        data=freeze(image)[None, None],
         saturation_level=meta.get("saturation_level"),
         source=str(path),
         attrs=attrs,
