@@ -19,7 +19,13 @@ the bracket's exposures) and processed in chunks to bound memory:
 * :func:`merge_debevec` -- Debevec & Malik (1997) eq. 6: a hat-weighted mean in the log domain,
   ``ln E = sum_i w(z_i) (g(z_i) - ln t_i) / sum_i w(z_i)``, on linear data (``g = ln``) or on
   non-linear 8-bit codes with a camera response ``g`` recovered by :func:`recover_response`
-  (the paper's least-squares ``gsolve`` with a smoothness term, solved here with numpy).
+  (the paper's least-squares ``gsolve`` with a smoothness term, on many pixels chosen across
+  the radiance range, pixel unknowns eliminated). A sample clipped in a shorter exposure is
+  not used in the longer ones of the same pixel and channel.
+* :func:`merge_ml_codes8` -- the inverse-variance estimator for 8-bit images: recovered
+  response, code variance measured on the bracket (no profile, no ISO).
+
+:func:`check_exposure_order` refuses exposure times that contradict the images.
 
 Pixels with no usable sample are never left as garbage. A pixel **saturated in every
 exposure** is filled with the radiance of the saturation level in the shortest exposure
