@@ -46,6 +46,7 @@ __all__ = [
     "save_profile",
     "is_profile_file",
     "bias_sidecar_path",
+    "profile_files",
     "paper_gain_dn_per_e",
     "SHIPPED_PROFILES",
     "SCHEMA",
@@ -451,15 +452,25 @@ def bias_sidecar_path(path: str | os.PathLike) -> Path:
     return path.with_name(f"{path.stem}.bias.npz")
 
 
+def profile_files(profile: CameraProfile, path: str | os.PathLike) -> list[Path]:
+    """Every file :func:`save_profile` writes for ``profile`` at ``path``: the JSON first, then its
+    bias sidecar and flat-field sidecar when the profile has them."""
+    path = Path(path)
+    files = [path]
+    if profile.bias_frames:
+        files.append(bias_sidecar_path(path))
+    if profile.flat_field is not None:
+        files.append(path.with_name(f"{path.stem}.flat.npz"))
+    return files
+
+
 def save_profile(profile: CameraProfile, path: str | os.PathLike, *, force: bool = False) -> Path:
     """Write a profile as JSON, its bias frames in a sidecar ``<stem>.bias.npz`` and its flat-field
     map in ``<stem>.flat.npz``; all or none (:func:`lfproc.io.atomic_outputs`)."""
     path = Path(path)
     doc = profile.to_json()
-    outputs = [path, bias_sidecar_path(path)] if profile.bias_frames else [path]
-    flat_at = len(outputs)
-    if profile.flat_field is not None:
-        outputs.append(path.with_name(f"{path.stem}.flat.npz"))
+    outputs = profile_files(profile, path)
+    flat_at = len(outputs) - 1
     with atomic_outputs(outputs, force=force) as staged:
         if profile.bias_frames:
             with open(staged[1], "wb") as fh:
