@@ -16,7 +16,7 @@ def register(sub, common) -> None:
                     "exposure bracketing merged per shot and solved jointly, dual ISO); write results.csv (one row "
                     "per cell), report.md (tables like the paper's Tables I-IV beside its numbers, the paper's "
                     "claims decided on these scenes) and plots into BENCH_DIR. Cells are cached in BENCH_DIR/cells: "
-                    "a killed bench resumes where it stopped. Presets: quick (central 64 x 64 crop, 35 cells per "
+                    "a killed bench resumes where it stopped. Presets: quick (central 48 x 48 crop, 35 cells per "
                     "scene, minutes), paper (the full grid at full size).")
     p.add_argument("scenes", nargs="*", type=Path, metavar="LF", help="HDR light fields (files or view folders)")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="BENCH_DIR", help="bench folder")

@@ -17,14 +17,14 @@ Methods (the ``method`` column):
 
 Presets (one function builds both; the numbers are in :data:`PRESETS`):
 
-``quick``  scenes cropped to their central 64 x 64 pixels; noise ``low``, ISO set
+``quick``  scenes cropped to their central 48 x 48 pixels; noise ``low``, ISO set
            (100, 400, 800, 1600) unless said otherwise; joint and dual-ISO for every pattern x
            1, 2, 3 shots; 2 shots with random, row and dual patterns for the two wider ISO
            sets; 2 random-pattern shots at noise none, medium, high and at relative exposures
-           4, 16, 64 (lfproc's addition: a saturation sweep); the baselines (individual ISO,
+           4, 32, 256 (lfproc's addition: a saturation sweep); the baselines (individual ISO,
            bracketing 2/3/4 with both merges, bracketing-joint 2/3/4). 35 cells per scene.
 ``paper``  full size; the full grid pattern x shots (1, 2, 3) x ISO set (3) x noise (4), the
-           exposure sweep, and the baselines at every noise level. 183 cells per scene.
+           exposure sweep, and the baselines at every noise level. 191 cells per scene.
 
 Seeds. Every cell records its seed: a hash of the bench seed, the scene and the
 acquisition's *draw group* -- ``(method, ISO pattern, shots)`` -- but not the ISO set, noise
@@ -79,15 +79,15 @@ REFERENCE = {"iso_set": ISO_SETS[0], "noise": "low", "exposure": 1.0}
 PRESETS = {
     "quick": Preset(
         name="quick",
-        description="two small scenes in minutes: central 64 x 64 crop; every pattern x 1-3 shots at the reference "
+        description="two small scenes in minutes: central 48 x 48 crop; every pattern x 1-3 shots at the reference "
                     "settings, the wider ISO sets and other noise levels at 2 shots, a saturation sweep, the baselines",
-        crop=(64, 64), noise_levels=NOISE_LEVELS, iso_sets=ISO_SETS, full_grid=False, exposures=(4.0, 16.0, 64.0),
-        baseline_noise=("low",), mask_period=4, recon={"max_iter": 150}),
+        crop=(48, 48), noise_levels=NOISE_LEVELS, iso_sets=ISO_SETS, full_grid=False,
+        exposures=(4.0, 32.0, 256.0), baseline_noise=("low",), mask_period=4, recon={"max_iter": 150}),
     "paper": Preset(
         name="paper",
         description="the full grid at full size: pattern x shots x ISO set x noise, the saturation sweep, the "
                     "baselines at every noise level",
-        crop=None, noise_levels=NOISE_LEVELS, iso_sets=ISO_SETS, full_grid=True, exposures=(4.0, 16.0, 64.0),
+        crop=None, noise_levels=NOISE_LEVELS, iso_sets=ISO_SETS, full_grid=True, exposures=(4.0, 32.0, 256.0),
         baseline_noise=NOISE_LEVELS, mask_period=None, recon={}),
 }
 

@@ -327,7 +327,7 @@ def _plot_saturation(rows, path: Path) -> None:
             if pts:
                 xs, ys = zip(*pts)
                 ax.scatter(xs, ys, facecolors="none", edgecolors=f"C{i}", marker=markers[j % len(markers)], s=40,
-                           label=f"exposure x4-x64, ISO {text}" + (f", {scene}" if len(scenes) > 1 else ""))
+                           label=f"longer exposures (sweep), ISO {text}" + (f", {scene}" if len(scenes) > 1 else ""))
     ax.axvline(100 * _SAT_LIMIT, color="grey", ls="--", lw=1)
     ax.text(100 * _SAT_LIMIT, ax.get_ylim()[0], " 15 %", color="grey", va="bottom", fontsize=8)
     ax.set_xscale("symlog", linthresh=1)
