@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -22,7 +23,7 @@ from lfproc.calib import load_profile
 from lfproc.camera.simulate import simulate_capture
 from lfproc.cli.main import main
 from lfproc.dictionary import dct_dictionary, save_dictionary
-from lfproc.errors import InputError, ShapeError
+from lfproc.errors import InputError, SaturationWarning, ShapeError
 from lfproc.metrics import evaluate
 from lfproc.recon import reconstruct
 from lfproc.synth import synthesize
@@ -52,6 +53,13 @@ def ramp():
 @pytest.fixture(scope="module")
 def dct8():
     return dct_dictionary((5, 5, 8, 8, 3), 200, sparsity=6)
+
+
+def _alone(shot, dictionary):
+    """One shot reconstructed on its own (higher ISOs and longer exposures saturate by design)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SaturationWarning)
+        return reconstruct(shot, dictionary)
 
 
 def _scores(result, truth):
@@ -90,7 +98,7 @@ def test_individual_iso_baseline_against_the_truth(ramp, dct8):
     capture = simulate_capture(ramp, profile="paper-low", baseline="individual-iso", mask_period=4, random_state=3)
     assert [float(np.unique(capture.iso[s])[0]) for s in range(4)] == [100, 400, 800, 1600]
     out = reconstruct_per_shot(capture, dct8, merges=("debevec", "ml"))
-    singles = [_scores(reconstruct(s, dct8), ramp) for s in split_shots(capture)]
+    singles = [_scores(_alone(s, dct8), ramp) for s in split_shots(capture)]
     best_single = max(s["log_psnr_db"] for s in singles)
     flat = _scores(_flat(ramp), ramp)
     for merge, lf in out.items():
@@ -113,7 +121,7 @@ def test_bracketing_baseline_against_the_truth(ramp, dct8):
                                random_state=3)
     assert np.allclose(np.array(capture.exposures_s) / capture.exposures_s[0], [1, 16])
     out = reconstruct_per_shot(capture, dct8, merges=("debevec", "ml"))
-    singles = [_scores(reconstruct(s, dct8), ramp)["log_psnr_db"] for s in split_shots(capture)]
+    singles = [_scores(_alone(s, dct8), ramp)["log_psnr_db"] for s in split_shots(capture)]
     for merge, lf in out.items():
         s = _scores(lf, ramp)
         assert s["pu21_psnr_db"] > 29.5, (merge, s["pu21_psnr_db"])

@@ -52,6 +52,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -59,13 +60,14 @@ import numpy as np
 
 from .._util import check_choice
 from .._version import __version__
-from ..errors import InputError
+from ..errors import InputError, SaturationWarning
 from ..lightfield import LightField
 
 __all__ = ["MERGES", "split_shots", "reexpose", "merge_reconstructions", "reconstruct_per_shot"]
 
 #: Merges :func:`reconstruct_per_shot` offers (see :mod:`lfproc.merge`).
 MERGES = ("debevec", "ml")
+_ML_UPDATES = 6
 
 
 def split_shots(capture) -> list:
@@ -170,7 +172,7 @@ def _guard(shot, dilate: int) -> np.ndarray:
 
     from ..camera.capture import observations
 
-    sat = observations(shot).saturated[0]
+    sat = observations(shot, warn_saturation=False).saturated[0]
     if dilate > 0 and sat.any():
         sat = binary_dilation(sat, structure=np.ones((2 * dilate + 1, 2 * dilate + 1), bool))
     return sat
@@ -213,8 +215,10 @@ def merge_reconstructions(
     if merge == "ml":
         # the codes are ideal (noise-free) samples; merge_ml weighs them by the noise each shot
         # would have had there, which is what tells a short, low-gain shot from a long one
+        # more fixed-point updates than merge_ml's default 2: reconstructions put samples right at
+        # the edges of the shots' ranges, where the weights take a few more updates to settle
         radiance, _, info = merge_ml(stack, exposures_s=t, isos=iso, profile=prof, gamma=float(shots[0].gamma),
-                                   n_threads=1)
+                                     n_iter=_ML_UPDATES, n_threads=1)
         data = radiance / scale
     else:
         if float(shots[0].gamma) != 1.0:
@@ -268,7 +272,7 @@ def reconstruct_per_shot(
         first shot's reconstruction settings, the per-shot records (``per_shot``), the
         patches and empty patches summed over the shots, and the total seconds.
     """
-    from ..camera.capture import Capture, load_capture
+    from ..camera.capture import Capture, load_capture, observations
     from ..dictionary import Dictionary, load_dictionary
     from ..recon import reconstruct
 
@@ -288,8 +292,12 @@ def reconstruct_per_shot(
     if not isinstance(dictionary, Dictionary):
         dictionary = load_dictionary(dictionary)
     started = time.perf_counter()
+    observations(capture)  # SaturationWarning when the capture's least sensitive shot saturates
     shots = split_shots(capture)
-    recs = [reconstruct(s, dictionary, **options) for s in shots]
+    with warnings.catch_warnings():
+        # each higher-ISO or longer shot saturates by design; the capture was checked as a whole above
+        warnings.simplefilter("ignore", SaturationWarning)
+        recs = [reconstruct(s, dictionary, **options) for s in shots]
     recon_seconds = time.perf_counter() - started
     out = {}
     for m in merges:

@@ -36,10 +36,9 @@ from typing import Any
 
 import numpy as np
 
-from ..io import atomic_file
 from .grid import ISO_SETS, NOISE_LEVELS, REFERENCE
 
-__all__ = ["write_report", "claims", "PAPER", "mean_metric"]
+__all__ = ["write_report", "claims", "PAPER", "PLOTS", "REPORT_FILES", "mean_metric"]
 
 #: The paper's Table I-IV numbers (method.md section 7): PU2-PSNR (dB) and PU2-SSIM by shots.
 PAPER = {
@@ -380,6 +379,10 @@ def _plot_best_worst(rows, bench_dir: Path, meta: dict, path: Path) -> None:
 
     ok = [r for r in rows if math.isfinite(_num(r, "pu21_psnr_db"))]
     if not ok:
+        fig, ax = plt.subplots(figsize=(4, 1))
+        ax.text(0.5, 0.5, "no cell with a finite score", ha="center", va="center")
+        ax.set_axis_off()
+        _save(fig, path)
         return
     best = max(ok, key=lambda r: _num(r, "pu21_psnr_db"))
     worst = min(ok, key=lambda r: _num(r, "pu21_psnr_db"))
@@ -418,9 +421,10 @@ def _plot_best_worst(rows, bench_dir: Path, meta: dict, path: Path) -> None:
 def _save(fig, path: Path) -> None:
     import matplotlib.pyplot as plt
 
-    with atomic_file(path, force=True) as tmp:
-        fig.savefig(tmp, dpi=90)
-    plt.close(fig)
+    try:
+        fig.savefig(path, dpi=90)  # a staged path of atomic_outputs: published with the report
+    finally:
+        plt.close(fig)
 
 
 # -- report.md ---------------------------------------------------------------------------------
@@ -431,24 +435,47 @@ def _table(header: list[str], body: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
-def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict) -> Path:
-    """Write report.md and the plots into ``bench_dir``; returns the report's path."""
+#: The plots of the report, by key.
+PLOTS = {
+    "shots": "quality_vs_shots.png",
+    "noise": "quality_vs_noise.png",
+    "saturation": "quality_vs_saturation.png",
+    "measurements": "joint_vs_bracketing.png",
+    "best_worst": "best_worst.png",
+}
+#: Every file :func:`write_report` writes.
+REPORT_FILES = ("report.md", *PLOTS.values())
+
+
+def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict,
+                 paths: dict[str, Path] | None = None) -> Path:
+    """Write report.md and the plots (:data:`REPORT_FILES`); returns the report's path.
+
+    Without ``paths`` the files go to ``bench_dir`` and are published together
+    (:func:`lfproc.io.atomic_outputs`); with ``paths`` (file name -> path, e.g. the staged
+    paths of a larger :func:`~lfproc.io.atomic_outputs` transaction) they are written there.
+    ``bench_dir`` is where the cells (for the best/worst picture) are read.
+    """
+    if paths is None:
+        from ..io import atomic_outputs
+
+        out = Path(bench_dir)
+        with atomic_outputs([out / f for f in REPORT_FILES], force=True) as staged:
+            _render(out, rows, meta, dict(zip(REPORT_FILES, staged)))
+        return out / "report.md"
+    return _render(Path(bench_dir), rows, meta, paths)
+
+
+def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path]) -> Path:
     import matplotlib
 
     matplotlib.use("Agg", force=False)
-    out = Path(bench_dir)
-    plots = {
-        "shots": "quality_vs_shots.png",
-        "noise": "quality_vs_noise.png",
-        "saturation": "quality_vs_saturation.png",
-        "measurements": "joint_vs_bracketing.png",
-        "best_worst": "best_worst.png",
-    }
-    _plot_shots(rows, out / plots["shots"])
-    _plot_noise(rows, out / plots["noise"])
-    _plot_saturation(rows, out / plots["saturation"])
-    _plot_measurements(rows, out / plots["measurements"])
-    _plot_best_worst(rows, out, meta, out / plots["best_worst"])
+    plots = PLOTS
+    _plot_shots(rows, paths[plots["shots"]])
+    _plot_noise(rows, paths[plots["noise"]])
+    _plot_saturation(rows, paths[plots["saturation"]])
+    _plot_measurements(rows, paths[plots["measurements"]])
+    _plot_best_worst(rows, bench_dir, meta, paths[plots["best_worst"]])
 
     n_scenes = len({r["scene"] for r in rows})
     crop = f"central {'x'.join(map(str, meta['crop']))} pixels of each view" if meta["crop"] else "none"
@@ -483,8 +510,9 @@ def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict) 
         "",
         "Scenes:",
         "",
-        _table(["scene", "size used", "file"], [[s["name"], "x".join(map(str, s["size"])), f"`{s['path']}`"]
-                                              for s in meta["scenes"]]),
+        _table(["scene", "size used", "file", "SHA-256"],
+               [[s["name"], "x".join(map(str, s["size"])), f"`{s.get('given', s['path'])}`", f"`{s['sha256'][:16]}`"]
+                for s in meta["scenes"]]),
         "",
     ]
 
@@ -608,8 +636,7 @@ def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict) 
                        ("saturation", "Quality vs saturated fraction as ISO steps widen"),
                        ("measurements", "Joint vs bracketing at equal numbers of measurements"),
                        ("best_worst", "Best and worst cell, centre view, with the error map")):
-        if (out / plots[key]).is_file():
-            lines += [f"### {title}", "", f"![{title}]({plots[key]})", ""]
+        lines += [f"### {title}", "", f"![{title}]({plots[key]})", ""]
 
     lines += ["## How the baselines are run", "",
               "- **Individual ISO** and **bracketing**: every shot is reconstructed alone with the same dictionary and "
@@ -624,9 +651,6 @@ def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict) 
               "- **Dual ISO**: the joint reconstruction of the dual-ISO row pattern.",
               "- **Two-step LDR + HDR-CNN**: not available (Table II).",
               ""]
-    text = "\n".join(lines)
-    path = out / "report.md"
-    with atomic_file(path, force=True) as tmp:
-        tmp.write_text(text)
-    return path
+    paths["report.md"].write_text("\n".join(lines))
+    return paths["report.md"]
 

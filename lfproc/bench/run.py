@@ -22,6 +22,7 @@ import json
 import os
 import shutil
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,7 +31,7 @@ import numpy as np
 
 from .._util import file_sha256, progress, to_jsonable
 from .._version import __version__
-from ..errors import InputError, OutputExistsError, ShapeError
+from ..errors import InputError, OutputExistsError, SaturationWarning, ShapeError
 from .grid import Cell, Job, Preset, cell_id, cell_seed, get_preset, grid_cells, group_jobs
 
 __all__ = ["run_bench", "load_scene", "run_job", "read_cells", "COLUMNS", "BenchScene"]
@@ -164,18 +165,22 @@ def run_job(spec: dict[str, Any], dictionary) -> list[dict[str, Any]]:
     lf = load_scene(scene)
     first = cells[0]
     seed = cell_seed(spec["seed"], first)
-    t0 = time.perf_counter()
-    capture = _simulate(lf, first, preset, seed)
-    simulate_seconds = time.perf_counter() - t0
-    obs = observations(capture)
-    options = dict(spec["recon"])
-    t0, c0 = time.perf_counter(), time.process_time()
-    if first.method in ("individual-iso", "bracketing"):
-        recs = reconstruct_per_shot(capture, dictionary, merges=[c.merge for c in cells], **options)
-        results = [recs[c.merge] for c in cells]
-    else:
-        results = [reconstruct(capture, dictionary, **options)]
-    seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
+    with warnings.catch_warnings():
+        # the grid saturates some cells on purpose (wide ISO sets, the exposure sweep): their
+        # saturated fraction is a column of results.csv instead of a warning per cell
+        warnings.simplefilter("ignore", SaturationWarning)
+        t0 = time.perf_counter()
+        capture = _simulate(lf, first, preset, seed)
+        simulate_seconds = time.perf_counter() - t0
+        obs = observations(capture)
+        options = dict(spec["recon"])
+        t0, c0 = time.perf_counter(), time.process_time()
+        if first.method in ("individual-iso", "bracketing"):
+            recs = reconstruct_per_shot(capture, dictionary, merges=[c.merge for c in cells], **options)
+            results = [recs[c.merge] for c in cells]
+        else:
+            results = [reconstruct(capture, dictionary, **options)]
+        seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
     rows = []
     for cell, cid, rec in zip(cells, ids, results):
         scores = evaluate(rec, lf, scale_tolerance_stops=None)
@@ -279,7 +284,8 @@ def run_bench(
         ``results`` (path), ``report`` (path or None), ``rows``.
     """
     from ..dictionary import Dictionary, load_dictionary
-    from ..io import atomic_file
+    from ..io import atomic_file, atomic_outputs, clean_stale
+    from .report import REPORT_FILES, write_report
 
     started = time.perf_counter()
     preset = get_preset(preset)
@@ -303,8 +309,7 @@ def run_bench(
     if force and cells_dir.is_dir():
         shutil.rmtree(cells_dir)
     cells_dir.mkdir(parents=True, exist_ok=True)
-    for stale in cells_dir.glob(".lfproc-tmp-*"):  # left by a killed run
-        stale.unlink(missing_ok=True)
+    clean_stale(cells_dir)  # temporaries of killed runs (entries of live processes are left alone)
 
     recon = {**preset.recon, **(recon_options or {})}
     dict_id = _dictionary_id(dictionary, source)
@@ -326,8 +331,8 @@ def run_bench(
         "preset_description": preset.description, "crop": preset.crop, "mask_period": preset.mask_period,
         "exposure_s": preset.exposure_s, "recon": recon, "seed": int(seed), "dictionary": dict_id,
         "dictionary_patch": list(dictionary.patch), "dictionary_atoms": dictionary.n_atoms,
-        "scenes": [{"name": s.name, "path": s.path, "sha256": s.sha256, "crop": s.crop, "size": list(s.size)}
-                   for s in bench_scenes],
+        "scenes": [{"name": s.name, "path": s.path, "given": str(g), "sha256": s.sha256, "crop": s.crop,
+                    "size": list(s.size)} for s, g in zip(bench_scenes, scenes)],
     }
     with atomic_file(marker, force=True) as tmp:
         tmp.write_text(json.dumps(to_jsonable(meta), indent=1))
@@ -354,17 +359,19 @@ def run_bench(
 
     rows = read_cells([_cell_path(cells_dir, ids[c]) for c in cells])
     results = out / "results.csv"
-    with atomic_file(results, force=True) as tmp:
-        with open(tmp, "w", newline="") as fh:
+    report_path = None
+    files = ["results.csv"] + (list(REPORT_FILES) if report and rows else [])
+    # results.csv, report.md and the plots are published together: all from this run, or none
+    with atomic_outputs([out / f for f in files], force=True) as staged:
+        staged = dict(zip(files, staged))
+        with open(staged["results.csv"], "w", newline="") as fh:
             writer = csv.DictWriter(fh, fieldnames=list(COLUMNS), extrasaction="ignore")
             writer.writeheader()
             for row in rows:
                 writer.writerow({k: _csv_value(row.get(k)) for k in COLUMNS})
-    report_path = None
-    if report and rows:
-        from .report import write_report
-
-        report_path = write_report(out, rows, meta=meta)
+        if len(files) > 1:
+            write_report(out, rows, meta=meta, paths=staged)
+            report_path = out / "report.md"
     seconds = time.perf_counter() - started
     return {"bench": str(out), "preset": preset.name, "scenes": len(bench_scenes), "cells": len(cells),
             "computed": computed, "cached": len(cells) - sum(len(s["cells"]) for s in specs),
