@@ -314,7 +314,7 @@ def _plot_saturation(rows, path: Path) -> None:
     for i, iso_set in enumerate(ISO_SETS):
         text = ",".join(str(v) for v in iso_set)
         for j, scene in enumerate(scenes):
-            pts = [(100 * _num(r, "saturated_fraction"), _num(r, "pu21_psnr_db")) for r in sel
+            pts = [(max(100 * _num(r, "saturated_fraction"), 0.01), _num(r, "pu21_psnr_db")) for r in sel
                    if r["isos"] == text and r["scene"] == scene and abs(_num(r, "exposure") - 1) < 1e-9]
             if pts:
                 xs, ys = zip(*pts)
@@ -322,14 +322,15 @@ def _plot_saturation(rows, path: Path) -> None:
                            label=f"ISO {text}" + (f", {scene}" if len(scenes) > 1 else ""))
         exp = [r for r in sel if r["isos"] == text and abs(_num(r, "exposure") - 1) > 1e-9]
         for j, scene in enumerate(scenes):
-            pts = [(100 * _num(r, "saturated_fraction"), _num(r, "pu21_psnr_db")) for r in exp if r["scene"] == scene]
+            pts = [(max(100 * _num(r, "saturated_fraction"), 0.01), _num(r, "pu21_psnr_db")) for r in exp
+                   if r["scene"] == scene]
             if pts:
                 xs, ys = zip(*pts)
                 ax.scatter(xs, ys, facecolors="none", edgecolors=f"C{i}", marker=markers[j % len(markers)], s=40,
                            label=f"longer exposures (sweep), ISO {text}" + (f", {scene}" if len(scenes) > 1 else ""))
     ax.axvline(100 * _SAT_LIMIT, color="grey", ls="--", lw=1)
     ax.text(100 * _SAT_LIMIT, ax.get_ylim()[0], " 15 %", color="grey", va="bottom", fontsize=8)
-    ax.set_xscale("symlog", linthresh=1)
+    ax.set_xscale("log")  # cells with no saturated measurement are drawn at 0.01 %
     ax.set_xlabel("saturated measurements (%)")
     ax.set_ylabel("PU21-PSNR (dB)")
     ax.grid(alpha=0.3)
