@@ -95,7 +95,7 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from .errors import FileFormatError, UnsafeFileError
+from .errors import FileFormatError, LfprocError, UnsafeFileError
 
 __all__ = [
     "MAX_JSON_BYTES",
@@ -702,9 +702,7 @@ def read_npz(path: str | os.PathLike, *, names: Iterable[str] | None = None, sou
                                          expect_shape=shape, expect_dtype=dtype, max_bytes=max_bytes,
                                          check=None if check is None else (lambda s, d, n=name: check(n, s, d)))
             return out
-    except (UnsafeFileError, error):
-        raise
-    except FileFormatError:
+    except LfprocError:
         raise
     except _archive_errors() as exc:
         raise error(f"{_where(source)}not a readable .npz/ZIP archive ({type(exc).__name__}: {str(exc)[:120]})") from None
@@ -784,9 +782,7 @@ def open_tar(path: str | os.PathLike, *, source=None, error: type[Exception] = F
         try:
             with tarfile.open(fileobj=stream, mode="r:") as tar:
                 yield tar
-        except (UnsafeFileError, error):
-            raise
-        except FileFormatError:
+        except LfprocError:
             raise
         except (tarfile.TarError, EOFError, OSError, zlib.error, lzma.LZMAError, ValueError, OverflowError,
                 UnicodeDecodeError) as exc:
