@@ -61,14 +61,11 @@ def _require_file(path: Path) -> None:
 
 def exr_parts(path: str | os.PathLike) -> list[dict[str, Any]]:
     """Describe the parts of an OpenEXR file: name, view, channels, size (header only)."""
-    import OpenEXR
+    from ._exr import open_exr
 
     path = Path(path)
     _require_file(path)
-    try:
-        f = OpenEXR.File(str(path), header_only=True)
-    except Exception as exc:  # the bindings raise plain RuntimeError on any failure
-        raise FileFormatError(f"{path}: not a readable OpenEXR file ({exc})") from None
+    f = open_exr(path, header_only=True)
     out = []
     for i, part in enumerate(f.parts):
         h = part.header
@@ -107,15 +104,13 @@ def _pick_channels(names: list[str], prefix: str) -> tuple[str, ...] | None:
 
 
 def _read_exr(path: Path, part: int | str | None, view: str | None) -> tuple[np.ndarray, dict[str, Any]]:
-    import OpenEXR
+    from ._exr import open_exr
 
-    try:
-        f = OpenEXR.File(str(path), separate_channels=True)
-    except Exception as exc:
-        raise FileFormatError(f"{path}: not a readable OpenEXR file ({exc})") from None
+    f = open_exr(path)
     parts = f.parts
     # choose the part
-    if part is None and view is not None and any(p.header.get("view") == view for p in parts):
+    if part is None and view is not None and any(p.header.get("view") == view and _pick_channels(list(p.channels), "")
+                                                 for p in parts):
         index = next(i for i, p in enumerate(parts) if p.header.get("view") == view and _pick_channels(list(p.channels), ""))
     elif part is None:
         candidates = [i for i, p in enumerate(parts) if _pick_channels(list(p.channels), "")]
@@ -153,9 +148,12 @@ def _read_exr(path: Path, part: int | str | None, view: str | None) -> tuple[np.
         raise FileFormatError(
             f"{path}: part {index} has channels {', '.join(sorted(names))}; expected R,G,B or Y (optionally in a layer)"
         )
-    array = np.stack([p.channels[c].pixels.astype(np.float32) for c in chans], axis=-1)
+    planes = [p.channels[c].pixels for c in chans]
+    if any(not isinstance(q, np.ndarray) or q.ndim != 2 or q.shape != planes[0].shape for q in planes):
+        raise FileFormatError(f"{path}: part {index} channels {', '.join(chans)} differ in size or hold no pixels")
+    array = np.stack([q.astype(np.float32) for q in planes], axis=-1)
     (x0, y0), (x1, y1) = header["dataWindow"]
-    (dx0, dy0), (dx1, dy1) = header["displayWindow"]
+    (dx0, dy0), (dx1, dy1) = header.get("displayWindow", header["dataWindow"])
     meta = {
         "format": "exr",
         "part": index,
