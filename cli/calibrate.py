@@ -38,6 +38,9 @@ def register(sub, common) -> None:
     p.add_argument("--name", help="profile name (default: from the input)")
     p.add_argument("--adc-bits", type=int, help="ADC resolution (default: from the frames)")
     p.add_argument("--cfa", choices=("RGGB", "GRBG", "GBRG", "BGGR"), help="CFA layout when the frames lack one")
+    p.add_argument("--frames-root", type=Path, metavar="DIR",
+                   help="folder the frames may lie in (default: the manifest's folder; paths leading elsewhere are "
+                        "refused)")
     add_json(p)
     g = p.add_argument_group(f"{SIMULATE} options")
     g.add_argument("--profile", help="camera profile: shipped name or JSON path")
@@ -51,8 +54,9 @@ def register(sub, common) -> None:
 def _simulate(args) -> int:
     from lfproc.calib.simulate_frames import simulate_frames
 
-    if args.report or args.name or args.adc_bits or args.cfa:
-        raise InputError(f"{SIMULATE}: --report, --name, --adc-bits and --cfa apply to calibration, not simulation")
+    if args.report or args.name or args.adc_bits or args.cfa or args.frames_root:
+        raise InputError(f"{SIMULATE}: --report, --name, --adc-bits, --cfa and --frames-root apply to calibration, "
+                         "not simulation")
     if not args.profile:
         raise InputError(f"{SIMULATE}: --profile is required (a shipped profile name or a profile JSON)")
     size = parse_size(args.size, option="--size") if args.size else (128, 128)
@@ -77,7 +81,8 @@ def run(args) -> int:
     check_output(args.output, force=args.force)
     if args.report is not None:
         check_output(args.report, force=args.force)
-    result = calibrate(args.input, name=args.name, adc_bits=args.adc_bits, cfa_pattern=args.cfa)
+    result = calibrate(args.input, name=args.name, adc_bits=args.adc_bits, cfa_pattern=args.cfa,
+                       frames_root=args.frames_root)
     save_profile(result.profile, args.output, force=args.force)
     out = {"profile": str(args.output), "name": result.profile.name}
     if args.report is not None:
