@@ -347,6 +347,9 @@ def _read_lytro(path: Path) -> Frame:
 def _read_image(path: Path) -> Frame:
     import cv2
 
+    from lfproc.io.images import check_image_size
+
+    check_image_size(path)
     data = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if data is None:
         raise FileFormatError(f"{path}: cannot read the image (corrupt, truncated or not a PNG/TIFF)")

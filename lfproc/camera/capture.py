@@ -551,6 +551,9 @@ def read_sensor_frame(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, An
     if path.suffix.lower() in _CV_SUFFIXES:
         import cv2
 
+        from ..io.images import check_image_size
+
+        check_image_size(path)
         image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
         if image is None:
             raise FileFormatError(f"{path}: cannot be read as an image")

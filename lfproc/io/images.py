@@ -14,7 +14,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ..errors import FileFormatError, InputError, MissingFileError
+from .. import _untrusted as ut
+from ..errors import FileFormatError, InputError, MissingFileError, UnsafeFileError
 from ..lightfield import clean_nonfinite
 from ._atomic import atomic_file
 
@@ -27,6 +28,7 @@ __all__ = [
     "IMAGE_SUFFIXES",
     "LDR_SUFFIXES",
     "HDR_SUFFIXES",
+    "check_image_size",
 ]
 
 HDR_SUFFIXES = (".exr", ".hdr", ".pic")
@@ -172,9 +174,71 @@ def _read_exr(path: Path, part: int | str | None, view: str | None) -> tuple[np.
 
 # -- OpenCV formats ---------------------------------------------------------------------
 
+#: Largest expansion of a PNG/TIFF/JPEG/Radiance file's pixels over its size (deflate, the
+#: strongest of their codecs, stays below about 1032:1).
+MAX_IMAGE_RATIO = 1100
+
+
+def _radiance_size(path: Path) -> tuple[int, int] | None:
+    """``(H, W)`` from a Radiance header (text lines, a blank line, then ``-Y H +X W``)."""
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    end = head.find(b"\n\n")
+    if end < 0:
+        return None
+    line = head[end + 2:].split(b"\n", 1)[0].split()
+    if len(line) != 4 or not all(t.lstrip(b"+-").isdigit() for t in (line[1], line[3])):
+        return None
+    a, b = int(line[1]), int(line[3])
+    return (a, b) if line[0][1:2] == b"Y" else (b, a)
+
+
+def check_image_size(path: str | os.PathLike) -> None:
+    """Refuse an image whose header announces more pixels than the limits allow or than its
+    file could hold (:data:`MAX_IMAGE_RATIO`), before a decoder allocates them.
+
+    Reads the header only (Pillow for PNG/TIFF/JPEG, the text header for Radiance);
+    files Pillow cannot identify are left to the decoder, which reports them.
+    """
+    import warnings
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    size = None
+    bands = 3
+    try:
+        if suffix in (".hdr", ".pic"):
+            size = _radiance_size(path)
+        else:
+            from PIL import Image
+
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")  # Pillow's bomb warning: lfproc applies its own limits below
+                    with Image.open(path) as im:
+                        w, h = im.size
+                        size, bands = (h, w), len(im.getbands())
+            except Image.DecompressionBombError as exc:
+                raise UnsafeFileError(f"{path}: {exc}; refused as a possible decompression bomb") from None
+    except UnsafeFileError:
+        raise
+    except OSError:
+        return
+    except Exception:  # Pillow raises assorted errors on damaged headers: the decoder will report the file
+        return
+    if size is None:
+        return
+    h, w = ut.check_dims(size, source=path, what="image", error=FileFormatError)
+    nbytes = h * w * max(bands, 1) * 4
+    limit = max(ut.EXPANSION_FLOOR, MAX_IMAGE_RATIO * path.stat().st_size)
+    if nbytes > limit:
+        raise UnsafeFileError(f"{path}: the header announces a {w} x {h} image ({nbytes} bytes decoded) in a file of "
+                              f"{path.stat().st_size} bytes; refused as corrupt or a decompression bomb")
+
 def _read_cv(path: Path, transfer: Transfer) -> tuple[np.ndarray, dict[str, Any]]:
     import cv2
 
+    check_image_size(path)
     raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if raw is None:
         raise FileFormatError(f"{path}: not a readable image (OpenCV could not decode it)")
