@@ -13,7 +13,8 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["check_random_state", "progress", "check_choice", "check_positive", "to_jsonable", "file_sha256"]
+__all__ = ["check_random_state", "progress", "check_choice", "check_positive", "check_count", "max_workers",
+           "to_jsonable", "file_sha256"]
 
 
 def check_random_state(random_state: Any = None) -> np.random.Generator:
@@ -62,6 +63,23 @@ def check_positive(name: str, value: float, *, allow_zero: bool = False) -> floa
     if not ok:
         raise InputError(f"{name}: expected a {'non-negative' if allow_zero else 'positive'} finite number, got {value!r}")
     return v
+
+
+def check_count(name: str, value: Any, *, low: int = 1, high: int, why: str = "") -> int:
+    """Validate an integer count (shots, workers, sizes...) in ``low..high`` before anything
+    is allocated or started; the error names the option and the allowed range."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        if not (isinstance(value, float) and math.isfinite(value) and value == int(value)):
+            raise InputError(f"{name}: expected an integer from {low} to {high}, got {value!r}")
+    value = int(value)
+    if not low <= value <= high:
+        raise InputError(f"{name}: expected an integer from {low} to {high}{f' ({why})' if why else ''}, got {value}")
+    return value
+
+
+def max_workers() -> int:
+    """Most worker processes lfproc starts: four per CPU core, at most 256."""
+    return max(1, min(256, 4 * (os.cpu_count() or 1)))
 
 
 def to_jsonable(obj: Any) -> Any:
