@@ -138,7 +138,8 @@ def _number(value: Any, *, name: str, where: str, required: bool, low: float | N
     except (TypeError, ValueError, OverflowError):
         raise InputError(f"{where}: {name}: expected a number, found {ut.show(value)}") from None
     if not math.isfinite(number) or (low is not None and number < low):
-        raise InputError(f"{where}: {name}: expected a finite number >= {low:g}, found {value!r}")
+        what = "a finite number" + (f" >= {low:g}" if low is not None else "")
+        raise InputError(f"{where}: {name}: expected {what}, found {ut.show(value)}")
     return number
 
 
@@ -347,12 +348,14 @@ def _read_lytro(path: Path) -> Frame:
 def _read_image(path: Path) -> Frame:
     import cv2
 
-    from lfproc.io.images import check_image_size
+    from lfproc.io.images import imread
 
-    check_image_size(path)
-    data = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if data is None:
-        raise FileFormatError(f"{path}: cannot read the image (corrupt, truncated or not a PNG/TIFF)")
+    try:
+        data = imread(path, cv2.IMREAD_UNCHANGED)
+    except FileFormatError as exc:
+        detail = str(exc).split("(OpenCV could not decode it", 1)[-1].lstrip(": ").rstrip(")")
+        raise FileFormatError(f"{path}: cannot read the image (corrupt, truncated or not a PNG/TIFF"
+                              + (f"; {detail})" if detail else ")")) from None
     if data.ndim != 2:
         raise FileFormatError(f"{path}: expected a single-channel raw frame, found {data.shape[2]} channels")
     if data.dtype == np.uint8:

@@ -551,12 +551,9 @@ def read_sensor_frame(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, An
     if path.suffix.lower() in _CV_SUFFIXES:
         import cv2
 
-        from ..io.images import check_image_size
+        from ..io.images import imread
 
-        check_image_size(path)
-        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if image is None:
-            raise FileFormatError(f"{path}: cannot be read as an image")
+        image = imread(path, cv2.IMREAD_UNCHANGED, what="sensor image")
         if image.ndim != 2 or image.dtype != np.uint16:
             raise FileFormatError(
                 f"{path}: expected a single-channel 16-bit sensor image (raw Bayer mosaic), found "

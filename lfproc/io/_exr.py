@@ -11,60 +11,20 @@ allocated, then reads the pixels (quietly) and turns dropped parts into one
 
 from __future__ import annotations
 
-import contextlib
-import io
 import os
-import sys
-import tempfile
 from pathlib import Path
 
 from .. import _untrusted as ut
+from .._util import quiet
 from ..errors import FileFormatError
 
-__all__ = ["quiet", "open_exr", "MAX_EXR_RATIO", "MAX_EXR_PARTS"]
+__all__ = ["open_exr", "MAX_EXR_RATIO", "MAX_EXR_PARTS"]
 
 #: Largest expansion of an EXR's pixel data over its file size: ZIP/deflate cannot exceed
 #: about 1032:1, so a file announcing more pixel bytes than this cannot be a valid one.
 MAX_EXR_RATIO = 1100
 #: Most parts lfproc reads from one file (a 17 x 17 light field has 289).
 MAX_EXR_PARTS = 4096
-
-
-@contextlib.contextmanager
-def quiet():
-    """Capture what runs in the block prints on ``sys.stdout``/``sys.stderr`` *and* on the
-    process's file descriptors 1 and 2 (where C libraries write); yields a list that is
-    filled with the captured lines when the block ends.
-
-    Other threads writing to fds 1/2 meanwhile are captured too (the block is short).
-    """
-    lines: list[str] = []
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):
-            stream.flush()
-    py_out = io.StringIO()
-    try:
-        tmp = tempfile.TemporaryFile()
-        saved = [os.dup(1), os.dup(2)]
-    except OSError:  # pragma: no cover - no spare descriptors: run without capturing
-        with contextlib.redirect_stdout(py_out), contextlib.redirect_stderr(py_out):
-            yield lines
-        lines.extend(py_out.getvalue().splitlines())
-        return
-    try:
-        os.dup2(tmp.fileno(), 1)
-        os.dup2(tmp.fileno(), 2)
-        with contextlib.redirect_stdout(py_out), contextlib.redirect_stderr(py_out):
-            yield lines
-    finally:
-        os.dup2(saved[0], 1)
-        os.dup2(saved[1], 2)
-        os.close(saved[0])
-        os.close(saved[1])
-        tmp.seek(0)
-        captured = tmp.read(1 << 16).decode("utf-8", errors="replace")
-        tmp.close()
-        lines.extend(line.strip() for line in (py_out.getvalue() + "\n" + captured).splitlines() if line.strip())
 
 
 def _first_error(lines: list[str], path: Path) -> str:

@@ -29,6 +29,7 @@ __all__ = [
     "LDR_SUFFIXES",
     "HDR_SUFFIXES",
     "check_image_size",
+    "imread",
 ]
 
 HDR_SUFFIXES = (".exr", ".hdr", ".pic")
@@ -235,13 +236,30 @@ def check_image_size(path: str | os.PathLike) -> None:
         raise UnsafeFileError(f"{path}: the header announces a {w} x {h} image ({nbytes} bytes decoded) in a file of "
                               f"{path.stat().st_size} bytes; refused as corrupt or a decompression bomb")
 
+def imread(path: str | os.PathLike, flags: int | None = None, *, what: str = "image") -> np.ndarray:
+    """``cv2.imread`` of an untrusted file: its header size checked first
+    (:func:`check_image_size`), the decoders' own messages kept off the terminal, and a
+    :class:`FileFormatError` quoting the first of them when nothing could be decoded."""
+    import cv2
+
+    from .._util import quiet
+
+    path = Path(path)
+    check_image_size(path)
+    flags = cv2.IMREAD_UNCHANGED if flags is None else flags
+    with quiet() as lines:
+        raw = cv2.imread(str(path), flags)
+    if raw is None:
+        detail = next((line for line in lines if "rror" in line), lines[0] if lines else "")
+        raise FileFormatError(f"{path}: not a readable {what} (OpenCV could not decode it"
+                              + (f": {detail[:160]})" if detail else ")"))
+    return raw
+
+
 def _read_cv(path: Path, transfer: Transfer) -> tuple[np.ndarray, dict[str, Any]]:
     import cv2
 
-    check_image_size(path)
-    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
-    if raw is None:
-        raise FileFormatError(f"{path}: not a readable image (OpenCV could not decode it)")
+    raw = imread(path, cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if raw.ndim == 3:
         if raw.shape[2] == 4:
             raw = raw[..., :3]
