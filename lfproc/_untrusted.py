@@ -244,7 +244,10 @@ def read_bytes(path: str | os.PathLike, *, max_bytes: int, source=None, error: t
         if size > max_bytes:
             raise error(f"{_where(source or path)}{what} of {size} bytes exceeds the limit of {max_bytes} bytes")
         with open(path, "rb") as fh:
-            data = fh.read(max_bytes + 1)
+            # read(n) allocates n bytes up front: ask for what the file holds, not the limit
+            data = fh.read(size + 1)
+            if len(data) > size:
+                data += fh.read(max_bytes + 1 - len(data))
     except IsADirectoryError:
         raise error(f"{_where(source or path)}expected a {what}, found a folder") from None
     if len(data) > max_bytes:  # grew while we read it
@@ -603,10 +606,10 @@ def read_npy(fileobj, size: int | None, *, source=None, what: str = "array", err
             shape, fortran, dtype = fmt.read_array_header_2_0(fileobj, max_header_size=10000)
         else:
             raise ValueError(f"unsupported .npy version {version}")
-    except UnsafeFileError:
+    except LfprocError:
         raise
-    except (ValueError, OSError, EOFError, SyntaxError, TypeError) as exc:
-        raise error(f"{label}: not a valid .npy array ({str(exc)[:120]})") from None
+    except Exception as exc:  # numpy's header parser raises ValueError, SyntaxError, tokenize errors...
+        raise error(f"{label}: not a valid .npy array ({type(exc).__name__}: {str(exc)[:120]})") from None
     dtype = np.dtype(dtype)
     if dtype.hasobject or dtype.fields is not None or dtype.subdtype is not None:
         raise error(f"{label}: dtype {dtype} is not a plain numeric type")
@@ -712,8 +715,9 @@ def read_npz(path: str | os.PathLike, *, names: Iterable[str] | None = None, sou
 class _CappedStream(io.RawIOBase):
     """A read/seek/tell view of a (decompressing) stream that refuses to go past ``limit``."""
 
-    def __init__(self, inner, limit: int, source, what: str):
+    def __init__(self, inner, limit: int, source, what: str, compressed: bool = True):
         self.inner, self.limit, self.source, self.what = inner, limit, source, what
+        self.compressed = compressed
 
     def readable(self) -> bool:
         return True
@@ -722,6 +726,9 @@ class _CappedStream(io.RawIOBase):
         return True
 
     def _refuse(self, where: int):
+        if not self.compressed:
+            raise FileFormatError(f"{_where(self.source)}truncated or corrupt {self.what}: needs byte {where} of a "
+                                  f"{self.limit}-byte file")
         raise UnsafeFileError(f"{_where(self.source)}{self.what} expands beyond {self.limit} bytes (needs byte "
                               f"{where}); refused as a possible compression bomb")
 
@@ -778,9 +785,11 @@ def open_tar(path: str | os.PathLike, *, source=None, error: type[Exception] = F
         else:
             inner, kind = raw, "tar"
         limit = size if inner is raw else expansion_limit(size, ratio=ratio, floor=floor)
-        stream = _CappedStream(inner, limit, source, kind)
+        stream = _CappedStream(inner, limit, source, kind, compressed=inner is not raw)
         try:
             with tarfile.open(fileobj=stream, mode="r:") as tar:
+                tar.lfproc_limit = limit  # read by safe_members
+                tar.lfproc_kind = kind if inner is not raw else None
                 yield tar
         except LfprocError:
             raise
@@ -808,6 +817,13 @@ def safe_members(tar: tarfile.TarFile, *, source=None, max_members: int = 100000
             continue
         if not member.isfile():
             raise UnsafeFileError(f"{_where(source)}member {show(name)} is not a regular file; refused")
+        limit = getattr(tar, "lfproc_limit", None)
+        if limit is not None and member.offset_data + member.size > limit:
+            if getattr(tar, "lfproc_kind", None):
+                raise UnsafeFileError(f"{_where(source)}{tar.lfproc_kind} expands beyond {limit} bytes (member "
+                                      f"{show(name)} announces {member.size}); refused as a possible compression bomb")
+            raise FileFormatError(f"{_where(source)}member {show(name)} announces {member.size} bytes, past the end "
+                                  "of the archive (truncated or corrupt)")
         out.append(member)
     return out
 

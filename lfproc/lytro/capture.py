@@ -177,7 +177,7 @@ _BAYER_NAMES = {"r": "R", "gr": "G", "gb": "G", "b": "B"}
 def _tile_rows(tile: str, source=None) -> list[list[str]]:
     rows = [r.split(",") for r in str(tile).replace(" ", "").split(":")]
     if len(rows) != 2 or any(len(r) != 2 for r in rows) or sorted(sum(rows, [])) != sorted(_BAYER_NAMES):
-        raise LfpFormatError(f"{source + ': ' if source else ''}mosaic tile {ut.show(tile)} is not a 2x2 Bayer tile "
+        raise LfpFormatError(f"{f'{source}: ' if source else ''}mosaic tile {ut.show(tile)} is not a 2x2 Bayer tile "
                              "of r, gr, gb, b like 'r,gr:gb,b'")
     return rows
 
@@ -195,7 +195,7 @@ def cfa_from_mosaic(tile: str, upper_left_pixel: str, *, source=None) -> str:
     rows = _tile_rows(tile, source)
     where = [(i, j) for i in range(2) for j in range(2) if rows[i][j] == upper_left_pixel]
     if not where:
-        raise LfpFormatError(f"{source + ': ' if source else ''}mosaic upperLeftPixel {ut.show(upper_left_pixel)} "
+        raise LfpFormatError(f"{f'{source}: ' if source else ''}mosaic upperLeftPixel {ut.show(upper_left_pixel)} "
                              f"is not in tile {ut.show(tile)}")
     i0, j0 = where[0]
     return "".join(_BAYER_NAMES[rows[(i0 + y) % 2][(j0 + x) % 2]] for y in range(2) for x in range(2))
@@ -300,7 +300,7 @@ def _packing(metadata: dict, source=None) -> tuple[int, str]:
     image = meta.opt_dict("image")
     pk = image.get("pixelPacking") or image.at("rawDetails.pixelPacking", None)
     if pk is None or not pk.is_dict() or "bitsPerPixel" not in pk.value:
-        raise LfpFormatError(f"{source + ': ' if source else ''}metadata has no image.pixelPacking / "
+        raise LfpFormatError(f"{f'{source}: ' if source else ''}metadata has no image.pixelPacking / "
                              "image.rawDetails.pixelPacking")
     return pk["bitsPerPixel"].as_int(low=1, high=32), pk.opt_str("endianness", "little", max_len=16)
 
