@@ -69,7 +69,7 @@ def test_node_names_file_and_field_and_checks_type_range_finiteness():
     assert image["list"].as_ints(length=3, low=0) == [1, 2, 3]
 
 
-@settings(max_examples=150, deadline=None, derandomize=True)
+@settings(max_examples=100, deadline=None, derandomize=True)
 @given(st.recursive(st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True, allow_infinity=True)
                     | st.text(max_size=20), lambda c: st.lists(c, max_size=4) | st.dictionaries(st.text(max_size=5), c,
                                                                                                 max_size=4),

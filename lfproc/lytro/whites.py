@@ -30,7 +30,8 @@ import numpy as np
 from .. import _untrusted as ut
 from .._util import progress
 from .._version import __version__
-from ..errors import FileFormatError, InputError, MissingFileError, NoWhiteImageError, UnsafeFileError
+from ..errors import (CalibrationError, FileFormatError, InputError, MissingFileError, NoWhiteImageError,
+                      UnsafeFileError)
 from ..io import atomic_dir
 from .grid import ILLUM_SPACING_PX, F01_SPACING_PX, LensletGrid, estimate_grid
 
@@ -186,7 +187,10 @@ def build_white_db(caldata: str | os.PathLike, out_dir: str | os.PathLike, *, fo
             black = float(fr.black_level.get("gr", next(iter(fr.black_level.values())))) if fr.black_level else 0.0
             white = float(fr.white_level) if fr.white_level is not None else float(fr.raw.max())
             mean = float((fr.raw.mean(dtype=np.float64) - black) / max(white - black, 1.0))
-            grid = estimate_grid(fr.raw, approx_spacing_px=_approx_spacing(fr.camera_model))
+            try:
+                grid = estimate_grid(fr.raw, approx_spacing_px=_approx_spacing(fr.camera_model))
+            except CalibrationError as exc:
+                raise CalibrationError(f"{fr.source or caldata}: {exc}") from None
             # the serial comes from the calibration data: it must be a plain name (see caldata)
             fname = ut.safe_filename(f"{fr.serial or 'unknown'}_{fr.name}.npz", what="white-image file name",
                                      source=caldata)
