@@ -353,9 +353,9 @@ def _read_image(path: Path) -> Frame:
     try:
         data = imread(path, cv2.IMREAD_UNCHANGED)
     except FileFormatError as exc:
-        detail = str(exc).split("(OpenCV could not decode it", 1)[-1].lstrip(": ").rstrip(")")
-        raise FileFormatError(f"{path}: cannot read the image (corrupt, truncated or not a PNG/TIFF"
-                              + (f"; {detail})" if detail else ")")) from None
+        detail = str(exc).removeprefix(f"{path}: ")
+        raise FileFormatError(f"{path}: cannot read the image (corrupt, truncated or not a PNG/TIFF: {detail})") \
+            from None
     if data.ndim != 2:
         raise FileFormatError(f"{path}: expected a single-channel raw frame, found {data.shape[2]} channels")
     if data.dtype == np.uint8:

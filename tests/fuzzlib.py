@@ -196,6 +196,13 @@ class Reader:
     mutators: list[tuple[float, Callable[[Seed, random.Random], dict[str, bytes]]]]
     target: Callable[[Path, Seed], Any]
     budget_s: float = 10.0
+    bombs: list[Callable[[], bytes]] = field(default_factory=list)  # builders of the bombs cases may use
+
+
+def prebuild_bombs(reader: Reader) -> None:
+    """Build (and cache) every compression bomb the reader's cases can use."""
+    for build in reader.bombs:
+        build()
 
 
 class CaseTimeout(BaseException):
@@ -543,14 +550,31 @@ _BOMB_CACHE: dict[tuple, bytes] = {}
 
 
 def bomb_zip(members: list[tuple[str, bytes]], victim: str, expanded: int) -> bytes:
+    """A copy of a ZIP whose member ``victim`` becomes a ``.npy`` of ``expanded`` bytes of zeros
+    (streamed: the bomb is never held in memory while it is built)."""
     key = (tuple(n for n, _ in members), victim, expanded)
     if key not in _BOMB_CACHE:
-        out = [(n, d) if n != victim else bomb_zip_member(n, expanded) for n, d in members]
         buf = io.BytesIO()
         with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=9) as zf:
-            for n, d in out:
-                zf.writestr(zipfile.ZipInfo(n, date_time=(2020, 1, 1, 0, 0, 0)), d,
-                            compress_type=zipfile.ZIP_DEFLATED)
+            for n, d in members:
+                info = zipfile.ZipInfo(n, date_time=(2020, 1, 1, 0, 0, 0))
+                info.compress_type = zipfile.ZIP_DEFLATED
+                if n != victim:
+                    zf.writestr(info, d)
+                    continue
+                head = bomb_zip_member(n, 0)[1]
+                head = head.replace(b"(0,)", f"({expanded // 2},)".encode())
+                text_len = len(head) - 10
+                pad = (-(10 + text_len)) % 64
+                head = head[:-1] + b" " * pad + b"\n"
+                head = head[:8] + (len(head) - 10).to_bytes(2, "little") + head[10:]
+                with zf.open(info, "w", force_zip64=True) as fh:
+                    fh.write(head)
+                    block = bytes(1 << 22)
+                    left = expanded // 2 * 2
+                    while left > 0:
+                        fh.write(block[:min(left, len(block))])
+                        left -= len(block)
         _BOMB_CACHE[key] = buf.getvalue()
     return _BOMB_CACHE[key]
 
@@ -783,9 +807,11 @@ def make_profile_reader(work: Path) -> Reader:
         describe_profile(profile)
         simulate_capture(lf, profile=profile, isos=profile.iso_values[:2], shots=1, random_state=0)
 
+    members = read_zip_members(seeds[0].files["cam.bias.npz"])
+    bombs = [lambda v=name: bomb_zip(members, v, BOMB_BYTES) for name, _ in members]
     return Reader("camera profile JSON + sidecar", "profile show, simulate", seeds,
                   [(4, mutate_profile_json), (1, mutate_file_bytes), (1, mutate_sidecar_path), (2, mutate_sidecar)],
-                  target)
+                  target, bombs=bombs)
 
 
 def make_manifest_reader(work: Path) -> Reader:
@@ -883,8 +909,10 @@ def make_capture_reader(work: Path) -> Reader:
     def target(path, seed):
         return describe_capture(path)
 
+    bombs = [lambda m=seed.extra["members"], v=name: bomb_zip(m, v, BOMB_BYTES)
+             for seed in seeds for name, _ in seed.extra["members"][1:]]
     return Reader("capture file", "info, preview", seeds,
-                  [(3, mutate_header), (3, mutate_arrays), (2, mutate_file_bytes)], target)
+                  [(3, mutate_header), (3, mutate_arrays), (2, mutate_file_bytes)], target, bombs=bombs)
 
 
 def make_caldata_reader(work: Path) -> Reader:
@@ -908,9 +936,10 @@ def make_caldata_reader(work: Path) -> Reader:
     def target(path, seed):
         return read_caldata(path)
 
+    bombs = [lambda v=v: bomb_gzip_tar(seeds[0].extra["members"], v, BOMB_BYTES) for v in (".RAW", ".TXT", ".GCT")]
     return Reader("caldata tar", "whites", seeds,
                   [(3, mutate_tar_json), (1, mutate_tar_serial), (2, mutate_tar_members), (2, mutate_file_bytes),
-                   (0.05, mutate_bomb)], target)
+                   (0.05, mutate_bomb)], target, bombs=bombs)
 
 
 def make_white_db_reader(work: Path) -> Reader:
@@ -978,8 +1007,10 @@ def make_white_db_reader(work: Path) -> Reader:
             e = db.entries[0]
             select_white(db, serial=e.serial, zoom_step=0, focus_step=0, raw_shape=tuple(e.grid.image_size))
 
+    bombs = [lambda m=read_zip_members(_data(v)): bomb_zip(m, "raw.npy", BOMB_BYTES)
+             for k, v in seeds[0].files.items() if k.endswith(".npz")]
     return Reader("white-image database", "decode --white-db", seeds,
-                  [(4, mutate_index), (1, mutate_entry_file), (2, mutate_npz)], target)
+                  [(4, mutate_index), (1, mutate_entry_file), (2, mutate_npz)], target, bombs=bombs)
 
 
 def make_emva_reader(work: Path) -> Reader:

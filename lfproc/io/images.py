@@ -194,6 +194,27 @@ def _radiance_size(path: Path) -> tuple[int, int] | None:
     return (a, b) if line[0][1:2] == b"Y" else (b, a)
 
 
+def _check_png_chunks(path: Path, size: int) -> None:
+    """Walk a PNG's chunks (length, type, data, CRC): a chunk announcing more bytes than the file
+    holds is refused before a decoder tries to read (and allocate) it."""
+    with open(path, "rb") as fh:
+        if fh.read(8) != b"\x89PNG\r\n\x1a\n":
+            raise FileFormatError(f"{path}: not a PNG file (wrong signature)")
+        offset = 8
+        while offset < size:
+            head = fh.read(8)
+            if len(head) < 8:
+                raise FileFormatError(f"{path}: truncated PNG (chunk header at byte {offset} is cut off)")
+            length = int.from_bytes(head[:4], "big")
+            if length > 2**31 - 1 or offset + 12 + length > size:
+                raise FileFormatError(f"{path}: corrupt or truncated PNG: chunk {head[4:8]!r} at byte {offset} "
+                                      f"announces {length} bytes, the file has {size}")
+            if head[4:8] == b"IEND":
+                return
+            fh.seek(length + 4, 1)
+            offset += 12 + length
+
+
 def check_image_size(path: str | os.PathLike) -> None:
     """Refuse an image whose header announces more pixels than the limits allow or than its
     file could hold (:data:`MAX_IMAGE_RATIO`), before a decoder allocates them.
@@ -205,6 +226,8 @@ def check_image_size(path: str | os.PathLike) -> None:
 
     path = Path(path)
     suffix = path.suffix.lower()
+    if suffix == ".png":
+        _check_png_chunks(path, path.stat().st_size)
     size = None
     bands = 3
     try:
@@ -223,9 +246,11 @@ def check_image_size(path: str | os.PathLike) -> None:
                 raise UnsafeFileError(f"{path}: {exc}; refused as a possible decompression bomb") from None
     except UnsafeFileError:
         raise
-    except OSError:
-        return
-    except Exception:  # Pillow raises assorted errors on damaged headers: the decoder will report the file
+    except Exception as exc:  # Pillow raises OSError and assorted others on damaged headers
+        if suffix in (".png", ".tif", ".tiff", ".jpg", ".jpeg"):
+            # a header Pillow cannot parse is not worth handing to a decoder (libpng can spend seconds on one)
+            raise FileFormatError(f"{path}: not a readable {suffix[1:].upper()} image ({type(exc).__name__}: "
+                                  f"{str(exc)[:120]})") from None
         return
     if size is None:
         return
