@@ -17,6 +17,9 @@ that (a hang inside C code) and starts a new one. Outcomes:
 * memory blow-up: ``MemoryError`` (the address-space limit), or a traced peak above
   256 MiB + 50 x the input's size.
 
+Cases that end well but raise Python warnings (numpy's overflow or divide-by-zero on values
+that went unchecked; the CLI would print them as extra lines) are counted apart.
+
 Timings are upper bounds on a shared machine.
 """
 
@@ -72,12 +75,12 @@ def _worker(conn, work: str, base_seed: int, hang_s: float, memory_gib: float):
         try:
             seed, files, mutator = fuzzlib.build_case(reader, index, base_seed)
         except MemoryError:
-            conn.send((index, "build-failed", "MemoryError while building the case", 0.0, 0, 0, ""))
+            conn.send((index, "build-failed", "MemoryError while building the case", 0.0, 0, 0, "", []))
             continue
         conn.send(("started", index))  # the parent's hang timer starts now, not while the case was built
         outcome = fuzzlib.run_case(reader, case_dir, seed, files, budget_s=hang_s)
         conn.send((index, outcome.kind, outcome.detail[:300], outcome.seconds, outcome.peak_bytes,
-                   outcome.input_bytes, f"{seed.name}/{mutator}"))
+                   outcome.input_bytes, f"{seed.name}/{mutator}", outcome.warnings[:1]))
 
 
 class _Slot:
@@ -128,7 +131,7 @@ def run_reader(args, reader_name: str, work: Path) -> dict:
     peak_ratio = 0.0
     slowest = 0.0
     t0 = time.time()
-    done = 0
+    done = shown = 0
 
     def record(kind, detail, index, label, seconds=0.0, peak_bytes=0, size=0):
         nonlocal peak, peak_ratio, slowest
@@ -154,7 +157,11 @@ def run_reader(args, reader_name: str, work: Path) -> dict:
                     if message[0] == "started":
                         slot.started = time.time()
                         continue
-                    index, kind, detail, seconds, peak_bytes, size, label = message
+                    index, kind, detail, seconds, peak_bytes, size, label, warned = message
+                    if warned:
+                        results["warned"] += 1
+                        if len(examples["warned"]) < 8:
+                            examples["warned"].append(f"case {index} ({label}): {warned[0]}")
                 except (EOFError, OSError):
                     code = slot.proc.exitcode
                     record("crash", f"worker died (exit code {code})", slot.case, "?")
@@ -174,7 +181,8 @@ def run_reader(args, reader_name: str, work: Path) -> dict:
                 slot.case = None
             if slot.case is None and todo:
                 slot.send(todo.pop(0))
-        if args.progress and done and done % 500 == 0:
+        if args.progress and done >= shown + 500:
+            shown = done // 500 * 500
             print(f"  {reader_name}: {done}/{n} ({time.time() - t0:.0f} s)", file=sys.stderr, flush=True)
     for slot in slots:
         try:
@@ -226,13 +234,13 @@ def main(argv=None) -> int:
     print(f"{args.cases} cases per reader, seed {args.seed}, hang > {args.hang_seconds:g} s, bombs of "
           f"{args.bomb_bytes / 2**30:g} GiB, {args.workers} workers\n")
     print("| reader (command) | inputs tried | crashes outside the tree | hangs > 10 s | memory blow-ups | "
-          "refused (lfproc error) | accepted | max traced peak | slowest case | time |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "refused (lfproc error) | accepted | with Python warnings | max traced peak | slowest case | time |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         o = r["outcomes"]
         print(f"| {r['label']} | {r['cases']} | {o.get('crash', 0)} | {o.get('hang', 0)} | {o.get('memory', 0)} | "
-              f"{o.get('lfproc', 0)} | {o.get('ok', 0)} | {r['max_traced_peak_mib']} MiB | {r['slowest_case_s']} s | "
-              f"{r['seconds']:.0f} s |")
+              f"{o.get('lfproc', 0)} | {o.get('ok', 0)} | {o.get('warned', 0)} | {r['max_traced_peak_mib']} MiB | "
+              f"{r['slowest_case_s']} s | {r['seconds']:.0f} s |")
     for r in rows:
         for kind, items in r["examples"].items():
             print(f"\n{r['reader']} {kind}:")

@@ -156,8 +156,9 @@ class CameraProfile:
 
     def iso_figures(self, iso: float) -> IsoFigures:
         """Figures of one ISO; :class:`ProfileError` naming the available ISOs otherwise."""
-        key = int(round(float(iso)))
-        if key not in self.isos or abs(key - float(iso)) > 1e-6:
+        value = float(iso)
+        key = int(round(value)) if math.isfinite(value) else None
+        if key not in self.isos or abs(key - value) > 1e-6:
             raise ProfileError(
                 f"ISO {iso:g} is not in camera profile {self.name!r}; it has ISO {', '.join(map(str, self.iso_values))}"
             )
@@ -264,7 +265,7 @@ class CameraProfile:
                 raise ProfileError(f"{where}: field 'isos.{key}': unknown keys {', '.join(sorted(map(str, extra)))}")
             values = {}
             for name in names:
-                values[name] = figs.opt_float(name, low=0, strict_low=name == "gain_dn_per_e",
+                values[name] = figs.opt_float(name, low=_FIGURE_LOWER.get(name, 0),
                                               high=_FIGURE_LIMITS.get(name, 1e12))
             isos[int(key)] = IsoFigures(**values)
         kwargs = {}
@@ -287,7 +288,7 @@ class CameraProfile:
             adc_bits=n["adc_bits"].as_int(low=1, high=32),
             white_level_dn=n["white_level_dn"].as_float(low=1, high=2.0**32),
             black_level_dn=n["black_level_dn"].as_float(low=0, high=2.0**32),
-            full_well_e=n["full_well_e"].as_float(low=0, strict_low=True, high=_FIGURE_LIMITS["full_well_e"]),
+            full_well_e=n["full_well_e"].as_float(low=1, high=_FIGURE_LIMITS["full_well_e"]),
             source=dict(n.opt_dict("source").value),
         )
         try:
@@ -299,6 +300,9 @@ class CameraProfile:
 #: Most ISO settings in one profile.
 MAX_ISOS = 256
 #: Upper bounds of per-ISO figures read from files (far above any real sensor).
+#: Lower bounds of figures read from files: a gain below 1e-6 DN/e- or a full well below one
+#: electron is no sensor, and would make the radiance (DN / (gain * t)) overflow.
+_FIGURE_LOWER = {"gain_dn_per_e": 1e-6, "full_well_e": 1.0}
 _FIGURE_LIMITS = {"gain_dn_per_e": 1e6, "read_noise_e": 1e9, "read_noise_dn": 1e9, "dark_current_e_per_s": 1e12,
                   "black_level_dn": 2.0**32, "full_well_e": 1e12, "dsnu_dn": 1e9, "prnu": 1.0}
 

@@ -216,6 +216,7 @@ class Outcome:
     seconds: float = 0.0
     peak_bytes: int = 0
     input_bytes: int = 0
+    warnings: list[str] = field(default_factory=list)  # Python warnings other than lfproc's own
 
 
 def build_case(reader: Reader, index: int, base_seed: int) -> tuple[Seed, dict[str, bytes], str]:
@@ -271,13 +272,20 @@ def run_case(reader: Reader, folder: Path, seed: Seed, files: dict[str, bytes], 
     if trace_memory:
         tracemalloc.start()
         tracemalloc.reset_peak()
+    import warnings
+
+    from lfproc.errors import LfprocWarning
+
     t0 = time.perf_counter()
     kind, detail = "ok", ""
+    caught: list = []
     try:
         if use_alarm:
             signal.setitimer(signal.ITIMER_REAL, budget_s)
         try:
-            reader.target(main, seed)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                reader.target(main, seed)
         finally:
             if use_alarm:
                 signal.setitimer(signal.ITIMER_REAL, 0)
@@ -306,7 +314,9 @@ def run_case(reader: Reader, folder: Path, seed: Seed, files: dict[str, bytes], 
             signal.signal(signal.SIGALRM, old)
     if kind in ("ok", "lfproc") and peak > memory_budget:
         kind, detail = "memory", f"traced peak {peak / 2**20:.0f} MiB > budget {memory_budget / 2**20:.0f} MiB"
-    return Outcome(kind, detail, elapsed, peak, size)
+    other = [f"{w.category.__name__}: {w.message} [{Path(w.filename).name}:{w.lineno}]" for w in caught or []
+             if not issubclass(w.category, LfprocWarning)]
+    return Outcome(kind, detail, elapsed, peak, size, other)
 
 
 # -- container helpers ------------------------------------------------------------------------

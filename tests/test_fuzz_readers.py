@@ -58,6 +58,8 @@ def _run(reader, n, tmp_path, base_seed=BASE_SEED):
         kinds[outcome.kind] += 1
         if outcome.kind not in ("ok", "lfproc"):
             bad.append(f"case {i} ({seed.name}, {mutator}): {outcome.kind}: {outcome.detail}")
+        elif outcome.warnings:  # numpy warnings on hostile values: a value went unchecked (and the CLI
+            bad.append(f"case {i} ({seed.name}, {mutator}): warned: {outcome.warnings[0]}")  # prints 2 lines)
     return kinds, bad
 
 

@@ -331,10 +331,11 @@ def _read_header(path: Path, zf: zipfile.ZipFile) -> dict[str, Any]:
         "views": list(views),
         "cfa_pattern": doc["cfa_pattern"].as_str(max_len=8),
         "gamma": doc["gamma"].as_float(low=1, high=16),
-        "exposures_s": doc["exposures_s"].as_floats(length=shots, low=0, strict_low=True, high=1e6),
+        # exposures from 1 ns to 11 days; shorter ones underflow the radiance (DN / (gain * t))
+        "exposures_s": doc["exposures_s"].as_floats(length=shots, low=1e-9, high=1e6),
         "mask": {"kind": kind, "period": period, "shift": shift},
         "profile": doc["profile"].as_dict(),
-        "radiance_scale": doc.opt_float("radiance_scale", low=0, strict_low=True),
+        "radiance_scale": doc.opt_float("radiance_scale", low=1e-30, high=1e30),
         "ground_truth": doc.opt_dict("ground_truth").value or None,
         "iso_pattern": doc.opt_dict("iso_pattern").value,
         "parameters": doc.opt_dict("parameters").value,
@@ -426,6 +427,9 @@ def load_capture(path: str | os.PathLike) -> Capture:
         if isinstance(exc, LfprocError):
             raise
         raise FileFormatError(f"{path}: corrupt capture archive ({type(exc).__name__}: {str(exc)[:120]})") from None
+    for name in ("iso", "bias"):
+        if name in arrays and not np.isfinite(arrays[name]).all():
+            raise FileFormatError(f"{path}: array {name!r} holds NaN or Inf values")
     profile = CameraProfile.from_json(header["profile"], where=f"{path}: embedded profile")
     m = header["mask"]
     try:
