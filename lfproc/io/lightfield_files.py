@@ -131,7 +131,8 @@ def _read_exr_lightfield(path: Path, nonfinite: str, negative: str) -> LightFiel
         expected[idx] = i
         if meta is None:
             meta = _exr_metadata(path, part.header["lfproc"])
-    assert meta is not None  # noqa: S101 - open_exr refuses files without parts
+    if meta is None:  # open_exr refuses files without parts; kept as an error, not an assert
+        raise FileFormatError(f"{path}: no view parts")
     nv, nu = meta["views"]
     missing = [view_name(v, u) for v in range(nv) for u in range(nu) if (v, u) not in expected]
     if missing or len(expected) != nv * nu:
