@@ -68,7 +68,7 @@ def _write(tmp_path, doc, name="bad.json"):
         (lambda d: d.update(flat_field_file="missing.npz"), r"field 'flat_field_file': .*missing.npz does not exist"),
         (lambda d: d.update(flat_field_file="notflat.npz"), r"field 'flat_field_file': .*notflat.npz is not a flat-field"),
         (lambda d: d.update(flat_field_file="negflat.npz"), r"flat_field: expected an \(H, W\) map of positive finite gains"),
-        (lambda d: d.update(flat_field_std=-0.1), "field 'flat_field_std': expected a value >= 0"),
+        (lambda d: d.update(flat_field_std=-0.1), "field 'flat_field_std': expected a number >= 0"),
         (lambda d: d.update(bias_frame_std_dn={"fast": 1.0}), "field 'bias_frame_std_dn': keys must be ISO numbers"),
         (lambda d: d.update(bias_frame_std_dn={"100": "big"}), "field 'bias_frame_std_dn.100': expected a number"),
     ],

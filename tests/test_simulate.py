@@ -289,7 +289,8 @@ def _nan_image(tmp_path, value):
 @pytest.mark.parametrize("args, message", [
     (["--isos", "100,123"], "ISO 123 is not in camera profile"),
     (["--exposure-s", "0"], "exposure_s: expected a positive finite number"),
-    (["--shots", "0"], "shots: expected an integer >= 1"),
+    (["--shots", "0"], "--shots: expected an integer from 1 to 256, got 0"),
+    (["--shots", "1000000"], "--shots: expected an integer from 1 to 256, got 1000000"),
     (["--iso-pattern", "zigzag"], "iso pattern: expected one of random, row, block, dual or a file"),
     (["--isos", "100,x"], "--isos: expected comma-separated numbers"),
     (["--profile", "nowhere.json"], "no such camera profile file"),
