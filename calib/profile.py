@@ -5,8 +5,13 @@ dark current and full well. It sets the noise model of the simulators
 (:mod:`lfproc.camera.sensor`), the weights of the HDR merge and those of the reconstruction.
 
 File format: versioned JSON (``schema: "lfproc.camera_profile"``, ``schema_version: 1``)
-with units in the field names; an optional bias frame lives in a sidecar ``.npz`` named in
-``bias_frame_file`` (relative to the JSON). A figure the calibration could not determine
+with units in the field names; optional master bias frames (one per ISO) live in a sidecar
+``.npz`` named in ``bias_frame_file`` (relative to the JSON), with the standard deviation of
+their per-pixel estimate in ``bias_frame_std_dn``; an optional measured flat-field map (the
+per-pixel PRNU gain, mean 1 per CFA position) lives in a sidecar ``.npz`` named in
+``flat_field_file`` (array ``flat_field``), with the relative standard deviation of its
+per-pixel estimate in ``flat_field_std``. :func:`lfproc.camera.sensor.fixed_pattern_correction`
+uses these maps to correct sensor images. A figure the calibration could not determine
 is ``null`` and its reason is in ``unknown``. Loading checks the schema and names the
 field that is wrong.
 
@@ -37,6 +42,8 @@ __all__ = [
     "load_profile",
     "save_profile",
     "bias_sidecar_path",
+    "flat_sidecar_path",
+    "profile_outputs",
     "paper_gain_dn_per_e",
     "SHIPPED_PROFILES",
     "SCHEMA",
@@ -101,11 +108,19 @@ class CameraProfile:
     fixed_pattern_seed : int
         Seed of the sensor's fixed-pattern maps (the same sensor always has the same maps).
     bias_frames : dict, optional
-        ISO -> master bias frame (DN, a finite 2-D array).
+        ISO -> master bias frame (DN, ``(H, W)``), as measured by ``lfproc calibrate``.
+    bias_frame_std_dn : dict, optional
+        ISO -> standard deviation (DN) of each pixel of that master bias (read noise over
+        the square root of the number of frames averaged); missing = treated as exact.
+    flat_field : ndarray (H, W), optional
+        Measured per-pixel PRNU gain map (mean 1 per CFA position) from flat frames.
+    flat_field_std : float
+        Relative standard deviation of each value of ``flat_field`` as an estimate (0 = exact).
 
-    ``isos`` and ``bias_frames`` are stored as read-only mappings and the bias frames as
-    read-only arrays (copied once unless already read-only), so a validated profile
-    cannot be changed; use :func:`dataclasses.replace` to derive a new one.
+    ``isos``, ``bias_frames`` and ``bias_frame_std_dn`` are stored as read-only mappings and
+    the bias frames and flat field as read-only arrays (copied once unless already
+    read-only), so a validated profile cannot be changed; use :func:`dataclasses.replace`
+    to derive a new one.
     unknown : dict
         Field name -> reason, for figures the calibration could not determine.
     """
@@ -126,6 +141,9 @@ class CameraProfile:
     bias_frames: dict[int, np.ndarray] = field(default_factory=dict)
     unknown: dict[str, str] = field(default_factory=dict)
     source: dict[str, Any] = field(default_factory=dict)
+    bias_frame_std_dn: dict[int, float] = field(default_factory=dict)
+    flat_field: np.ndarray | None = field(default=None, repr=False)
+    flat_field_std: float = 0.0
 
     def __post_init__(self):
         _check_number(self.adc_bits, "adc_bits", integer=True, low=1, high=32)
@@ -141,6 +159,14 @@ class CameraProfile:
         _check_number(self.dark_current_e_per_s, "dark_current_e_per_s", low=0)
         _check_number(self.prnu, "prnu", low=0)
         _check_number(self.dsnu_e, "dsnu_e", low=0)
+        _check_number(self.flat_field_std, "flat_field_std", low=0)
+        for iso, std in self.bias_frame_std_dn.items():
+            _check_number(std, f"bias_frame_std_dn.{iso}", low=0)
+        if self.flat_field is not None:
+            ff = np.asarray(self.flat_field)
+            if ff.ndim != 2 or not np.issubdtype(ff.dtype, np.floating) or not np.isfinite(ff).all() or (ff <= 0).any():
+                raise ProfileError(f"profile {self.name}: flat_field: expected an (H, W) map of positive finite gains, "
+                                   f"found {ff.dtype} of shape {ff.shape}")
         if self.cfa_pattern not in _CFA:
             raise ProfileError(f"profile {self.name}: cfa_pattern: expected one of {', '.join(_CFA)}, got {self.cfa_pattern!r}")
         if not self.isos:
@@ -163,12 +189,17 @@ class CameraProfile:
                 )
             frames[iso] = frozen_array(frame)
         object.__setattr__(self, "bias_frames", FrozenDict(frames))
+        object.__setattr__(self, "bias_frame_std_dn", FrozenDict(self.bias_frame_std_dn))
+        if self.flat_field is not None:
+            object.__setattr__(self, "flat_field", frozen_array(self.flat_field))
 
     def __setstate__(self, state):
         # pickle and copy.deepcopy bring new (writeable) bias arrays: make them read-only again
         for name, value in state.items():
             if name == "bias_frames":
                 value = FrozenDict({k: frozen_array(v) for k, v in value.items()})
+            elif name == "flat_field" and value is not None:
+                value = frozen_array(value)
             object.__setattr__(self, name, value)
 
     # -- lookups ---------------------------------------------------------------------
@@ -213,6 +244,14 @@ class CameraProfile:
             signal = self.white_level_dn * (min(signal, self.white_level_dn) / self.white_level_dn) ** (1 / self.gamma)
         return float(min(self.white_level_dn, round(signal + figs["black_level_dn"])))
 
+    @property
+    def measured(self) -> bool:
+        """True for a profile measured by ``lfproc calibrate`` (``source.kind == "calibrated"``): its
+        ``prnu``/``dsnu_e`` describe a real sensor whose maps are only known where measured
+        (``flat_field``, ``bias_frames``); otherwise they are a simulated sensor's, drawn from
+        ``fixed_pattern_seed``."""
+        return self.source.get("kind") == "calibrated"
+
     def with_noise(self, *, read_noise_e: float, dark_current_e_per_s: float, name: str | None = None) -> "CameraProfile":
         """A copy with the same read noise (e-) and dark current (e-/s) at every ISO."""
         isos = {
@@ -228,8 +267,8 @@ class CameraProfile:
 
     # -- serialisation -----------------------------------------------------------------
     def to_json(self) -> dict[str, Any]:
-        """The profile as a JSON-serialisable dict (bias frames excluded: see :func:`save_profile`)."""
-        return {
+        """The profile as a JSON-serialisable dict (bias frames and flat field excluded: see :func:`save_profile`)."""
+        doc = {
             "schema": SCHEMA,
             "schema_version": SCHEMA_VERSION,
             "lfproc_version": __version__,
@@ -249,9 +288,16 @@ class CameraProfile:
             "unknown": dict(self.unknown),
             "source": dict(self.source),
         }
+        # written only when present, so profiles without measured maps keep their JSON unchanged
+        if self.bias_frame_std_dn:
+            doc["bias_frame_std_dn"] = {str(k): float(v) for k, v in sorted(self.bias_frame_std_dn.items())}
+        if self.flat_field is not None or self.flat_field_std:
+            doc["flat_field_std"] = float(self.flat_field_std)
+        return doc
 
     @classmethod
-    def from_json(cls, doc: dict[str, Any], *, where: str = "profile", bias_frames=None) -> "CameraProfile":
+    def from_json(cls, doc: dict[str, Any], *, where: str = "profile", bias_frames=None,
+                  flat_field=None) -> "CameraProfile":
         """Build and validate a profile from its JSON dict; errors name the field."""
         if not isinstance(doc, dict):
             raise ProfileError(f"{where}: expected a JSON object")
@@ -280,7 +326,15 @@ class CameraProfile:
                 raise ProfileError(f"{where}: field 'isos.{key}': unknown keys {', '.join(sorted(extra))}")
             isos[iso] = IsoFigures(**{n: figs.get(n) for n in names})
         kwargs = {k: doc[k] for k in ("gamma", "cfa_pattern", "dark_current_e_per_s", "prnu", "dsnu_e",
-                                      "fixed_pattern_seed", "description") if doc.get(k) is not None}
+                                      "fixed_pattern_seed", "description", "flat_field_std") if doc.get(k) is not None}
+        std = doc.get("bias_frame_std_dn") or {}
+        if not isinstance(std, dict):
+            raise ProfileError(f"{where}: field 'bias_frame_std_dn': expected an object from ISO to DN")
+        try:
+            kwargs["bias_frame_std_dn"] = {int(k): v for k, v in std.items()}
+        except ValueError:
+            raise ProfileError(f"{where}: field 'bias_frame_std_dn': keys must be ISO numbers, found "
+                               f"{', '.join(map(repr, std))}") from None
         try:
             return cls(
                 name=str(doc["name"]),
@@ -292,6 +346,7 @@ class CameraProfile:
                 unknown=dict(doc.get("unknown") or {}),
                 source=dict(doc.get("source") or {}),
                 bias_frames=bias_frames or {},
+                flat_field=flat_field,
                 **kwargs,
             )
         except ProfileError as exc:
@@ -336,7 +391,19 @@ def load_profile(name_or_path: str | os.PathLike | CameraProfile) -> CameraProfi
             raise ProfileError(f"{path}: field 'bias_frame_file': {side} does not exist")
         with np.load(side) as npz:
             bias = {int(k.removeprefix("iso_")): npz[k] for k in npz.files}
-    return CameraProfile.from_json(doc, where=str(path), bias_frames=bias)
+    flat = None
+    sidecar = doc.get("flat_field_file") if isinstance(doc, dict) else None
+    if sidecar:
+        side = path.parent / sidecar
+        if not side.exists():
+            raise ProfileError(f"{path}: field 'flat_field_file': {side} does not exist")
+        try:
+            with np.load(side, allow_pickle=False) as npz:
+                flat = npz["flat_field"]
+        except (KeyError, ValueError, OSError, EOFError) as exc:
+            raise ProfileError(f"{path}: field 'flat_field_file': {side} is not a flat-field map "
+                               f"(.npz with array 'flat_field'): {exc}") from None
+    return CameraProfile.from_json(doc, where=str(path), bias_frames=bias, flat_field=flat)
 
 
 def bias_sidecar_path(path: str | os.PathLike) -> Path:
@@ -345,16 +412,34 @@ def bias_sidecar_path(path: str | os.PathLike) -> Path:
     return path.with_name(f"{path.stem}.bias.npz")
 
 
+def flat_sidecar_path(path: str | os.PathLike) -> Path:
+    """Where :func:`save_profile` writes the flat-field map of a profile saved at ``path``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.flat.npz")
+
+
+def profile_outputs(profile: CameraProfile, path: str | os.PathLike) -> list[Path]:
+    """The files :func:`save_profile` writes for ``profile`` at ``path``: the JSON first, then its
+    bias and flat-field sidecars when the profile has them."""
+    path = Path(path)
+    return ([path] + ([bias_sidecar_path(path)] if profile.bias_frames else [])
+            + ([flat_sidecar_path(path)] if profile.flat_field is not None else []))
+
+
 def save_profile(profile: CameraProfile, path: str | os.PathLike, *, force: bool = False) -> Path:
-    """Write a profile as JSON, its bias frames in a sidecar ``<stem>.bias.npz``; both or neither
-    (:func:`lfproc.io.atomic_outputs`)."""
+    """Write a profile as JSON, its bias frames in a sidecar ``<stem>.bias.npz`` and its flat-field
+    map in ``<stem>.flat.npz``: all of them or none (:func:`lfproc.io.atomic_outputs`)."""
     path = Path(path)
     doc = profile.to_json()
-    outputs = [path, bias_sidecar_path(path)] if profile.bias_frames else [path]
+    outputs = profile_outputs(profile, path)
     with atomic_outputs(outputs, force=force) as staged:
         if profile.bias_frames:
             with open(staged[1], "wb") as fh:
                 np.savez_compressed(fh, **{f"iso_{iso}": frame for iso, frame in profile.bias_frames.items()})
-            doc["bias_frame_file"] = outputs[1].name
+            doc["bias_frame_file"] = bias_sidecar_path(path).name
+        if profile.flat_field is not None:
+            with open(staged[-1], "wb") as fh:
+                np.savez_compressed(fh, flat_field=np.asarray(profile.flat_field, dtype=np.float32))
+            doc["flat_field_file"] = flat_sidecar_path(path).name
         staged[0].write_text(json.dumps(doc, indent=2))
     return path

@@ -71,18 +71,16 @@ def run(args) -> int:
     if given:
         raise InputError(f"{', '.join(given)}: only for 'lfproc calibrate {SIMULATE}'")
     from lfproc.calib.calibrate import calibrate
-    from lfproc.calib.profile import bias_sidecar_path, save_profile
+    from lfproc.calib.profile import profile_outputs, save_profile
     from lfproc.io import atomic_outputs, check_output
 
     check_output(args.output, force=args.force)
     if args.report is not None:
         check_output(args.report, force=args.force)
     result = calibrate(args.input, name=args.name, adc_bits=args.adc_bits, cfa_pattern=args.cfa)
-    # the profile, its bias sidecar and the report are published together: a run killed at any
+    # the profile, its sidecars and the report are published together: a run killed at any
     # moment leaves all of them or none (and a re-run as it was then succeeds)
-    outputs = [args.output]
-    if result.profile.bias_frames:
-        outputs.append(bias_sidecar_path(args.output))
+    outputs = profile_outputs(result.profile, args.output)
     if args.report is not None:
         outputs.append(args.report)
     with atomic_outputs(outputs, force=args.force) as staged:

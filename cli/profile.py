@@ -30,6 +30,7 @@ def describe_profile(profile) -> dict:
     """The profile as one JSON-ready dict (its JSON form plus the bias frames' shapes)."""
     doc = profile.to_json()
     doc["bias_frames"] = {str(iso): list(frame.shape) for iso, frame in sorted(profile.bias_frames.items())}
+    doc["flat_field"] = None if profile.flat_field is None else list(profile.flat_field.shape)
     doc["saturation_dn"] = {}
     for iso in profile.iso_values:
         try:
@@ -51,6 +52,8 @@ def run_show(args) -> int:
                                 "gamma", "cfa_pattern", "dark_current_e_per_s", "prnu", "dsnu_e")}
     if doc["bias_frames"]:
         head["bias_frames"] = ", ".join(f"ISO {k}: {v[0]}x{v[1]}" for k, v in doc["bias_frames"].items())
+    if doc["flat_field"]:
+        head["flat_field"] = f"{doc['flat_field'][0]}x{doc['flat_field'][1]} (relative std {doc['flat_field_std']:.3g})"
     emit(head, as_json=False)
     print()
     width = max(len(k) for k in _ISO_KEYS + ("saturation_dn",))

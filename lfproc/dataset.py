@@ -304,7 +304,7 @@ def _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, fa
         n = workers or min(len(todo), os.cpu_count() or 1)
         if n < 1:
             raise InputError(f"--workers: expected a positive number, got {workers}")
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                silence_logs=logging.ERROR)
         client = Client(cluster)
     try:

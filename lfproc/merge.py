@@ -240,6 +240,7 @@ def merge_ml(
         obs = calibrated_observation(
             codes[None, :], exposure_s=t[i], iso=iso[i], profile=profile, gamma=gamma, bias_dn=bias,
             saturation_margin_dn=saturation_margin_dn, variance_from="estimate", radiance_estimate=0.0,
+            correct_fixed_pattern=False,  # codes here are tables or samples, not one sensor image
         )
         return obs.radiance[0], obs.variance[0], obs.saturated[0], obs.black_clipped[0]
 

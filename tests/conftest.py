@@ -53,3 +53,50 @@ def run_lfproc():
         return proc
 
     return run
+
+
+# -- genuine raw files for the import tests ------------------------------------------------------
+
+_CFA_CODES = {"R": 0, "G": 1, "B": 2}
+
+
+def write_dng(path, dn, *, cfa_pattern: str = "RGGB", black_level: float = 64, white_level: int = 4095,
+              exposure_s: float | None = None, iso: float | None = None) -> Path:
+    """Write a Bayer mosaic (uint16 DN) as a minimal uncompressed DNG 1.4 that LibRaw (rawpy) reads.
+
+    A test helper, not product code: tifffile writes the TIFF structure and the DNG tags (DNGVersion,
+    CFARepeatPatternDim/CFAPattern, BlackLevel, WhiteLevel, an identity ColorMatrix1...).
+    """
+    import numpy as np
+    import tifffile
+
+    dn = np.ascontiguousarray(dn, dtype=np.uint16)
+    tags = [
+        (271, "s", 0, "lfproc", True),  # Make
+        (272, "s", 0, "simulated sensor", True),  # Model
+        (33421, "H", 2, (2, 2), True),  # CFARepeatPatternDim
+        (33422, "B", 4, tuple(_CFA_CODES[c] for c in cfa_pattern), True),  # CFAPattern
+        (50706, "B", 4, (1, 4, 0, 0), True),  # DNGVersion
+        (50707, "B", 4, (1, 1, 0, 0), True),  # DNGBackwardVersion
+        (50708, "s", 0, "lfproc simulated sensor", True),  # UniqueCameraModel
+        (50713, "H", 2, (1, 1), True),  # BlackLevelRepeatDim
+        (50714, "2I", 1, (int(round(black_level * 1000)), 1000), True),  # BlackLevel (RATIONAL)
+        (50717, "I", 1, (int(white_level),), True),  # WhiteLevel
+        (50721, "2i", 9, (1, 1, 0, 1, 0, 1, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 1, 1), True),  # ColorMatrix1 = I
+        (50728, "2I", 3, (1, 1, 1, 1, 1, 1), True),  # AsShotNeutral
+        (50778, "H", 1, (21,), True),  # CalibrationIlluminant1 = D65
+    ]
+    if exposure_s is not None:
+        tags.append((33434, "2I", 1, (int(round(exposure_s * 1e6)), 1_000_000), True))  # ExposureTime
+    if iso is not None:
+        tags.append((34855, "H", 1, (int(iso),), True))  # ISOSpeedRatings
+    tifffile.imwrite(path, dn, photometric=32803, compression=None, planarconfig=1, subfiletype=0,
+                     metadata=None, extratags=tags)
+    return Path(path)
+
+
+@pytest.fixture(scope="session")
+def dng_writer():
+    """:func:`write_dng` (skips when tifffile is missing)."""
+    pytest.importorskip("tifffile")
+    return write_dng

@@ -18,7 +18,7 @@ from lfproc.calib.frames import read_manifest
 from lfproc.calib.report import write_report
 from lfproc.calib.simulate_frames import expected_figures, simulate_frames
 from lfproc.cli.main import main
-from lfproc.errors import CalibrationError, FileFormatError, InputError, MissingFileError
+from lfproc.errors import CalibrationError, FileFormatError, InputError, MissingFileError, ProfileError
 
 ISOS = (100, 400, 1600)
 
@@ -102,6 +102,76 @@ def test_saved_profile_round_trip(result, tmp_path):
     back = load_profile(path)
     assert back.isos == result.profile.isos
     np.testing.assert_array_equal(back.bias_frames[100], result.profile.bias_frames[100])
+
+
+def test_flat_field_and_bias_frames_match_the_sensor_maps(result, profile, tmp_path):
+    """The measured maps against the simulated sensor's own (lfproc.camera.sensor.fixed_pattern): their
+    errors have the standard deviation the calibration records."""
+    from lfproc.calib import save_profile
+    from lfproc.camera.sensor import fixed_pattern
+
+    prof = result.profile
+    gain, offset = fixed_pattern(profile, (128, 128))
+    assert prof.flat_field.shape == (128, 128) and prof.flat_field.dtype == np.float32
+    err = prof.flat_field - gain
+    assert err.std() == pytest.approx(prof.flat_field_std, rel=0.1)
+    assert prof.flat_field_std < 0.2 * profile.prnu  # the map resolves the 1 % PRNU
+    assert abs(err.mean()) < 1e-3  # mean 1 per CFA position vs the sensor's mean over all pixels
+    for r in (0, 1):
+        for c in (0, 1):
+            assert prof.flat_field[r::2, c::2].mean() == pytest.approx(1.0, abs=1e-6)
+    assert [result.figures[str(i)]["flat_field_std"] for i in ISOS] == sorted(
+        result.figures[str(i)]["flat_field_std"] for i in ISOS)  # fewer electrons at higher ISO
+    for iso in ISOS:
+        h = profile.isos[iso].gain_dn_per_e
+        frame = prof.bias_frames[iso].astype(np.float64)
+        dsnu_err = (frame - frame.mean()) / h - offset
+        assert dsnu_err.std() == pytest.approx(prof.bias_frame_std_dn[iso] / h, rel=0.1)
+    path = save_profile(prof, tmp_path / "measured.json")
+    doc = json.loads(path.read_text())
+    assert doc["flat_field_file"] == "measured.flat.npz" and doc["flat_field_std"] == prof.flat_field_std
+    back = load_profile(path)
+    np.testing.assert_array_equal(back.flat_field, prof.flat_field)
+    assert back.flat_field_std == prof.flat_field_std and back.bias_frame_std_dn == prof.bias_frame_std_dn
+    (tmp_path / "measured.flat.npz").unlink()
+    with pytest.raises(ProfileError, match=r"measured.json: field 'flat_field_file': .*measured.flat.npz does not exist"):
+        load_profile(path)
+
+
+def test_measured_maps_make_t_unbiased_per_pixel(result, profile):
+    """Captures of the true sensor, observed with its measured maps: per pixel, the mean of 100 draws is
+    within the noise of the mean plus the maps' recorded uncertainty; without correction it is not."""
+    from lfproc.camera.sensor import calibrated_observation, expose, fixed_pattern_correction
+
+    prof = result.profile
+    # the true profile with the measured maps only, so that gain or dark-current errors stay out
+    measured = replace(profile, source={"kind": "calibrated"}, fixed_pattern_seed=0, flat_field=prof.flat_field,
+                       flat_field_std=prof.flat_field_std, bias_frames=prof.bias_frames,
+                       bias_frame_std_dn=prof.bias_frame_std_dn)
+    rng = np.random.default_rng(0)
+    iso = rng.choice([100.0, 400.0, 1600.0], size=(128, 128))
+    t = 0.01
+    electrons = np.exp(rng.uniform(np.log(50), np.log(4000), size=iso.shape))
+    E = np.where(iso == 1600, np.minimum(electrons, 1000), electrons) / t
+    fp = fixed_pattern_correction(measured, iso.shape, iso)
+    assert fp.gain_source == "flat_field" and fp.offset_source == "bias_frames (ISO 100, 400, 1600)"
+    map_var = E**2 * fp.gain_var / fp.gain**2 + fp.offset_var_e2 / (t * fp.gain) ** 2
+    draws = 100
+    T = np.zeros(iso.shape)
+    V = np.zeros(iso.shape)
+    T_plain = np.zeros(iso.shape)
+    for _ in range(draws):
+        dn = expose(E, exposure_s=t, iso=iso, profile=profile, random_state=rng)
+        kw = dict(exposure_s=t, iso=iso, variance_from="estimate", radiance_estimate=E)
+        obs = calibrated_observation(dn, profile=measured, **kw)
+        T += obs.radiance / draws
+        V += obs.variance / draws
+        T_plain += calibrated_observation(dn, profile=measured, correct_fixed_pattern=False, **kw).radiance / draws
+    noise_var = V - map_var  # the part of the variance that averages down over draws
+    z = (T - E) / np.sqrt(noise_var / draws + map_var)
+    assert abs(z.mean()) < 4.5 / np.sqrt(z.size)
+    assert z.var() == pytest.approx(1.0, abs=0.08)
+    assert ((T_plain - E) / np.sqrt(noise_var / draws + map_var)).var() > 3
 
 
 def test_report(result, tmp_path):
@@ -266,6 +336,11 @@ def test_cli_calibrate_json(frames, result, tmp_path, capsys):
             assert figs[key] == pytest.approx(result.figures[iso][key], rel=1e-12)
     assert load_profile(out).isos[400].gain_dn_per_e == pytest.approx(0.819, rel=0.02)
     assert (tmp_path / "p.bias.npz").is_file() and (tmp_path / "rep" / "summary.md").is_file()
+    assert (tmp_path / "p.flat.npz").is_file() and load_profile(out).flat_field.shape == (128, 128)
+    assert main(["profile", "show", str(out), "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["flat_field"] == [128, 128] and 0 < shown["flat_field_std"] < 0.002
+    assert sorted(shown["bias_frame_std_dn"]) == ["100", "1600", "400"]
     assert main(["calibrate", str(frames), "-o", str(out)]) == 2
     assert "output exists" in capsys.readouterr().err
 

@@ -23,7 +23,9 @@ followed by ``.npy`` members: ``dn`` (``(S, H, W)`` uint16, black level included
 :class:`lfproc.camera.projection.MaskCode`: ``(S, V, U, Ph, Pw, 3)`` for ``random``, ``(S, Bh, Bw, 3)``
 for ``shifted``; one tile when the mask is periodic; uint8 levels ``k`` meaning transmittance
 ``k / 255`` when every code is such a level, as the simulator's are, else float32) and
-optionally ``bias`` (``(S, H, W)`` float32 bias frames in DN).
+optionally ``bias`` (``(S, H, W)`` float32 bias frames in DN) and the embedded profile's
+measured maps, ``profile_flat_field`` (``(H, W)``) and ``profile_bias_<ISO>`` (its master bias
+frames), which the calibrated observations use (:func:`lfproc.camera.sensor.fixed_pattern_correction`).
 
 Radiance units: ``observations`` returns ``T`` in electrons per second reaching each
 pixel. For a simulated capture, ``L_e = radiance_scale * L_relative``, so a light field
@@ -279,6 +281,10 @@ class Capture(ReadOnlyState):
         out = {"dn": self.dn, "iso": self.iso, "mask": self.mask.codes if levels is None else levels}
         if self.bias_dn is not None:
             out["bias"] = self.bias_dn
+        if self.profile.flat_field is not None:
+            out["profile_flat_field"] = np.asarray(self.profile.flat_field, dtype=np.float32)
+        for iso, frame in sorted(self.profile.bias_frames.items()):
+            out[f"profile_bias_{iso}"] = np.asarray(frame, dtype=np.float32)
         return out
 
     def save(self, path: str | os.PathLike, *, force: bool = False) -> Path:
@@ -388,9 +394,18 @@ def load_capture(path: str | os.PathLike) -> Capture:
             arrays = {name: _read_array(path, zf, name, header) for name in ("dn", "iso", "mask")}
             if "bias" in header["arrays"]:
                 arrays["bias"] = _read_array(path, zf, "bias", header)
+            maps = {name: _read_array(path, zf, name, header) for name in header["arrays"]
+                    if name.startswith("profile_")}
     except zipfile.BadZipFile as exc:
         raise FileFormatError(f"{path}: corrupt capture archive ({exc})") from None
-    profile = CameraProfile.from_json(header["profile"], where=f"{path}: embedded profile")
+    try:
+        profile_bias = {int(name.removeprefix("profile_bias_")): a for name, a in maps.items()
+                        if name.startswith("profile_bias_")}
+    except ValueError:
+        raise FileFormatError(f"{path}: profile bias arrays must be named profile_bias_<ISO>, found "
+                              f"{', '.join(sorted(maps))}") from None
+    profile = CameraProfile.from_json(header["profile"], where=f"{path}: embedded profile", bias_frames=profile_bias,
+                                      flat_field=maps.get("profile_flat_field"))
     m = header["mask"]
     try:
         codes = decode_levels(arrays["mask"]) if arrays["mask"].dtype == np.uint8 else arrays["mask"]
@@ -565,18 +580,56 @@ def read_sensor_frame(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, An
     return dn, meta
 
 
+def _mask_from(mask, *, views) -> tuple[MaskCode, tuple[int, int], str | None]:
+    """The mask of :func:`capture_from_raw`, the views it implies and the file it came from."""
+    if isinstance(mask, (str, os.PathLike)):
+        path = Path(mask)
+        if not path.is_file():
+            raise MissingFileError(f"{path}: no such mask code file or capture file")
+        if not is_capture_file(path):
+            raise FileFormatError(f"{path}: a mask given as a path must be an lfproc capture file (its mask is "
+                                  "reused); pass .npy codes as {'kind': ..., 'codes': PATH}")
+        donor = load_capture(path)
+        return donor.mask, donor.views if views is None else views, str(path)
+    source = None
+    if isinstance(mask, Mapping):
+        codes = mask.get("codes")
+        if isinstance(codes, (str, os.PathLike)):
+            codes_path = Path(codes)
+            source = str(codes_path)
+            if not codes_path.is_file():
+                raise MissingFileError(f"{codes_path}: no such mask code file")
+            try:
+                codes = np.load(codes_path, allow_pickle=False)
+            except (ValueError, OSError, EOFError) as exc:
+                raise FileFormatError(f"{codes_path}: not a .npy array of mask codes ({exc})") from None
+        if codes is None or "kind" not in mask:
+            raise InputError("mask: expected a MaskCode or a mapping with 'kind' and 'codes'")
+        try:
+            mask = MaskCode(kind=mask["kind"], codes=codes, period=mask.get("period"),
+                            shift=int(mask.get("shift", 1)))
+        except InputError as exc:  # ShapeError included
+            raise type(exc)(f"{source}: {exc}" if source else str(exc)) from None
+    if not isinstance(mask, MaskCode):
+        raise InputError(f"mask: expected a MaskCode, a mapping or a capture file, got {type(mask).__name__}")
+    if views is None:
+        views = tuple(int(v) for v in mask.codes.shape[1:3]) if mask.kind == "random" else (5, 5)
+    return mask, views, source
+
+
 def capture_from_raw(
     raw_paths: Sequence[str | os.PathLike],
     *,
-    mask: MaskCode | Mapping[str, Any],
+    mask: MaskCode | Mapping[str, Any] | str | os.PathLike,
     iso_layout,
     profile,
     exposures_s,
-    views: tuple[int, int] = (5, 5),
+    views: tuple[int, int] | None = None,
     cfa_pattern: str | None = None,
     gamma: float | None = None,
     bias_dn=None,
     isos: Sequence[float] | None = None,
+    block_px: int = 4,
     random_state=None,
 ) -> Capture:
     """Build a capture from real sensor images (one per shot), a mask description, an ISO layout and a profile.
@@ -584,73 +637,111 @@ def capture_from_raw(
     Parameters
     ----------
     raw_paths : sequence of paths
-        One sensor image per shot: raw files (read with rawpy, ``raw_image_visible``) or
-        single-channel 16-bit PNG/TIFF mosaics.
-    mask : MaskCode or mapping
-        The mask codes, or ``{"kind": "random"|"shifted", "codes": array or .npy path,
-        "period": P or None, "shift": 1}``.
+        One sensor image per shot: raw files (read with rawpy, ``raw_image_visible``; DNG
+        included) or single-channel 16-bit PNG/TIFF mosaics. All of one size and CFA layout.
+    mask : MaskCode, mapping or path
+        The mask codes; or ``{"kind": "random"|"shifted", "codes": array or .npy path,
+        "period": P or None, "shift": 1}`` (codes in the layout of
+        :class:`lfproc.camera.projection.MaskCode`: ``(S, V, U, Ph, Pw, 3)`` for ``random``,
+        ``(S, Bh, Bw, 3)`` for ``shifted``, transmittances in [0, 1]); or the path of a capture
+        file whose mask (and views) are reused.
     iso_layout : float, ndarray (H, W) or (S, H, W), or str
-        ISO of every pixel; a string names a pattern of :func:`lfproc.camera.simulate.iso_pattern`
-        (``row``, ``block``, ``dual``, ``random``) built with ``isos`` (stored explicitly).
+        ISO of every pixel; a string names a pattern of :func:`lfproc.camera.iso.iso_pattern`
+        (``row``, ``block``, ``dual``, ``random``) built with ``isos``, or an ISO map file
+        (stored explicitly either way).
     profile : CameraProfile, name or path
     exposures_s : float or sequence of floats (one per shot)
-    views : (V, U)
+    views : (V, U), optional
+        Default: the random codes' views, the donor capture's, else 5 x 5.
     cfa_pattern : str, optional
-        Default: the raw file's pattern when rawpy reports one, else the profile's.
+        Default: the raw files' pattern when rawpy reports one, else the profile's.
     gamma : float, optional (default: the profile's)
     bias_dn : float or ndarray, optional (default: black level plus mean dark signal)
-    isos, random_state : for a named ``iso_layout``.
+    isos, block_px, random_state : for a named ``iso_layout`` (``block_px``: the block side of
+        ``block``; ``random_state`` seeds ``random``).
 
     Returns
     -------
     Capture
+
+    Warns
+    -----
+    LfprocWarning
+        When a raw file's black level differs from the profile's by more than 2 DN (the
+        profile is probably for another camera or mode).
     """
+    import warnings
+
+    from ..errors import LfprocWarning
+
     paths = [Path(p) for p in ([raw_paths] if isinstance(raw_paths, (str, os.PathLike)) else raw_paths)]
     if not paths:
         raise InputError("capture_from_raw: expected at least one sensor image")
+    profile = load_profile(profile)
     frames, metas = zip(*(read_sensor_frame(p) for p in paths))
-    if len({f.shape for f in frames}) != 1:
-        raise ShapeError(f"capture_from_raw: sensor images differ in size: {[f.shape for f in frames]}")
+    for p, f in zip(paths[1:], frames[1:]):
+        if f.shape != frames[0].shape:
+            raise ShapeError(f"{p}: sensor image of {f.shape[0]}x{f.shape[1]} pixels, but {paths[0]} has "
+                             f"{frames[0].shape[0]}x{frames[0].shape[1]}; all shots must come from one sensor mode")
     dn = np.stack(frames)
-    if isinstance(mask, Mapping):
-        codes = mask.get("codes")
-        if isinstance(codes, (str, os.PathLike)):
-            codes_path = Path(codes)
-            if not codes_path.is_file():
-                raise MissingFileError(f"{codes_path}: no such mask code file")
-            codes = np.load(codes_path, allow_pickle=False)
-        if codes is None or "kind" not in mask:
-            raise InputError("mask: expected a MaskCode or a mapping with 'kind' and 'codes'")
-        mask = MaskCode(kind=mask["kind"], codes=codes, period=mask.get("period"), shift=int(mask.get("shift", 1)))
-    if not isinstance(mask, MaskCode):
-        raise InputError(f"mask: expected a MaskCode or a mapping, got {type(mask).__name__}")
-    iso_info: dict[str, Any] = {"kind": "given"}
-    if isinstance(iso_layout, str):
-        from .iso import iso_pattern
-
-        if isos is None:
-            raise InputError(f"iso_layout {iso_layout!r}: pass isos= (the ISO values of the pattern)")
-        iso_map = iso_pattern(iso_layout, size=dn.shape[1:], isos=isos, random_state=random_state)
-        iso_info = {"kind": iso_layout, "isos": [_num(v) for v in isos]}
-    else:
-        iso_map = np.asarray(iso_layout, dtype=np.float32)
     raw_cfa = {m.get("cfa_pattern") for m in metas} - {None}
+    if len(raw_cfa) > 1:
+        raise InputError(f"capture_from_raw: the raw files differ in CFA layout ({', '.join(sorted(raw_cfa))}); "
+                         "all shots must come from one sensor")
     if cfa_pattern is None and len(raw_cfa) == 1:
         cfa_pattern = raw_cfa.pop()
-    return Capture(
-        dn=dn,
-        iso=iso_map,
-        exposures_s=exposures_s,
-        mask=mask,
-        profile=profile,
-        views=views,
-        cfa_pattern=cfa_pattern,
-        gamma=gamma,
-        bias_dn=bias_dn,
-        iso_pattern=iso_info,
-        parameters={"source": "raw", "frames": [{"path": str(p), "sha256": file_sha256(p), **m}
-                                                for p, m in zip(paths, metas)]},
-    )
+    for p, m in zip(paths, metas):
+        if "black_level_dn" in m:
+            black = float(np.mean(m["black_level_dn"]))
+            known = {float(profile.black_level_dn)} | {float(f.black_level_dn) for f in profile.isos.values()
+                                                       if f.black_level_dn is not None}
+            if min(abs(black - b) for b in known) > 2:
+                warnings.warn(f"{p}: black level {black:g} DN, but camera profile {profile.name!r} has "
+                              f"{', '.join(f'{b:g}' for b in sorted(known))} DN; is it this camera's profile?",
+                              LfprocWarning, stacklevel=2)
+    mask, views, mask_source = _mask_from(mask, views=views)
+    iso_info: dict[str, Any] = {"kind": "given"}
+    if isinstance(iso_layout, (str, os.PathLike)):
+        from .iso import ISO_PATTERNS, iso_pattern
+
+        name = str(iso_layout)
+        if name in ISO_PATTERNS and isos is None:
+            raise InputError(f"iso_layout {name!r}: pass isos= (the ISO values of the pattern)")
+        iso_map = iso_pattern(iso_layout, size=dn.shape[1:], isos=isos if isos is not None else (100,),
+                              block_px=block_px, random_state=random_state)
+        if name in ISO_PATTERNS:
+            iso_info = {"kind": name, "isos": [_num(v) for v in isos]}
+            if name == "block":
+                iso_info["block_px"] = int(block_px)
+            if name == "random":
+                iso_info["seed"] = random_state if isinstance(random_state, (int, np.integer)) else None
+        else:
+            iso_info = {"kind": "file", "path": name}
+    else:
+        iso_map = np.asarray(iso_layout, dtype=np.float32)
+    parameters: dict[str, Any] = {
+        "source": "raw", "lfproc_version": __version__,
+        "frames": [{"path": str(p), "sha256": file_sha256(p), **m} for p, m in zip(paths, metas)]}
+    if mask_source:
+        parameters["mask_source"] = mask_source
+    try:
+        return Capture(
+            dn=dn,
+            iso=iso_map,
+            exposures_s=exposures_s,
+            mask=mask,
+            profile=profile,
+            views=views,
+            cfa_pattern=cfa_pattern,
+            gamma=gamma,
+            bias_dn=bias_dn,
+            iso_pattern=iso_info,
+            parameters=parameters,
+        )
+    except ShapeError as exc:
+        if mask_source and "mask" in str(exc):
+            raise ShapeError(f"{mask_source}: {exc}") from None
+        raise
 
 
 # -- previews --------------------------------------------------------------------------------

@@ -56,6 +56,9 @@ __all__ = [
     "cfa_index_map",
     "build_operator",
     "sampling_rate",
+    "PatchOperators",
+    "patch_operators",
+    "patch_grid",
 ]
 
 MASK_KINDS = ("random", "shifted")
@@ -568,3 +571,199 @@ def build_operator(mask: MaskCode, *, views: tuple[int, int], size: tuple[int, i
         p = math.lcm(int(mask.period), 2)
         period = (p, p)
     return ProjectionOperator(freeze(np.ascontiguousarray(weights, dtype=dtype)), freeze(cfa), channels=3, period=period)
+
+
+# -- per-phase patch operators (the reconstruction's view of Phi) ------------------------------
+
+def patch_grid(size: tuple[int, int], patch: int, stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """Top (or left) corners of patches of ``patch`` pixels every ``stride`` pixels covering ``size``.
+
+    Per axis: ``0, stride, 2 stride, ...`` up to ``size - patch``, plus ``size - patch`` when the
+    grid does not reach the border (so every pixel is covered).
+
+    Returns
+    -------
+    tops, lefts : 1-D int arrays (the grid is their outer product)
+    """
+    patch, stride = int(patch), int(stride)
+    if patch < 1 or stride < 1:
+        raise InputError(f"patch grid: expected positive patch size and stride, got {patch} and {stride}")
+    out = []
+    for n in size:
+        if n < patch:
+            raise ShapeError(f"patch grid: patches of {patch} pixels do not fit a sensor of {tuple(size)} pixels")
+        axis = np.arange(0, n - patch + 1, stride)
+        if axis[-1] != n - patch:
+            axis = np.append(axis, n - patch)
+        out.append(axis.astype(np.intp))
+    return out[0], out[1]
+
+
+@dataclass(frozen=True, eq=False)
+class PatchOperators:
+    """The distinct patch matrices ``Phi_p`` of a set of patches, and which patch uses which.
+
+    Each patch matrix (``m x n``, ``m = S * size^2``, ``n = V * U * size^2 * C``; row and
+    column orders of the module notes) has one non-zero per row and view. It is held in
+    gather form: ``Phi_g @ x == (vals[g] * x[cols[g]]).sum(-1)``.
+
+    Attributes
+    ----------
+    cols : ndarray of shape (G, m, V*U), int32
+        Column index of every non-zero (it depends on the patch only through its CFA phase).
+    vals : ndarray of shape (G, m, V*U), float32
+        Mask transmittances.
+    index : ndarray of shape (B,), intp
+        ``index[b]`` is the operator of patch ``b`` (in the order the patches were given).
+    positions : ndarray of shape (G, 2), intp
+        Sensor position (top, left) of one patch that uses each operator.
+    size, views, shots, channels : the patch geometry.
+    periodic : bool
+        True when operators are shared by phase (a periodic mask): ``G`` does not grow with
+        the sensor; False: one operator per patch position.
+    """
+
+    cols: np.ndarray
+    vals: np.ndarray
+    index: np.ndarray
+    positions: np.ndarray
+    size: int
+    views: tuple[int, int]
+    shots: int
+    channels: int
+    periodic: bool
+
+    @property
+    def n_operators(self) -> int:
+        return int(self.vals.shape[0])
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(m, n)`` of each patch matrix."""
+        nv, nu = self.views
+        return self.shots * self.size**2, nv * nu * self.size**2 * self.channels
+
+    def dense(self, g: int) -> np.ndarray:
+        """Dense ``(m, n)`` matrix of operator ``g`` (for tests and small problems)."""
+        out = np.zeros(self.shape, dtype=self.vals.dtype)
+        np.put_along_axis(out, self.cols[g].astype(np.intp), self.vals[g], axis=1)
+        return out
+
+    def times(self, atoms: np.ndarray, g=None) -> np.ndarray:
+        """``Phi_g @ atoms`` for operators ``g`` (default all): ``(G, m, K)`` (or ``(m, K)`` for one ``g``).
+
+        ``atoms`` is ``(n, K)`` (a dictionary); computed as a sum over views of scaled row
+        gathers, so no ``(m, V*U, K)`` intermediate is built.
+        """
+        atoms = np.asarray(atoms)
+        one = g is not None and np.ndim(g) == 0
+        gs = np.arange(self.n_operators) if g is None else np.atleast_1d(np.asarray(g, dtype=np.intp))
+        dtype = np.result_type(atoms.dtype, np.float32)
+        out = np.zeros((len(gs), self.shape[0], atoms.shape[1]), dtype=dtype)
+        for i, gi in enumerate(gs):
+            cols, vals = self.cols[gi], self.vals[gi].astype(dtype)
+            for k in range(cols.shape[1]):
+                out[i] += vals[:, k, None] * atoms[cols[:, k]]
+        return out[0] if one else out
+
+    def row_sums(self) -> np.ndarray:
+        """Total transmittance seen by each measurement, ``(G, m)`` (``Phi_g @ ones``)."""
+        return self.vals.sum(axis=-1, dtype=np.float64).astype(np.float32)
+
+
+def _mask_values(mask: MaskCode, rows: np.ndarray, cols: np.ndarray, colour: np.ndarray,
+                 views: tuple[int, int]) -> np.ndarray:
+    """Transmittance of every shot and view at sensor pixels ``(rows, cols)`` in colour ``colour``.
+
+    ``rows``, ``cols``, ``colour`` are integer arrays of one shape ``X``; returns ``(S, V, U, *X)``.
+    Reads the codes directly (a periodic tile is indexed modulo its period), never the
+    expanded ``(S, V, U, H, W)`` weights.
+    """
+    nv, nu = views
+    if mask.kind == "random":
+        if mask.period is not None:
+            rows, cols = rows % mask.period, cols % mask.period
+        return mask.codes[:, :, :, rows, cols, colour]
+    sh = int(mask.shift)
+    extra = (1,) * rows.ndim
+    r = rows[None, None] + sh * np.arange(nv).reshape(nv, 1, *extra)
+    c = cols[None, None] + sh * np.arange(nu).reshape(1, nu, *extra)
+    if mask.period is not None:
+        r, c = r % mask.period, c % mask.period
+    return mask.codes[:, r, c, colour[None, None]]
+
+
+def patch_operators(mask: MaskCode, *, views: tuple[int, int], cfa_pattern: str, tops, lefts, size: int,
+                    sensor_size: tuple[int, int] | None = None) -> PatchOperators:
+    """The distinct patch matrices of the patches at ``(tops[b], lefts[b])``, from the mask codes and the CFA.
+
+    With a periodic mask (period ``P``) two patches have the same matrix when their
+    positions agree modulo ``lcm(P, 2)`` (the mask tile and the Bayer quad), so only one
+    operator per such phase is built: memory independent of the sensor size. Without a
+    period every patch gets its own operator (build them per batch of patches).
+
+    Parameters
+    ----------
+    mask : MaskCode
+    views : (V, U)
+    cfa_pattern : str
+        Bayer layout from the sensor's top-left pixel.
+    tops, lefts : 1-D int arrays of equal length
+        Patch corners on the sensor.
+    size : int
+        Patch side in pixels.
+    sensor_size : (H, W), optional
+        Checks that the patches lie inside the sensor (and the codes cover it).
+
+    Returns
+    -------
+    PatchOperators
+        ``dense(index[b])`` equals ``build_operator(...).patch_matrix(tops[b], lefts[b], size)``.
+    """
+    tops = np.atleast_1d(np.asarray(tops, dtype=np.intp))
+    lefts = np.atleast_1d(np.asarray(lefts, dtype=np.intp))
+    if tops.shape != lefts.shape or tops.ndim != 1:
+        raise ShapeError(f"patch_operators: tops and lefts must be 1-D of equal length, got {tops.shape}, {lefts.shape}")
+    size = int(size)
+    if size < 1:
+        raise InputError(f"patch size: expected a positive integer, got {size}")
+    if not isinstance(mask, MaskCode):
+        raise InputError(f"patch_operators: expected a MaskCode, got {type(mask).__name__}")
+    nv, nu = int(views[0]), int(views[1])
+    if tops.size and (tops.min() < 0 or lefts.min() < 0):
+        raise InputError("patch_operators: patch corners must be non-negative")
+    if sensor_size is not None:
+        h, w = sensor_size
+        mask.check(views=(nv, nu), size=(h, w))
+        if tops.size and (tops.max() + size > h or lefts.max() + size > w):
+            raise InputError(f"patch_operators: patches of size {size} must lie inside the sensor of {h} x {w}")
+    if mask.channels != 3:
+        raise ShapeError(f"a Bayer CFA needs a 3-colour mask, this one has {mask.channels} colours")
+    periodic = mask.period is not None
+    if periodic:
+        p = math.lcm(int(mask.period), 2)
+        keys = np.stack([tops % p, lefts % p], axis=1)
+    else:
+        keys = np.stack([tops, lefts], axis=1)
+    uniq, first, index = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    index = index.reshape(-1)
+    positions = np.stack([tops[first], lefts[first]], axis=1) if len(first) else np.zeros((0, 2), np.intp)
+    ii = np.arange(size)
+    rows = positions[:, 0, None, None] + ii[None, :, None]  # (G, size, 1)
+    cols_ = positions[:, 1, None, None] + ii[None, None, :]  # (G, 1, size)
+    rows, cols_ = np.broadcast_arrays(rows, cols_)
+    tile = np.array([_COLOUR_INDEX[ch] for ch in check_choice("cfa_pattern", str(cfa_pattern).upper(), CFA_PATTERNS)],
+                    dtype=np.intp).reshape(2, 2)
+    colour = tile[rows % 2, cols_ % 2]  # (G, size, size)
+    values = _mask_values(mask, rows, cols_, colour, (nv, nu))  # (S, V, U, G, size, size)
+    s_n = mask.shots
+    g_n = len(positions)
+    vals = values.transpose(3, 0, 4, 5, 1, 2).reshape(g_n, s_n * size * size, nv * nu)
+    view = np.arange(nv * nu)
+    pix = ii[:, None] * size + ii[None, :]
+    col = (view[None, None, None, :] * size * size + pix[None, :, :, None]) * 3 + colour[..., None]  # (G, sz, sz, VU)
+    col = np.broadcast_to(col[:, None], (g_n, s_n, size, size, nv * nu)).reshape(g_n, -1, nv * nu)
+    return PatchOperators(cols=np.ascontiguousarray(col, dtype=np.int32),
+                          vals=np.ascontiguousarray(vals, dtype=np.float32),
+                          index=index.astype(np.intp), positions=positions.astype(np.intp), size=size,
+                          views=(nv, nu), shots=s_n, channels=3, periodic=periodic)

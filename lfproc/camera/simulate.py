@@ -283,6 +283,7 @@ def simulate_capture(
         "noise": bool(noise),
         "radiance_scale_rule": scale_rule,
         "light_field_source": lf.source if isinstance(lf, LightField) else None,
+        "light_field_units": lf.units if isinstance(lf, LightField) else None,
     }
     capture = Capture(
         dn=freeze(dn),
