@@ -48,7 +48,8 @@ __all__ = [
     "save_profile",
     "is_profile_file",
     "bias_sidecar_path",
-    "profile_files",
+    "flat_sidecar_path",
+    "profile_outputs",
     "paper_gain_dn_per_e",
     "SHIPPED_PROFILES",
     "SCHEMA",
@@ -127,11 +128,10 @@ class CameraProfile:
     flat_field_std : float
         Relative standard deviation of each value of ``flat_field`` as an estimate (0 = exact).
 
-        ISO -> master bias frame (DN, a finite 2-D array).
-
-    ``isos`` and ``bias_frames`` are stored as read-only mappings and the bias frames as
-    read-only arrays (copied once unless already read-only), so a validated profile
-    cannot be changed; use :func:`dataclasses.replace` to derive a new one.
+    ``isos``, ``bias_frames`` and ``bias_frame_std_dn`` are stored as read-only mappings and
+    the bias frames and flat field as read-only arrays (copied once unless already
+    read-only), so a validated profile cannot be changed; use :func:`dataclasses.replace`
+    to derive a new one.
     unknown : dict
         Field name -> reason, for figures the calibration could not determine.
     """
@@ -201,12 +201,17 @@ class CameraProfile:
                 )
             frames[iso] = frozen_array(frame)
         object.__setattr__(self, "bias_frames", FrozenDict(frames))
+        object.__setattr__(self, "bias_frame_std_dn", FrozenDict(self.bias_frame_std_dn))
+        if self.flat_field is not None:
+            object.__setattr__(self, "flat_field", frozen_array(self.flat_field))
 
     def __setstate__(self, state):
         # pickle and copy.deepcopy bring new (writeable) bias arrays: make them read-only again
         for name, value in state.items():
             if name == "bias_frames":
                 value = FrozenDict({k: frozen_array(v) for k, v in value.items()})
+            elif name == "flat_field" and value is not None:
+                value = frozen_array(value)
             object.__setattr__(self, name, value)
 
     # -- lookups ---------------------------------------------------------------------
@@ -485,16 +490,18 @@ def bias_sidecar_path(path: str | os.PathLike) -> Path:
     return path.with_name(f"{path.stem}.bias.npz")
 
 
-def profile_files(profile: CameraProfile, path: str | os.PathLike) -> list[Path]:
-    """Every file :func:`save_profile` writes for ``profile`` at ``path``: the JSON first, then its
-    bias sidecar and flat-field sidecar when the profile has them."""
+def flat_sidecar_path(path: str | os.PathLike) -> Path:
+    """Where :func:`save_profile` writes the flat-field map of a profile saved at ``path``."""
     path = Path(path)
-    files = [path]
-    if profile.bias_frames:
-        files.append(bias_sidecar_path(path))
-    if profile.flat_field is not None:
-        files.append(path.with_name(f"{path.stem}.flat.npz"))
-    return files
+    return path.with_name(f"{path.stem}.flat.npz")
+
+
+def profile_outputs(profile: CameraProfile, path: str | os.PathLike) -> list[Path]:
+    """The files :func:`save_profile` writes for ``profile`` at ``path``: the JSON first, then its
+    bias and flat-field sidecars when the profile has them."""
+    path = Path(path)
+    return ([path] + ([bias_sidecar_path(path)] if profile.bias_frames else [])
+            + ([flat_sidecar_path(path)] if profile.flat_field is not None else []))
 
 
 #: Largest profile JSON (bytes); shipped ones have about 2 kB.
@@ -573,22 +580,21 @@ def _read_flat_sidecar(path: Path, sidecar: Any) -> np.ndarray:
 
 def save_profile(profile: CameraProfile, path: str | os.PathLike, *, force: bool = False) -> Path:
     """Write a profile as JSON, its bias frames in a sidecar ``<stem>.bias.npz`` and its flat-field
-    map in ``<stem>.flat.npz``; all or none (:func:`lfproc.io.atomic_outputs`)."""
+    map in ``<stem>.flat.npz``: all of them or none (:func:`lfproc.io.atomic_outputs`)."""
     path = Path(path)
     doc = profile.to_json()
-    outputs = profile_files(profile, path)
-    flat_at = len(outputs) - 1
+    outputs = profile_outputs(profile, path)
     with atomic_outputs(outputs, force=force) as staged:
         if profile.bias_frames:
             with open(staged[1], "wb") as fh:
                 np.savez_compressed(fh, **{f"iso_{iso}": frame for iso, frame in profile.bias_frames.items()})
-            doc["bias_frame_file"] = outputs[1].name
+            doc["bias_frame_file"] = bias_sidecar_path(path).name
             shapes = {tuple(np.shape(frame)) for frame in profile.bias_frames.values()}
             if len(shapes) == 1:
                 doc["bias_frame_shape"] = list(shapes.pop())
         if profile.flat_field is not None:
-            with open(staged[flat_at], "wb") as fh:
+            with open(staged[-1], "wb") as fh:
                 np.savez_compressed(fh, flat_field=np.asarray(profile.flat_field, dtype=np.float32))
-            doc["flat_field_file"] = outputs[flat_at].name
+            doc["flat_field_file"] = flat_sidecar_path(path).name
         staged[0].write_text(json.dumps(doc, indent=2))
     return path

@@ -76,7 +76,7 @@ def run(args) -> int:
     if given:
         raise InputError(f"{', '.join(given)}: only for 'lfproc calibrate {SIMULATE}'")
     from lfproc.calib.calibrate import calibrate
-    from lfproc.calib.profile import profile_files, save_profile
+    from lfproc.calib.profile import profile_outputs, save_profile
     from lfproc.io import atomic_outputs, check_output
 
     check_output(args.output, force=args.force)
@@ -86,7 +86,7 @@ def run(args) -> int:
                        frames_root=args.frames_root)
     # the profile, its sidecars and the report are published together: a run killed at any
     # moment leaves all of them or none (and a re-run as it was then succeeds)
-    outputs = profile_files(result.profile, args.output)  # the JSON and its sidecars
+    outputs = profile_outputs(result.profile, args.output)
     if args.report is not None:
         outputs.append(args.report)
     with atomic_outputs(outputs, force=args.force) as staged:

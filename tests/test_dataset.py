@@ -134,7 +134,8 @@ def test_cli_dataset_build_killed_then_resumed(scenes, tmp_path, capsys):
     assert main(["dataset", "build", str(scenes), "-o", str(out), "--workers", "1", "--profile", "illum",
                  "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
-    assert doc["skipped"] == len(done_at_kill) and doc["processed"] == 4 - len(done_at_kill) and doc["failed"] == 0
+    assert doc["skipped"] == len(done_at_kill) and doc["processed"] == 4 - len(done_at_kill) and doc["failed"] == 0, (
+        doc, sorted(done_at_kill))
     after = _record_mtimes(out)
     assert len(after) == 4 and all(after[k] == v for k, v in done_at_kill.items())
     rows = read_manifest(out)
