@@ -25,6 +25,15 @@ the frames have a CFA):
    robust standard deviations above the median; they are left out of every statistic.
 8. **PRNU**: from the flat level nearest 50 % saturation:
    ``sqrt(s_y^2 - var_t / n - s_dark^2) / signal``.
+   **Flat field** (the per-pixel PRNU map, stored in the profile's ``flat_field``): per ISO,
+   the dark-subtracted master flats of every level without a clipped pixel, summed with
+   weights ``n_frames`` (so brighter levels, whose relative noise is lower, count more) over
+   the summed mean signal; the dark level of each pixel is its master bias (which holds the
+   DSNU) plus the mean dark current over the exposure. The ISOs' maps are averaged with
+   inverse-variance weights and normalised to mean 1 per CFA position (the channels' mean
+   response is colour, not non-uniformity). ``flat_field_std`` is the relative standard
+   deviation of a map value from the temporal noise of the flats and the bias master.
+   The master bias frames are stored too, with ``bias_frame_std_dn = sqrt(var_read / n_bias)``.
 9. **Read-noise split across ISOs**: least squares ``var_read(S) = K(S)^2 sigma_pre^2 +
    sigma_post^2`` (Hasinoff): ``sigma_pre`` (e-) before, ``sigma_post`` (DN) after the ISO gain.
 10. **Dynamic range and SNR** (EMVA 1288): ``DR = mu_e.sat / (sigma_y.dark / K + 1/2)`` with the
@@ -207,7 +216,7 @@ def _hot_mask(master: np.ndarray, sigma: float) -> tuple[np.ndarray, float]:
 # -- per-ISO calibration ----------------------------------------------------------------------
 def _calibrate_iso(iso_key: str, records: list[FrameRecord], *, cfa: str | None, hot_pixel_sigma: float,
                    unknown: dict[str, str]) -> tuple[dict[str, Any], dict[str, Any], np.ndarray | None,
-                                                     np.ndarray | None, FrameChecker]:
+                                                     np.ndarray | None, FrameChecker, tuple | None]:
     def unk(name: str, why: str) -> None:
         unknown[f"isos.{iso_key}.{name}"] = why
 
@@ -438,6 +447,15 @@ def _calibrate_iso(iso_key: str, records: list[FrameRecord], *, cfa: str | None,
             fig["prnu"] = math.sqrt(max(_pooled(s2), 0.0)) / sig["all"]
     if fig["prnu"] is None:
         unk("prnu", "needs the gain, the DSNU and an unclipped flat pair")
+    # flat field (per-pixel PRNU map) and the noise of the master bias
+    flat, flat_relvar, why = _flat_field(flat_stats, bias_master, n_bias=fig["n_bias"],
+                                         read_var=read_var["all"] if read_var else None, t_bias=t_bias,
+                                         dark_slope=mean_slope["all"], saturation_dn=saturation_dn, gain=K, mask=mask)
+    fig["flat_field_std"] = math.sqrt(flat_relvar) if flat_relvar is not None else None
+    if why:
+        unk("flat_field", why)
+    fig["bias_frame_std_dn"] = (math.sqrt(max(read_var["all"], 0.0) / fig["n_bias"])
+                                if (bias_master is not None and read_var) else None)
     # EMVA dynamic range and SNR
     if fig["saturation_capacity_emva_e"] and fig["temporal_dark_noise_dn"] is not None:
         s_dark = math.sqrt(max(fig["temporal_dark_noise_dn"] ** 2, 0.24))
@@ -491,7 +509,47 @@ def _calibrate_iso(iso_key: str, records: list[FrameRecord], *, cfa: str | None,
         "gain_dn_per_e": K,
     }
     hot = None if mask is None else ~mask
-    return fig, curves, bias_master, hot, checker
+    return fig, curves, bias_master, hot, checker, (None if flat is None else (flat, flat_relvar))
+
+
+def _flat_field(flat_stats: list, bias_master: np.ndarray | None, *, n_bias: int, read_var: float | None,
+                t_bias: float | None, dark_slope: float | None, saturation_dn: float | None, gain: float | None,
+                mask: np.ndarray | None) -> tuple[np.ndarray | None, float | None, str | None]:
+    """One ISO's flat-field map (not yet normalised), its relative variance, or the reason there is none."""
+    if bias_master is None or read_var is None or not n_bias:
+        return None, None, "needs bias frames with a pair (the per-pixel dark level and its noise)"
+    if saturation_dn is not None:
+        unclipped = [s for s in flat_stats if s.max_code < saturation_dn]
+    else:
+        unclipped = [s for s in flat_stats if s.frac_at_max < _CLIP_PILE_FRACTION]
+    num = np.zeros(bias_master.shape)
+    den = var_num = 0.0
+    n_total = 0
+    for s in unclipped:
+        dark = bias_master + (dark_slope or 0.0) * (s.exposure_s - (t_bias or 0.0))
+        signal = s.master - dark
+        level = float(signal[mask].mean()) if mask is not None else float(signal.mean())
+        var_t = s.pair_var.get("all") if s.pair_var else (gain * level + read_var if gain else None)
+        if level <= 0 or var_t is None:
+            continue
+        num += s.n * signal
+        den += s.n * level
+        var_num += s.n * var_t  # var(n * master) = n * var_t
+        n_total += s.n
+    if not n_total:
+        return None, None, "no flat level without clipped pixels and with a measurable temporal noise"
+    var_num += n_total**2 * read_var / n_bias  # every level subtracts the same master bias
+    return num / den, var_num / den**2, None
+
+
+def _normalise_flat(flat: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+    """Divide each CFA position (each 2x2 phase) by its mean over the usable pixels."""
+    out = flat.copy()
+    views = _views(flat.shape)
+    for rs, cs in [views[p] for p in _POS] if "p00" in views else [views["all"]]:
+        sel = flat[rs, cs] if mask is None else flat[rs, cs][mask[rs, cs]]
+        out[rs, cs] /= sel.mean()
+    return out
 
 
 def _spatial(image: np.ndarray, mask: np.ndarray | None) -> dict[str, float]:
@@ -637,13 +695,16 @@ def calibrate(
     curves: dict[str, dict[str, Any]] = {}
     hot_pixels: dict[str, np.ndarray] = {}
     bias_frames: dict[int, np.ndarray] = {}
+    flats: dict[int, tuple[np.ndarray, float]] = {}
     frame_cfa = None
     bit_source = None
     max_code = 0
     shapes = {}
     for key in sorted(by_iso):
-        fig, cur, bias, hot, checker = _calibrate_iso(str(key), by_iso[key], cfa=cfa,
-                                                      hot_pixel_sigma=hot_pixel_sigma, unknown=unknown)
+        fig, cur, bias, hot, checker, flat = _calibrate_iso(str(key), by_iso[key], cfa=cfa,
+                                                            hot_pixel_sigma=hot_pixel_sigma, unknown=unknown)
+        if flat is not None:
+            flats[key] = flat
         figures[str(key)] = fig
         curves[str(key)] = cur
         shapes[key] = checker.first.shape
@@ -663,7 +724,20 @@ def calibrate(
         detail = ", ".join(f"ISO {k}: {s[0]}x{s[1]}" for k, s in shapes.items())
         raise CalibrationError(f"frames of different sizes across ISOs ({detail}); one sensor mode per calibration")
     cfa = cfa or frame_cfa
+    flat_field = flat_field_std = None
+    if flats:  # the ISOs' maps, inverse-variance weighted (the PRNU is a property of the pixel)
+        weights = {k: 1.0 / relvar for k, (_, relvar) in flats.items()}
+        total = sum(weights.values())
+        combined = sum(weights[k] * m for k, (m, _) in flats.items()) / total
+        good = None
+        for hot in hot_pixels.values():
+            good = ~hot if good is None else good & ~hot
+        flat_field = _normalise_flat(combined, good).astype(np.float32)
+        flat_field_std = math.sqrt(1.0 / total)
+    bias_std = {k: figures[str(k)]["bias_frame_std_dn"] for k in bias_frames
+                if figures[str(k)].get("bias_frame_std_dn") is not None}
     return _build(figures=figures, curves=curves, hot_pixels=hot_pixels, bias_frames=bias_frames, unknown=unknown,
+                  flat_field=flat_field, flat_field_std=flat_field_std, bias_frame_std_dn=bias_std,
                   name=name or options.get("name") or (source_path.stem if source_path else "calibrated"),
                   adc_bits=adc_bits or options.get("adc_bits") or (bit_source[0] if bit_source else None),
                   bits_from=("argument" if adc_bits else "manifest" if options.get("adc_bits") else
@@ -672,7 +746,8 @@ def calibrate(
 
 
 def _build(*, figures, curves, hot_pixels, bias_frames, unknown, name, adc_bits, bits_from, max_code, cfa,
-           input_path, kind, iso_keys=None, extra_source=None) -> CalibrationResult:
+           input_path, kind, iso_keys=None, extra_source=None, flat_field=None, flat_field_std=None,
+           bias_frame_std_dn=None) -> CalibrationResult:
     with_gain = {k: f for k, f in figures.items() if f.get("gain_dn_per_e")}
     if not with_gain:
         reasons = "; ".join(f"ISO {k}: {unknown.get(f'isos.{k}.gain_dn_per_e', 'unknown')}" for k in figures)
@@ -733,6 +808,7 @@ def _build(*, figures, curves, hot_pixels, bias_frames, unknown, name, adc_bits,
         dark_current_e_per_s=dark or 0.0, prnu=prnu or 0.0, dsnu_e=dsnu or 0.0, fixed_pattern_seed=0,
         description=f"Measured by lfproc calibrate {__version__} from {input_path or 'frames'}",
         bias_frames=bias_frames, unknown=profile_unknown, source=source,
+        bias_frame_std_dn=bias_frame_std_dn or {}, flat_field=flat_field, flat_field_std=flat_field_std or 0.0,
     )
     # one saturation code everywhere: the profile's (full well or ADC, whichever clips first)
     for key, f in figures.items():

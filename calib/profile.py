@@ -5,8 +5,13 @@ dark current and full well. It sets the noise model of the simulators
 (:mod:`lfproc.camera.sensor`), the weights of the HDR merge and those of the reconstruction.
 
 File format: versioned JSON (``schema: "lfproc.camera_profile"``, ``schema_version: 1``)
-with units in the field names; an optional bias frame lives in a sidecar ``.npz`` named in
-``bias_frame_file`` (relative to the JSON). A figure the calibration could not determine
+with units in the field names; optional master bias frames (one per ISO) live in a sidecar
+``.npz`` named in ``bias_frame_file`` (relative to the JSON), with the standard deviation of
+their per-pixel estimate in ``bias_frame_std_dn``; an optional measured flat-field map (the
+per-pixel PRNU gain, mean 1 per CFA position) lives in a sidecar ``.npz`` named in
+``flat_field_file`` (array ``flat_field``), with the relative standard deviation of its
+per-pixel estimate in ``flat_field_std``. :func:`lfproc.camera.sensor.fixed_pattern_correction`
+uses these maps to correct sensor images. A figure the calibration could not determine
 is ``null`` and its reason is in ``unknown``. Loading checks the schema and names the
 field that is wrong.
 
@@ -26,9 +31,10 @@ from typing import Any
 
 import numpy as np
 
+from lfproc._util import FrozenDict, frozen_array
 from lfproc._version import __version__
 from lfproc.errors import FileFormatError, MissingFileError, ProfileError
-from lfproc.io._atomic import atomic_file
+from lfproc.io._atomic import atomic_outputs
 
 __all__ = [
     "MONO",
@@ -39,6 +45,8 @@ __all__ = [
     "load_profile",
     "save_profile",
     "is_profile_file",
+    "bias_sidecar_path",
+    "profile_files",
     "paper_gain_dn_per_e",
     "SHIPPED_PROFILES",
     "SCHEMA",
@@ -107,8 +115,21 @@ class CameraProfile:
         non-uniformity (std of the per-pixel offset, electrons). 0 = uniform sensor.
     fixed_pattern_seed : int
         Seed of the sensor's fixed-pattern maps (the same sensor always has the same maps).
-    bias_frame : ndarray, optional
-        Master bias frame (DN) keyed by ISO in ``bias_frames``.
+    bias_frames : dict, optional
+        ISO -> master bias frame (DN, ``(H, W)``), as measured by ``lfproc calibrate``.
+    bias_frame_std_dn : dict, optional
+        ISO -> standard deviation (DN) of each pixel of that master bias (read noise over
+        the square root of the number of frames averaged); missing = treated as exact.
+    flat_field : ndarray (H, W), optional
+        Measured per-pixel PRNU gain map (mean 1 per CFA position) from flat frames.
+    flat_field_std : float
+        Relative standard deviation of each value of ``flat_field`` as an estimate (0 = exact).
+
+        ISO -> master bias frame (DN, a finite 2-D array).
+
+    ``isos`` and ``bias_frames`` are stored as read-only mappings and the bias frames as
+    read-only arrays (copied once unless already read-only), so a validated profile
+    cannot be changed; use :func:`dataclasses.replace` to derive a new one.
     unknown : dict
         Field name -> reason, for figures the calibration could not determine.
     """
@@ -129,6 +150,9 @@ class CameraProfile:
     bias_frames: dict[int, np.ndarray] = field(default_factory=dict)
     unknown: dict[str, str] = field(default_factory=dict)
     source: dict[str, Any] = field(default_factory=dict)
+    bias_frame_std_dn: dict[int, float] = field(default_factory=dict)
+    flat_field: np.ndarray | None = field(default=None, repr=False)
+    flat_field_std: float = 0.0
 
     def __post_init__(self):
         _check_number(self.adc_bits, "adc_bits", integer=True, low=1, high=32)
@@ -144,6 +168,15 @@ class CameraProfile:
         _check_number(self.dark_current_e_per_s, "dark_current_e_per_s", low=0)
         _check_number(self.prnu, "prnu", low=0)
         _check_number(self.dsnu_e, "dsnu_e", low=0)
+        _check_number(self.flat_field_std, "flat_field_std", low=0)
+        for iso, std in self.bias_frame_std_dn.items():
+            _check_number(std, f"bias_frame_std_dn.{iso}", low=0)
+        if self.flat_field is not None:
+            ff = np.asarray(self.flat_field)
+            if ff.ndim != 2 or not np.issubdtype(ff.dtype, np.floating) or not np.isfinite(ff).all() or (ff <= 0).any():
+                raise ProfileError(f"profile {self.name}: flat_field: expected an (H, W) map of positive finite gains, "
+                                   f"found {ff.dtype} of shape {ff.shape}")
+            object.__setattr__(self, "flat_field", frozen_array(self.flat_field))
         if self.cfa_pattern not in _CFA:
             raise ProfileError(f"profile {self.name}: cfa_pattern: expected one of {', '.join(_CFA)}, got {self.cfa_pattern!r}")
         if not self.isos:
@@ -155,6 +188,24 @@ class CameraProfile:
                 value = getattr(figs, f.name)
                 if value is not None:
                     _check_number(value, f"isos.{iso}.{f.name}", low=0, strict=f.name == "gain_dn_per_e")
+        object.__setattr__(self, "isos", FrozenDict(self.isos))
+        frames = {}
+        for iso, frame in dict(self.bias_frames).items():
+            arr = np.asarray(frame)
+            if arr.ndim != 2 or arr.size == 0 or not (np.issubdtype(arr.dtype, np.number) and np.isfinite(arr).all()):
+                raise ProfileError(
+                    f"profile {self.name}: bias frame of ISO {iso}: expected a finite 2-D array, found "
+                    f"{arr.dtype} of shape {arr.shape}"
+                )
+            frames[iso] = frozen_array(frame)
+        object.__setattr__(self, "bias_frames", FrozenDict(frames))
+
+    def __setstate__(self, state):
+        # pickle and copy.deepcopy bring new (writeable) bias arrays: make them read-only again
+        for name, value in state.items():
+            if name == "bias_frames":
+                value = FrozenDict({k: frozen_array(v) for k, v in value.items()})
+            object.__setattr__(self, name, value)
 
     # -- lookups ---------------------------------------------------------------------
     @property
@@ -203,6 +254,14 @@ class CameraProfile:
             signal = self.white_level_dn * (min(signal, self.white_level_dn) / self.white_level_dn) ** (1 / self.gamma)
         return float(min(self.white_level_dn, round(signal + figs["black_level_dn"])))
 
+    @property
+    def measured(self) -> bool:
+        """True for a profile measured by ``lfproc calibrate`` (``source.kind == "calibrated"``): its
+        ``prnu``/``dsnu_e`` describe a real sensor whose maps are only known where measured
+        (``flat_field``, ``bias_frames``); otherwise they are a simulated sensor's, drawn from
+        ``fixed_pattern_seed``."""
+        return self.source.get("kind") == "calibrated"
+
     def with_noise(self, *, read_noise_e: float, dark_current_e_per_s: float, name: str | None = None) -> "CameraProfile":
         """A copy with the same read noise (e-) and dark current (e-/s) at every ISO."""
         isos = {
@@ -218,8 +277,8 @@ class CameraProfile:
 
     # -- serialisation -----------------------------------------------------------------
     def to_json(self) -> dict[str, Any]:
-        """The profile as a JSON-serialisable dict (bias frames excluded: see :func:`save_profile`)."""
-        return {
+        """The profile as a JSON-serialisable dict (bias frames and flat field excluded: see :func:`save_profile`)."""
+        doc = {
             "schema": SCHEMA,
             "schema_version": SCHEMA_VERSION,
             "lfproc_version": __version__,
@@ -239,9 +298,16 @@ class CameraProfile:
             "unknown": dict(self.unknown),
             "source": dict(self.source),
         }
+        # written only when present, so profiles without measured maps keep their JSON unchanged
+        if self.bias_frame_std_dn:
+            doc["bias_frame_std_dn"] = {str(k): float(v) for k, v in sorted(self.bias_frame_std_dn.items())}
+        if self.flat_field is not None or self.flat_field_std:
+            doc["flat_field_std"] = float(self.flat_field_std)
+        return doc
 
     @classmethod
-    def from_json(cls, doc: dict[str, Any], *, where: str = "profile", bias_frames=None) -> "CameraProfile":
+    def from_json(cls, doc: dict[str, Any], *, where: str = "profile", bias_frames=None,
+                  flat_field=None) -> "CameraProfile":
         """Build and validate a profile from its JSON dict; errors name the field."""
         if not isinstance(doc, dict):
             raise ProfileError(f"{where}: expected a JSON object")
@@ -270,7 +336,15 @@ class CameraProfile:
                 raise ProfileError(f"{where}: field 'isos.{key}': unknown keys {', '.join(sorted(extra))}")
             isos[iso] = IsoFigures(**{n: figs.get(n) for n in names})
         kwargs = {k: doc[k] for k in ("gamma", "cfa_pattern", "dark_current_e_per_s", "prnu", "dsnu_e",
-                                      "fixed_pattern_seed", "description") if doc.get(k) is not None}
+                                      "fixed_pattern_seed", "description", "flat_field_std") if doc.get(k) is not None}
+        std = doc.get("bias_frame_std_dn") or {}
+        if not isinstance(std, dict):
+            raise ProfileError(f"{where}: field 'bias_frame_std_dn': expected an object from ISO to DN")
+        try:
+            kwargs["bias_frame_std_dn"] = {int(k): v for k, v in std.items()}
+        except ValueError:
+            raise ProfileError(f"{where}: field 'bias_frame_std_dn': keys must be ISO numbers, found "
+                               f"{', '.join(map(repr, std))}") from None
         try:
             return cls(
                 name=str(doc["name"]),
@@ -282,6 +356,7 @@ class CameraProfile:
                 unknown=dict(doc.get("unknown") or {}),
                 source=dict(doc.get("source") or {}),
                 bias_frames=bias_frames or {},
+                flat_field=flat_field,
                 **kwargs,
             )
         except ProfileError as exc:
@@ -308,6 +383,7 @@ def describe_profile(profile: CameraProfile) -> dict[str, Any]:
     doc = profile.to_json()
     doc = {"kind": "camera_profile", **doc}
     doc["bias_frames"] = {str(iso): list(frame.shape) for iso, frame in sorted(profile.bias_frames.items())}
+    doc["flat_field"] = None if profile.flat_field is None else list(profile.flat_field.shape)
     doc["saturation_dn"] = {}
     for iso in profile.iso_values:
         try:
@@ -355,19 +431,54 @@ def load_profile(name_or_path: str | os.PathLike | CameraProfile) -> CameraProfi
             raise ProfileError(f"{path}: field 'bias_frame_file': {side} does not exist")
         with np.load(side) as npz:
             bias = {int(k.removeprefix("iso_")): npz[k] for k in npz.files}
-    return CameraProfile.from_json(doc, where=str(path), bias_frames=bias)
+    flat = None
+    sidecar = doc.get("flat_field_file") if isinstance(doc, dict) else None
+    if sidecar:
+        side = path.parent / sidecar
+        if not side.exists():
+            raise ProfileError(f"{path}: field 'flat_field_file': {side} does not exist")
+        try:
+            with np.load(side, allow_pickle=False) as npz:
+                flat = npz["flat_field"]
+        except (KeyError, ValueError, OSError, EOFError) as exc:
+            raise ProfileError(f"{path}: field 'flat_field_file': {side} is not a flat-field map "
+                               f"(.npz with array 'flat_field'): {exc}") from None
+    return CameraProfile.from_json(doc, where=str(path), bias_frames=bias, flat_field=flat)
+
+
+def bias_sidecar_path(path: str | os.PathLike) -> Path:
+    """Where :func:`save_profile` writes the bias frames of a profile saved at ``path``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.bias.npz")
+
+
+def profile_files(profile: CameraProfile, path: str | os.PathLike) -> list[Path]:
+    """Every file :func:`save_profile` writes for ``profile`` at ``path``: the JSON first, then its
+    bias sidecar and flat-field sidecar when the profile has them."""
+    path = Path(path)
+    files = [path]
+    if profile.bias_frames:
+        files.append(bias_sidecar_path(path))
+    if profile.flat_field is not None:
+        files.append(path.with_name(f"{path.stem}.flat.npz"))
+    return files
 
 
 def save_profile(profile: CameraProfile, path: str | os.PathLike, *, force: bool = False) -> Path:
-    """Write a profile as JSON (atomically), its bias frames in a sidecar ``<stem>.bias.npz``."""
+    """Write a profile as JSON, its bias frames in a sidecar ``<stem>.bias.npz`` and its flat-field
+    map in ``<stem>.flat.npz``; all or none (:func:`lfproc.io.atomic_outputs`)."""
     path = Path(path)
     doc = profile.to_json()
-    if profile.bias_frames:
-        side = path.with_name(f"{path.stem}.bias.npz")
-        with atomic_file(side, force=force) as tmp:
-            with open(tmp, "wb") as fh:
+    outputs = profile_files(profile, path)
+    flat_at = len(outputs) - 1
+    with atomic_outputs(outputs, force=force) as staged:
+        if profile.bias_frames:
+            with open(staged[1], "wb") as fh:
                 np.savez_compressed(fh, **{f"iso_{iso}": frame for iso, frame in profile.bias_frames.items()})
-        doc["bias_frame_file"] = side.name
-    with atomic_file(path, force=force) as tmp:
-        tmp.write_text(json.dumps(doc, indent=2))
+            doc["bias_frame_file"] = outputs[1].name
+        if profile.flat_field is not None:
+            with open(staged[flat_at], "wb") as fh:
+                np.savez_compressed(fh, flat_field=np.asarray(profile.flat_field, dtype=np.float32))
+            doc["flat_field_file"] = outputs[flat_at].name
+        staged[0].write_text(json.dumps(doc, indent=2))
     return path

@@ -72,19 +72,26 @@ def run(args) -> int:
     if given:
         raise InputError(f"{', '.join(given)}: only for 'lfproc calibrate {SIMULATE}'")
     from lfproc.calib.calibrate import calibrate
-    from lfproc.calib.profile import save_profile
-    from lfproc.io import check_output
+    from lfproc.calib.profile import profile_files, save_profile
+    from lfproc.io import atomic_outputs, check_output
 
     check_output(args.output, force=args.force)
     if args.report is not None:
         check_output(args.report, force=args.force)
     result = calibrate(args.input, name=args.name, adc_bits=args.adc_bits, cfa_pattern=args.cfa)
-    save_profile(result.profile, args.output, force=args.force)
+    # the profile, its bias sidecar and the report are published together: a run killed at any
+    # moment leaves all of them or none (and a re-run as it was then succeeds)
+    outputs = profile_files(result.profile, args.output)  # the JSON and its sidecars
+    if args.report is not None:
+        outputs.append(args.report)
+    with atomic_outputs(outputs, force=args.force) as staged:
+        save_profile(result.profile, staged[0])
+        if args.report is not None:
+            from lfproc.calib.report import write_report
+
+            write_report(result, staged[-1])
     out = {"profile": str(args.output), "name": result.profile.name}
     if args.report is not None:
-        from lfproc.calib.report import write_report
-
-        write_report(result, args.report, force=args.force)
         out["report"] = str(args.report)
     if args.json:
         out["isos"] = result.figures

@@ -12,6 +12,7 @@ def register(sub, common) -> None:
     from lfproc.preview import PREVIEWS, preview_kinds
 
     import lfproc.camera.capture  # noqa: F401  (registers the capture kinds)
+    import lfproc.dictionary  # noqa: F401  (registers the atoms kind)
 
     kinds = preview_kinds(LightField)
     listing = "; ".join(f"{k}: {PREVIEWS[k].description}" for k in PREVIEWS)
@@ -19,11 +20,11 @@ def register(sub, common) -> None:
         "preview", parents=[common], help="write a tone-mapped preview, contact sheet, EPI or histogram",
         description="Tone mapping: Reinhard et al. 2002 global operator (key 0.18, white at the 99.9th "
                     f"percentile), colour ratios kept, sRGB. Kinds: {listing}.")
-    p.add_argument("input", type=Path, help="light-field file or folder, an image, or a coded capture")
+    p.add_argument("input", type=Path, help="light-field file or folder, an image, a coded capture, or a dictionary (file or default)")
     add_output(p, help="output image (.png, .jpg or .tif)")
     p.add_argument("--kind", default=None,
                    help=f"light fields: {', '.join(kinds)} (default centre); coded captures: "
-                        f"{', '.join(preview_kinds(lfproc.camera.capture.Capture))} (default capture)")
+                        f"{', '.join(preview_kinds(lfproc.camera.capture.Capture))} (default capture); dictionaries: atoms")
     p.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="extra exposure in stops")
     p.add_argument("--nonfinite", choices=("raise", "zero", "clip"), default="raise",
                    help="what to do with NaN/Inf samples (default: refuse the file)")
@@ -40,6 +41,14 @@ def run(args) -> int:
     if args.kind is not None and args.kind not in PREVIEWS:  # before reading a large input
         raise InputError(f"--kind: expected one of {', '.join(PREVIEWS)}; got {args.kind!r}")
     check_output(args.output, force=args.force)
+    from lfproc.dictionary import is_dictionary_file, load_dictionary
+
+    if is_dictionary_file(args.input):
+        d = load_dictionary(str(args.input))
+        kind = args.kind or "atoms"
+        path = write_preview(d, args.output, kind=kind, force=args.force)
+        emit({"output": str(path), "kind": kind, "atoms": d.n_atoms, "patch": list(d.patch)}, as_json=args.json)
+        return 0
     if is_capture_file(args.input):
         summary = write_capture_preview(args.input, args.output, kind=args.kind or "capture", force=args.force)
         emit(summary, as_json=args.json)

@@ -48,6 +48,8 @@ def print_profile(doc: dict) -> None:
         head["cfa_pattern"] = "mono (monochrome sensor)"
     if doc["bias_frames"]:
         head["bias_frames"] = ", ".join(f"ISO {k}: {v[0]}x{v[1]}" for k, v in doc["bias_frames"].items())
+    if doc["flat_field"]:
+        head["flat_field"] = f"{doc['flat_field'][0]}x{doc['flat_field'][1]} (relative std {doc['flat_field_std']:.3g})"
     emit(head, as_json=False)
     print()
     emva = (doc.get("source") or {}).get("emva1288") or {}

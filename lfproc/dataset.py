@@ -29,8 +29,8 @@ Layout of ``DATASET_DIR`` (every file written atomically)::
 Resuming: a scene whose done-record and outputs exist is skipped; its output folder is
 written as a whole (temporary folder, then rename) before the done-record, so an interrupted
 run leaves either a finished scene or none. A failed scene is reported and does not stop the
-others. A new run removes the hidden temporary folders a killed run left in ``scenes/``
-(run one build per data set at a time).
+others. A new run removes the hidden temporaries a killed run left (those whose process is gone:
+:func:`lfproc.io.clean_stale`).
 """
 
 from __future__ import annotations
@@ -41,13 +41,14 @@ import json
 import os
 import shutil
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ._version import __version__
 from ._util import file_sha256
-from .errors import InputError, MissingFileError
+from .errors import InputError, LfprocWarning, MissingFileError
 
 __all__ = [
     "Scene",
@@ -218,7 +219,9 @@ def process_scene(
 ) -> dict[str, Any]:
     """Decode, merge and write one scene; return its manifest row (also written as records).
 
-    Writes ``scenes/<name>/`` (atomically, as a whole) and then ``done/<name>.json``.
+    Writes ``scenes/<name>/`` (atomically, as a whole) and then ``done/<name>.json``. lfproc's
+    warnings raised while merging (:class:`lfproc.errors.SaturationWarning`...) are recorded
+    in the row's ``warnings`` (``"Category: message"`` strings) instead of being emitted.
     """
     from .bracket import merge_files
     from .io import atomic_dir, atomic_file, write_lightfield
@@ -238,13 +241,20 @@ def process_scene(
         _check_exposures(scene)
     with atomic_dir(scene_out, force=True) as tmp:
         white_db = _white_db(scene, tmp)
-        try:
-            merged, info = merge_files(scene.inputs, method=method, profile=profile, white_db=white_db,
-                                       exposures_s=exposures, n_threads=n_threads)
-        except InputError as exc:  # the command-line hint of lfproc merge does not apply here
-            message = str(exc).replace("give --exposures-s", f"write the bracket's times to "
-                                       f"{scene.folder / EXPOSURE_FILES[0]}")
-            raise InputError(message) from None
+        # lfproc's warnings (saturation, convergence) belong to the scene: kept in its row, not
+        # printed by (or raised in) a worker process
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", LfprocWarning)
+            try:
+                merged, info = merge_files(scene.inputs, method=method, profile=profile, white_db=white_db,
+                                           exposures_s=exposures, n_threads=n_threads)
+            except InputError as exc:  # the command-line hint of lfproc merge does not apply here
+                message = str(exc).replace("give --exposures-s", f"write the bracket's times to "
+                                           f"{scene.folder / EXPOSURE_FILES[0]}")
+                raise InputError(message) from None
+        other = [w for w in caught if not issubclass(w.category, LfprocWarning)]
+        for w in other:  # not ours: pass them on as they were
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         if white_db is not None:
             shutil.rmtree(white_db, ignore_errors=True)
         write_lightfield(merged, tmp / "hdr.exr")
@@ -267,6 +277,7 @@ def process_scene(
             "sha256": [file_sha256(p) for p in scene.inputs],
             "lfproc_version": __version__,
             "seconds": round(time.perf_counter() - start, 3),
+            "warnings": [f"{w.category.__name__}: {w.message}" for w in caught if issubclass(w.category, LfprocWarning)],
         }
         (tmp / "record.json").write_text(json.dumps(row, indent=2))
     with atomic_file(out_dir / "done" / f"{scene.name}.json", force=True) as tmp:
@@ -360,8 +371,10 @@ def build_dataset(
         from .calib import load_profile
 
         profile = load_profile(profile)
-    for stale in (out / "scenes").glob(".lfproc-tmp-*") if (out / "scenes").is_dir() else []:
-        shutil.rmtree(stale, ignore_errors=True)  # left by a killed run (one build per data set at a time)
+    from .io import clean_stale
+
+    for folder in (out, out / "scenes", out / "done"):
+        clean_stale(folder)  # temporaries left by killed runs (their process is gone)
     todo = [s for s in scenes if not _is_done(s, out)]
     skipped = [s.name for s in scenes if s not in todo]
     processed: list[str] = []
@@ -400,7 +413,7 @@ def _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, fa
         n = workers or min(len(todo), os.cpu_count() or 1)
         if n < 1:
             raise InputError(f"--workers: expected a positive number, got {workers}")
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                silence_logs=logging.ERROR)
         client = Client(cluster)
     try:

@@ -198,7 +198,7 @@ def stage_merge(ctx: _Context) -> dict[str, Any]:
     truth = ctx.state["illum_truth"]
     t0 = next(cap["exposure_s"] for cap in ctx.state["illum"]["captures"] if cap["exposure_ev"] == 0)
     h, w = (min(a, b) for a, b in zip(hdr.size, truth.size))
-    result = hdr.replace(data=hdr.data[:, :, :h, :w] * t0, variance=None, disparity=None)
+    result = hdr.replace(data=hdr.data[:, :, :h, :w] * t0, variance=None, disparity=None, exposure_s=t0)  # per second -> t0
     reference = truth.replace(data=truth.data[:, :, :h, :w], disparity=None, variance=None)
     scores = evaluate(result, reference, peak_luminance=c.peak_luminance)
     single = ctx.state["decoded"][[cap["exposure_ev"] for cap in ctx.state["illum"]["captures"]].index(0)]

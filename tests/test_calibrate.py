@@ -18,7 +18,7 @@ from lfproc.calib.frames import read_manifest
 from lfproc.calib.report import write_report
 from lfproc.calib.simulate_frames import expected_figures, simulate_frames
 from lfproc.cli.main import main
-from lfproc.errors import CalibrationError, FileFormatError, InputError, MissingFileError
+from lfproc.errors import CalibrationError, FileFormatError, InputError, MissingFileError, ProfileError
 
 ISOS = (100, 400, 1600)
 
@@ -107,6 +107,76 @@ def test_saved_profile_round_trip(result, tmp_path):
     np.testing.assert_array_equal(back.bias_frames[100], result.profile.bias_frames[100])
 
 
+def test_flat_field_and_bias_frames_match_the_sensor_maps(result, profile, tmp_path):
+    """The measured maps against the simulated sensor's own (lfproc.camera.sensor.fixed_pattern): their
+    errors have the standard deviation the calibration records."""
+    from lfproc.calib import save_profile
+    from lfproc.camera.sensor import fixed_pattern
+
+    prof = result.profile
+    gain, offset = fixed_pattern(profile, (128, 128))
+    assert prof.flat_field.shape == (128, 128) and prof.flat_field.dtype == np.float32
+    err = prof.flat_field - gain
+    assert err.std() == pytest.approx(prof.flat_field_std, rel=0.1)
+    assert prof.flat_field_std < 0.2 * profile.prnu  # the map resolves the 1 % PRNU
+    assert abs(err.mean()) < 1e-3  # mean 1 per CFA position vs the sensor's mean over all pixels
+    for r in (0, 1):
+        for c in (0, 1):
+            assert prof.flat_field[r::2, c::2].mean() == pytest.approx(1.0, abs=1e-6)
+    assert [result.figures[str(i)]["flat_field_std"] for i in ISOS] == sorted(
+        result.figures[str(i)]["flat_field_std"] for i in ISOS)  # fewer electrons at higher ISO
+    for iso in ISOS:
+        h = profile.isos[iso].gain_dn_per_e
+        frame = prof.bias_frames[iso].astype(np.float64)
+        dsnu_err = (frame - frame.mean()) / h - offset
+        assert dsnu_err.std() == pytest.approx(prof.bias_frame_std_dn[iso] / h, rel=0.1)
+    path = save_profile(prof, tmp_path / "measured.json")
+    doc = json.loads(path.read_text())
+    assert doc["flat_field_file"] == "measured.flat.npz" and doc["flat_field_std"] == prof.flat_field_std
+    back = load_profile(path)
+    np.testing.assert_array_equal(back.flat_field, prof.flat_field)
+    assert back.flat_field_std == prof.flat_field_std and back.bias_frame_std_dn == prof.bias_frame_std_dn
+    (tmp_path / "measured.flat.npz").unlink()
+    with pytest.raises(ProfileError, match=r"measured.json: field 'flat_field_file': .*measured.flat.npz does not exist"):
+        load_profile(path)
+
+
+def test_measured_maps_make_t_unbiased_per_pixel(result, profile):
+    """Captures of the true sensor, observed with its measured maps: per pixel, the mean of 100 draws is
+    within the noise of the mean plus the maps' recorded uncertainty; without correction it is not."""
+    from lfproc.camera.sensor import calibrated_observation, expose, fixed_pattern_correction
+
+    prof = result.profile
+    # the true profile with the measured maps only, so that gain or dark-current errors stay out
+    measured = replace(profile, source={"kind": "calibrated"}, fixed_pattern_seed=0, flat_field=prof.flat_field,
+                       flat_field_std=prof.flat_field_std, bias_frames=prof.bias_frames,
+                       bias_frame_std_dn=prof.bias_frame_std_dn)
+    rng = np.random.default_rng(0)
+    iso = rng.choice([100.0, 400.0, 1600.0], size=(128, 128))
+    t = 0.01
+    electrons = np.exp(rng.uniform(np.log(50), np.log(4000), size=iso.shape))
+    E = np.where(iso == 1600, np.minimum(electrons, 1000), electrons) / t
+    fp = fixed_pattern_correction(measured, iso.shape, iso)
+    assert fp.gain_source == "flat_field" and fp.offset_source == "bias_frames (ISO 100, 400, 1600)"
+    map_var = E**2 * fp.gain_var / fp.gain**2 + fp.offset_var_e2 / (t * fp.gain) ** 2
+    draws = 100
+    T = np.zeros(iso.shape)
+    V = np.zeros(iso.shape)
+    T_plain = np.zeros(iso.shape)
+    for _ in range(draws):
+        dn = expose(E, exposure_s=t, iso=iso, profile=profile, random_state=rng)
+        kw = dict(exposure_s=t, iso=iso, variance_from="estimate", radiance_estimate=E)
+        obs = calibrated_observation(dn, profile=measured, **kw)
+        T += obs.radiance / draws
+        V += obs.variance / draws
+        T_plain += calibrated_observation(dn, profile=measured, correct_fixed_pattern=False, **kw).radiance / draws
+    noise_var = V - map_var  # the part of the variance that averages down over draws
+    z = (T - E) / np.sqrt(noise_var / draws + map_var)
+    assert abs(z.mean()) < 4.5 / np.sqrt(z.size)
+    assert z.var() == pytest.approx(1.0, abs=0.08)
+    assert ((T_plain - E) / np.sqrt(noise_var / draws + map_var)).var() > 3
+
+
 def test_report(result, tmp_path):
     files = write_report(result, tmp_path / "rep")
     names = {f.name for f in files}
@@ -114,9 +184,19 @@ def test_report(result, tmp_path):
             "summary.md"} <= names
     for f in files:
         assert f.stat().st_size > 0
-    assert cv2.imread(str(tmp_path / "rep" / "photon_transfer.png")) is not None
+    assert cv2.imread(str(tmp_path / "rep" / "photon_transfer.png")).shape[2] == 3
     md = (tmp_path / "rep" / "summary.md").read_text()
-    assert "| gain (DN/e-) |" in md and "ISO 1600" in md and "sigma_pre" in md
+    # the table shows the measured figures, one column per ISO (the gains are near the true
+    # 0.2048, 0.819 and 3.276 DN/e- of paper-high at ISO 100, 400 and 1600)
+    row = next(line for line in md.splitlines() if line.startswith("| gain (DN/e-) |"))
+    cells = [float(c) for c in row.strip("|").split("|")[1:]]
+    np.testing.assert_allclose(cells, [result.figures[str(i)]["gain_dn_per_e"] for i in ISOS], rtol=1e-4)
+    np.testing.assert_allclose(cells, [0.2048, 0.819, 3.276], rtol=0.02)
+    sigma = float(md.split("sigma_pre = ")[1].split(" e-")[0])
+    assert sigma == pytest.approx(result.read_noise_model["sigma_pre_e"], rel=1e-3)
+    # figures.json holds the result's figures
+    doc = json.loads((tmp_path / "rep" / "figures.json").read_text())
+    assert doc["isos"]["400"]["gain_dn_per_e"] == result.figures["400"]["gain_dn_per_e"]
 
 
 # -- bad input -------------------------------------------------------------------------------
@@ -248,17 +328,22 @@ def test_hot_pixels_are_found_and_masked(tmp_path, profile):
 
 
 # -- CLI ---------------------------------------------------------------------------------------
-def test_cli_calibrate_json(frames, tmp_path, capsys):
+def test_cli_calibrate_json(frames, result, tmp_path, capsys):
     out = tmp_path / "p.json"
     assert main(["calibrate", str(frames), "-o", str(out), "--json", "--report", str(tmp_path / "rep")]) == 0
     doc = json.loads(capsys.readouterr().out)
-    for iso in ("100", "400", "1600"):
+    for iso in ("100", "400", "1600"):  # the command reports what the library measures
         figs = doc["isos"][iso]
         for key in ("gain_dn_per_e", "read_noise_dn", "read_noise_e", "black_level_dn", "full_well_e",
                     "dark_current_e_per_s"):
-            assert isinstance(figs[key], float)
+            assert figs[key] == pytest.approx(result.figures[iso][key], rel=1e-12)
     assert load_profile(out).isos[400].gain_dn_per_e == pytest.approx(0.819, rel=0.02)
     assert (tmp_path / "p.bias.npz").is_file() and (tmp_path / "rep" / "summary.md").is_file()
+    assert (tmp_path / "p.flat.npz").is_file() and load_profile(out).flat_field.shape == (128, 128)
+    assert main(["profile", "show", str(out), "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["flat_field"] == [128, 128] and 0 < shown["flat_field_std"] < 0.002
+    assert sorted(shown["bias_frame_std_dn"]) == ["100", "1600", "400"]
     assert main(["calibrate", str(frames), "-o", str(out)]) == 2
     assert "output exists" in capsys.readouterr().err
 
@@ -274,6 +359,11 @@ def test_cli_simulate_frames(tmp_path, capsys):
     assert len({r.exposure_s for r in records if r.kind == "dark"}) >= 3
     img = cv2.imread(str(records[0].path), cv2.IMREAD_UNCHANGED)
     assert img.dtype == np.uint16 and img.shape == (16, 24)
+    # the frames are the profile's sensor: paper-medium at ISO 200 has black level 64 DN and read
+    # noise 2 e- x 0.4095 DN/e- = 0.819 DN, 0.868 DN with the rounding's 1/12 DN^2
+    bias = [cv2.imread(str(r.path), cv2.IMREAD_UNCHANGED).astype(float) for r in records if r.kind == "bias"][:2]
+    assert np.mean(bias) == pytest.approx(64, abs=0.15)
+    assert np.std(bias[0] - bias[1]) / np.sqrt(2) == pytest.approx(np.sqrt(0.819**2 + 1 / 12), rel=0.12)
     params = json.loads((tmp_path / "s" / "simulation.json").read_text())
     assert params["seed"] == 2 and params["profile"] == "paper-medium" and "lfproc_version" in params
     assert main(["calibrate", "simulate-frames", "--profile", "paper-medium", "-o", str(tmp_path / "s")]) == 2

@@ -271,3 +271,16 @@ def test_hex_to_square_preserves_smooth_signals():
     np.testing.assert_allclose(out[0, 0, :, 4:-4, 0], (0.1 + 0.01 * kk + 0.02 * rr)[:, 4:-4], atol=1e-4)
     with pytest.raises(ShapeError, match="lenslets"):
         hex_to_square(ramp[:, :, :-1], g)
+
+
+def test_decode_killed_then_rerun_leaves_no_temporaries(bench, tmp_path, run_lfproc):
+    """decode killed with its output complete in the temporary (not yet renamed): the re-run as it
+    was removes the dead run's temporary and writes the output (issue 13)."""
+    cam, info = bench["cam"], bench["info"]
+    args = ["decode", cam / info["truth_capture"], "--white-db", bench["db"], "-o", tmp_path / "d.exr"]
+    run_lfproc(*args, kill_at="file-written")
+    assert [p.name.startswith(".lfproc-tmp-") for p in tmp_path.iterdir()] == [True]
+    rerun = run_lfproc(*args)
+    assert rerun.returncode == 0, rerun.stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["d.exr"]
+    np.testing.assert_array_equal(read_lightfield(tmp_path / "d.exr").data, bench["decoded"].data)

@@ -65,9 +65,17 @@ def _write(tmp_path, doc, name="bad.json"):
         (lambda d: d.update(cfa_pattern="RGBW"), "cfa_pattern"),
         (lambda d: d.update(black_level_dn=5000.0), "black_level_dn"),
         (lambda d: d.update(bias_frame_file="missing.npz"), "bias_frame_file"),
+        (lambda d: d.update(flat_field_file="missing.npz"), r"field 'flat_field_file': .*missing.npz does not exist"),
+        (lambda d: d.update(flat_field_file="notflat.npz"), r"field 'flat_field_file': .*notflat.npz is not a flat-field"),
+        (lambda d: d.update(flat_field_file="negflat.npz"), r"flat_field: expected an \(H, W\) map of positive finite gains"),
+        (lambda d: d.update(flat_field_std=-0.1), "field 'flat_field_std': expected a value >= 0"),
+        (lambda d: d.update(bias_frame_std_dn={"fast": 1.0}), "field 'bias_frame_std_dn': keys must be ISO numbers"),
+        (lambda d: d.update(bias_frame_std_dn={"100": "big"}), "field 'bias_frame_std_dn.100': expected a number"),
     ],
 )
 def test_load_errors_name_the_field(tmp_path, edit, match):
+    np.savez(tmp_path / "notflat.npz", other=np.ones((2, 2)))
+    np.savez(tmp_path / "negflat.npz", flat_field=-np.ones((2, 2)))
     doc = load_profile("paper-high").to_json()
     edit(doc)
     with pytest.raises(ProfileError, match=match):

@@ -23,7 +23,9 @@ followed by ``.npy`` members: ``dn`` (``(S, H, W)`` uint16, black level included
 :class:`lfproc.camera.projection.MaskCode`: ``(S, V, U, Ph, Pw, 3)`` for ``random``, ``(S, Bh, Bw, 3)``
 for ``shifted``; one tile when the mask is periodic; uint8 levels ``k`` meaning transmittance
 ``k / 255`` when every code is such a level, as the simulator's are, else float32) and
-optionally ``bias`` (``(S, H, W)`` float32 bias frames in DN).
+optionally ``bias`` (``(S, H, W)`` float32 bias frames in DN) and the embedded profile's
+measured maps, ``profile_flat_field`` (``(H, W)``) and ``profile_bias_<ISO>`` (its master bias
+frames), which the calibrated observations use (:func:`lfproc.camera.sensor.fixed_pattern_correction`).
 
 Radiance units: ``observations`` returns ``T`` in electrons per second reaching each
 pixel. For a simulated capture, ``L_e = radiance_scale * L_relative``, so a light field
@@ -44,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from .._util import file_sha256, to_jsonable
+from .._util import ReadOnlyState, file_sha256, freeze, frozen_array, to_jsonable
 from .._version import __version__
 from ..calib import load_profile
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
@@ -77,7 +79,7 @@ _ARRAYS = ("dn", "iso", "mask", "bias")
 
 
 @dataclass(frozen=True, eq=False)
-class Capture:
+class Capture(ReadOnlyState):
     """A coded multi-ISO capture (see the module documentation).
 
     Parameters
@@ -130,18 +132,36 @@ class Capture:
             dn = dn[None]
         if dn.ndim != 3:
             raise ShapeError(f"capture dn: expected sensor images of shape (S, H, W), got {dn.shape}")
+        if dn.size == 0:
+            raise ShapeError(f"capture dn: every axis needs at least one element, got shape {dn.shape}")
         if dn.dtype != np.uint16:
-            if not np.issubdtype(dn.dtype, np.integer) or dn.min(initial=0) < 0 or dn.max(initial=0) > 65535:
+            if np.issubdtype(dn.dtype, np.floating):
+                bad = int(np.count_nonzero(~np.isfinite(dn)))
+                frac = int(np.count_nonzero(np.isfinite(dn) & (dn != np.round(dn))))
+                if bad or frac:
+                    raise InputError(
+                        f"capture dn: expected integer sensor codes, found {bad} NaN or Inf and {frac} fractional values"
+                    )
+            elif not np.issubdtype(dn.dtype, np.integer):
                 raise InputError(f"capture dn: expected uint16 sensor codes, got {dn.dtype}")
-            dn = dn.astype(np.uint16)
+            if dn.min() < 0 or dn.max() > 65535:
+                raise InputError(
+                    f"capture dn: expected codes in [0, 65535], found range [{dn.min():g}, {dn.max():g}]"
+                )
+        dn = frozen_array(self.dn, dtype=np.uint16)
+        if dn.ndim == 2:
+            dn = dn[None]
         s, h, w = dn.shape
         iso = np.asarray(self.iso, dtype=np.float32)
         try:
-            iso = np.broadcast_to(iso, dn.shape).copy() if iso.ndim < 3 else iso
+            iso = np.broadcast_to(iso, dn.shape) if iso.ndim < 3 else iso
         except ValueError:
             raise ShapeError(f"capture iso: expected a scalar, (H, W) or (S, H, W) = {dn.shape} map, got {iso.shape}") from None
         if iso.shape != dn.shape:
             raise ShapeError(f"capture iso: expected shape {dn.shape}, got {iso.shape}")
+        if not np.isfinite(iso).all():
+            raise InputError("capture iso: expected finite ISO values, found NaN or Inf")
+        iso = frozen_array(iso)  # broadcast views and caller arrays are copied once, fresh conversions kept
         for value in np.unique(iso):
             profile.iso_figures(float(value))  # ProfileError naming the available ISOs
         exposures = np.atleast_1d(np.asarray(self.exposures_s, dtype=np.float64))
@@ -166,9 +186,12 @@ class Capture:
         if self.bias_dn is not None:
             bias = np.asarray(self.bias_dn, dtype=np.float32)
             try:
-                bias = np.broadcast_to(bias, dn.shape).copy()
+                bias = np.broadcast_to(bias, dn.shape)
             except ValueError:
                 raise ShapeError(f"capture bias_dn: expected a map broadcastable to {dn.shape}, got {bias.shape}") from None
+            if not np.isfinite(bias).all():
+                raise InputError("capture bias_dn: expected finite bias codes, found NaN or Inf")
+            bias = frozen_array(bias)
         if self.radiance_scale is not None and not (math.isfinite(self.radiance_scale) and self.radiance_scale > 0):
             raise InputError(f"capture radiance_scale: expected a positive number, got {self.radiance_scale}")
         object.__setattr__(self, "dn", dn)
@@ -199,6 +222,28 @@ class Capture:
     def sampling_rate(self) -> float:
         """``S / (3 V U)``, a fraction."""
         return sampling_rate(shots=self.shots, views=self.views, channels=3)
+
+    def saturated_fraction(self, *, pixels: str = "all", saturation_margin_dn: float = 0.5) -> float:
+        """Share of saturated pixels: at or above their ISO's saturation code minus the margin (the
+        ``saturated`` mask of :func:`observations`, without computing the rest).
+
+        ``pixels="all"`` counts every pixel of every shot; ``"least-sensitive"`` only the pixels
+        of the lowest ISO x exposure of the capture, where highlights must come from: a
+        saturated one there has lost its radiance for good (this is what
+        :class:`lfproc.errors.SaturationWarning` tests).
+        """
+        from .._util import check_choice
+
+        check_choice("pixels", pixels, ("all", "least-sensitive"))
+        codes = np.zeros(self.iso.shape, np.float64)
+        for value in self.isos:
+            codes[self.iso == value] = self.profile.saturation_dn(value)
+        saturated = self.dn >= codes - saturation_margin_dn
+        if pixels == "all":
+            return float(saturated.mean())
+        sensitivity = self.iso * np.asarray(self.exposures_s, np.float32)[:, None, None]
+        least = sensitivity <= sensitivity.min() * (1 + 1e-6)
+        return float(saturated[least].mean())
 
     def operator(self, *, dtype=np.float32) -> ProjectionOperator:
         """The projection operator ``Phi`` of this capture (:mod:`lfproc.camera.projection`)."""
@@ -236,6 +281,10 @@ class Capture:
         out = {"dn": self.dn, "iso": self.iso, "mask": self.mask.codes if levels is None else levels}
         if self.bias_dn is not None:
             out["bias"] = self.bias_dn
+        if self.profile.flat_field is not None:
+            out["profile_flat_field"] = np.asarray(self.profile.flat_field, dtype=np.float32)
+        for iso, frame in sorted(self.profile.bias_frames.items()):
+            out[f"profile_bias_{iso}"] = np.asarray(frame, dtype=np.float32)
         return out
 
     def save(self, path: str | os.PathLike, *, force: bool = False) -> Path:
@@ -244,12 +293,25 @@ class Capture:
         header = json.dumps(to_jsonable(self.header()), indent=1).encode()
         with atomic_file(path, force=force) as tmp:
             with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=6) as zf:
-                zf.writestr(HEADER_NAME, header)
+                zf.writestr(_member(HEADER_NAME), header, compresslevel=6)
                 for name, array in self._arrays().items():
                     buf = io.BytesIO()
                     np.lib.format.write_array(buf, np.ascontiguousarray(array), allow_pickle=False)
-                    zf.writestr(f"{name}.npy", buf.getvalue())
+                    zf.writestr(_member(f"{name}.npy"), buf.getvalue(), compresslevel=6)
         return path
+
+
+#: Timestamp of every member of a capture file: fixed, so that the same capture always gives
+#: the same bytes (files can be compared by hash); 1980-01-01 is the earliest a ZIP can hold.
+_ZIP_DATE_TIME = (1980, 1, 1, 0, 0, 0)
+
+
+def _member(name: str) -> zipfile.ZipInfo:
+    info = zipfile.ZipInfo(name, date_time=_ZIP_DATE_TIME)
+    info.compress_type = zipfile.ZIP_DEFLATED
+    info.external_attr = 0o644 << 16  # a regular file, rw-r--r--
+    info.create_system = 3  # Unix, whatever the writing machine
+    return info
 
 
 def _num(v: float):
@@ -332,9 +394,18 @@ def load_capture(path: str | os.PathLike) -> Capture:
             arrays = {name: _read_array(path, zf, name, header) for name in ("dn", "iso", "mask")}
             if "bias" in header["arrays"]:
                 arrays["bias"] = _read_array(path, zf, "bias", header)
+            maps = {name: _read_array(path, zf, name, header) for name in header["arrays"]
+                    if name.startswith("profile_")}
     except zipfile.BadZipFile as exc:
         raise FileFormatError(f"{path}: corrupt capture archive ({exc})") from None
-    profile = CameraProfile.from_json(header["profile"], where=f"{path}: embedded profile")
+    try:
+        profile_bias = {int(name.removeprefix("profile_bias_")): a for name, a in maps.items()
+                        if name.startswith("profile_bias_")}
+    except ValueError:
+        raise FileFormatError(f"{path}: profile bias arrays must be named profile_bias_<ISO>, found "
+                              f"{', '.join(sorted(maps))}") from None
+    profile = CameraProfile.from_json(header["profile"], where=f"{path}: embedded profile", bias_frames=profile_bias,
+                                      flat_field=maps.get("profile_flat_field"))
     m = header["mask"]
     try:
         codes = decode_levels(arrays["mask"]) if arrays["mask"].dtype == np.uint8 else arrays["mask"]
@@ -366,12 +437,15 @@ def load_capture(path: str | os.PathLike) -> Capture:
 
 # -- calibrated observations --------------------------------------------------------------
 
-def observations(capture: Capture, **options) -> Observation:
+def observations(capture: Capture, *, warn_saturation: bool = True, **options) -> Observation:
     """Radiance estimates ``T`` (e-/s), their variance and weights for every shot (method.md section 3).
 
     Parameters
     ----------
     capture : Capture
+    warn_saturation : bool
+        Emit :class:`lfproc.errors.SaturationWarning` when more than
+        :data:`lfproc.errors.SATURATION_WARNING_FRACTION` of the pixels are saturated.
     **options
         Passed to :func:`lfproc.camera.sensor.calibrated_observation` (``saturation_margin_dn``,
         ``variance_from``, ``radiance_estimate`` of shape (S, H, W)...).
@@ -399,14 +473,29 @@ def observations(capture: Capture, **options) -> Observation:
             bias_dn=None if capture.bias_dn is None else capture.bias_dn[s],
             **kw,
         ))
-    return Observation(*(np.stack([getattr(o, f) for o in per_shot]) for f in
-                         ("radiance", "variance", "weight", "saturated", "black_clipped")))
+    obs = Observation(*(freeze(np.stack([getattr(o, f) for o in per_shot])) for f in
+                        ("radiance", "variance", "weight", "saturated", "black_clipped")))
+    if warn_saturation:
+        _warn_saturation(capture, stacklevel=4)
+    return obs
+
+
+def _warn_saturation(capture: Capture, *, stacklevel: int) -> None:
+    """SaturationWarning when too many of the least sensitive pixels (lowest ISO x exposure) saturate."""
+    from .._util import warn_saturation
+
+    sens = capture.iso * np.asarray(capture.exposures_s, np.float32)[:, None, None]
+    at = np.unravel_index(int(np.argmin(sens)), sens.shape)
+    where = f"ISO {_num(capture.iso[at])} at {capture.exposures_s[at[0]]:g} s"
+    warn_saturation(capture.saturated_fraction(pixels="least-sensitive"), "capture",
+                    samples=f"least sensitive pixels ({where})", stacklevel=stacklevel + 1,
+                    consequence="their radiance is lost for good; use a shorter exposure or a smaller radiance scale")
 
 
 def describe_capture(path: str | os.PathLike) -> dict[str, Any]:
     """Figures of a capture file for ``lfproc info`` (first key ``kind = "capture"``)."""
     capture = load_capture(path)
-    obs = observations(capture)
+    obs = observations(capture, warn_saturation=False)  # the figures below report it
     per_iso = {}
     for value in capture.isos:
         sel = capture.iso == value
@@ -491,18 +580,56 @@ def read_sensor_frame(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, An
     return dn, meta
 
 
+def _mask_from(mask, *, views) -> tuple[MaskCode, tuple[int, int], str | None]:
+    """The mask of :func:`capture_from_raw`, the views it implies and the file it came from."""
+    if isinstance(mask, (str, os.PathLike)):
+        path = Path(mask)
+        if not path.is_file():
+            raise MissingFileError(f"{path}: no such mask code file or capture file")
+        if not is_capture_file(path):
+            raise FileFormatError(f"{path}: a mask given as a path must be an lfproc capture file (its mask is "
+                                  "reused); pass .npy codes as {'kind': ..., 'codes': PATH}")
+        donor = load_capture(path)
+        return donor.mask, donor.views if views is None else views, str(path)
+    source = None
+    if isinstance(mask, Mapping):
+        codes = mask.get("codes")
+        if isinstance(codes, (str, os.PathLike)):
+            codes_path = Path(codes)
+            source = str(codes_path)
+            if not codes_path.is_file():
+                raise MissingFileError(f"{codes_path}: no such mask code file")
+            try:
+                codes = np.load(codes_path, allow_pickle=False)
+            except (ValueError, OSError, EOFError) as exc:
+                raise FileFormatError(f"{codes_path}: not a .npy array of mask codes ({exc})") from None
+        if codes is None or "kind" not in mask:
+            raise InputError("mask: expected a MaskCode or a mapping with 'kind' and 'codes'")
+        try:
+            mask = MaskCode(kind=mask["kind"], codes=codes, period=mask.get("period"),
+                            shift=int(mask.get("shift", 1)))
+        except InputError as exc:  # ShapeError included
+            raise type(exc)(f"{source}: {exc}" if source else str(exc)) from None
+    if not isinstance(mask, MaskCode):
+        raise InputError(f"mask: expected a MaskCode, a mapping or a capture file, got {type(mask).__name__}")
+    if views is None:
+        views = tuple(int(v) for v in mask.codes.shape[1:3]) if mask.kind == "random" else (5, 5)
+    return mask, views, source
+
+
 def capture_from_raw(
     raw_paths: Sequence[str | os.PathLike],
     *,
-    mask: MaskCode | Mapping[str, Any],
+    mask: MaskCode | Mapping[str, Any] | str | os.PathLike,
     iso_layout,
     profile,
     exposures_s,
-    views: tuple[int, int] = (5, 5),
+    views: tuple[int, int] | None = None,
     cfa_pattern: str | None = None,
     gamma: float | None = None,
     bias_dn=None,
     isos: Sequence[float] | None = None,
+    block_px: int = 4,
     random_state=None,
 ) -> Capture:
     """Build a capture from real sensor images (one per shot), a mask description, an ISO layout and a profile.
@@ -510,73 +637,111 @@ def capture_from_raw(
     Parameters
     ----------
     raw_paths : sequence of paths
-        One sensor image per shot: raw files (read with rawpy, ``raw_image_visible``) or
-        single-channel 16-bit PNG/TIFF mosaics.
-    mask : MaskCode or mapping
-        The mask codes, or ``{"kind": "random"|"shifted", "codes": array or .npy path,
-        "period": P or None, "shift": 1}``.
+        One sensor image per shot: raw files (read with rawpy, ``raw_image_visible``; DNG
+        included) or single-channel 16-bit PNG/TIFF mosaics. All of one size and CFA layout.
+    mask : MaskCode, mapping or path
+        The mask codes; or ``{"kind": "random"|"shifted", "codes": array or .npy path,
+        "period": P or None, "shift": 1}`` (codes in the layout of
+        :class:`lfproc.camera.projection.MaskCode`: ``(S, V, U, Ph, Pw, 3)`` for ``random``,
+        ``(S, Bh, Bw, 3)`` for ``shifted``, transmittances in [0, 1]); or the path of a capture
+        file whose mask (and views) are reused.
     iso_layout : float, ndarray (H, W) or (S, H, W), or str
-        ISO of every pixel; a string names a pattern of :func:`lfproc.camera.simulate.iso_pattern`
-        (``row``, ``block``, ``dual``, ``random``) built with ``isos`` (stored explicitly).
+        ISO of every pixel; a string names a pattern of :func:`lfproc.camera.iso.iso_pattern`
+        (``row``, ``block``, ``dual``, ``random``) built with ``isos``, or an ISO map file
+        (stored explicitly either way).
     profile : CameraProfile, name or path
     exposures_s : float or sequence of floats (one per shot)
-    views : (V, U)
+    views : (V, U), optional
+        Default: the random codes' views, the donor capture's, else 5 x 5.
     cfa_pattern : str, optional
-        Default: the raw file's pattern when rawpy reports one, else the profile's.
+        Default: the raw files' pattern when rawpy reports one, else the profile's.
     gamma : float, optional (default: the profile's)
     bias_dn : float or ndarray, optional (default: black level plus mean dark signal)
-    isos, random_state : for a named ``iso_layout``.
+    isos, block_px, random_state : for a named ``iso_layout`` (``block_px``: the block side of
+        ``block``; ``random_state`` seeds ``random``).
 
     Returns
     -------
     Capture
+
+    Warns
+    -----
+    LfprocWarning
+        When a raw file's black level differs from the profile's by more than 2 DN (the
+        profile is probably for another camera or mode).
     """
+    import warnings
+
+    from ..errors import LfprocWarning
+
     paths = [Path(p) for p in ([raw_paths] if isinstance(raw_paths, (str, os.PathLike)) else raw_paths)]
     if not paths:
         raise InputError("capture_from_raw: expected at least one sensor image")
+    profile = load_profile(profile)
     frames, metas = zip(*(read_sensor_frame(p) for p in paths))
-    if len({f.shape for f in frames}) != 1:
-        raise ShapeError(f"capture_from_raw: sensor images differ in size: {[f.shape for f in frames]}")
+    for p, f in zip(paths[1:], frames[1:]):
+        if f.shape != frames[0].shape:
+            raise ShapeError(f"{p}: sensor image of {f.shape[0]}x{f.shape[1]} pixels, but {paths[0]} has "
+                             f"{frames[0].shape[0]}x{frames[0].shape[1]}; all shots must come from one sensor mode")
     dn = np.stack(frames)
-    if isinstance(mask, Mapping):
-        codes = mask.get("codes")
-        if isinstance(codes, (str, os.PathLike)):
-            codes_path = Path(codes)
-            if not codes_path.is_file():
-                raise MissingFileError(f"{codes_path}: no such mask code file")
-            codes = np.load(codes_path, allow_pickle=False)
-        if codes is None or "kind" not in mask:
-            raise InputError("mask: expected a MaskCode or a mapping with 'kind' and 'codes'")
-        mask = MaskCode(kind=mask["kind"], codes=codes, period=mask.get("period"), shift=int(mask.get("shift", 1)))
-    if not isinstance(mask, MaskCode):
-        raise InputError(f"mask: expected a MaskCode or a mapping, got {type(mask).__name__}")
-    iso_info: dict[str, Any] = {"kind": "given"}
-    if isinstance(iso_layout, str):
-        from .iso import iso_pattern
-
-        if isos is None:
-            raise InputError(f"iso_layout {iso_layout!r}: pass isos= (the ISO values of the pattern)")
-        iso_map = iso_pattern(iso_layout, size=dn.shape[1:], isos=isos, random_state=random_state)
-        iso_info = {"kind": iso_layout, "isos": [_num(v) for v in isos]}
-    else:
-        iso_map = np.asarray(iso_layout, dtype=np.float32)
     raw_cfa = {m.get("cfa_pattern") for m in metas} - {None}
+    if len(raw_cfa) > 1:
+        raise InputError(f"capture_from_raw: the raw files differ in CFA layout ({', '.join(sorted(raw_cfa))}); "
+                         "all shots must come from one sensor")
     if cfa_pattern is None and len(raw_cfa) == 1:
         cfa_pattern = raw_cfa.pop()
-    return Capture(
-        dn=dn,
-        iso=iso_map,
-        exposures_s=exposures_s,
-        mask=mask,
-        profile=profile,
-        views=views,
-        cfa_pattern=cfa_pattern,
-        gamma=gamma,
-        bias_dn=bias_dn,
-        iso_pattern=iso_info,
-        parameters={"source": "raw", "frames": [{"path": str(p), "sha256": file_sha256(p), **m}
-                                                for p, m in zip(paths, metas)]},
-    )
+    for p, m in zip(paths, metas):
+        if "black_level_dn" in m:
+            black = float(np.mean(m["black_level_dn"]))
+            known = {float(profile.black_level_dn)} | {float(f.black_level_dn) for f in profile.isos.values()
+                                                       if f.black_level_dn is not None}
+            if min(abs(black - b) for b in known) > 2:
+                warnings.warn(f"{p}: black level {black:g} DN, but camera profile {profile.name!r} has "
+                              f"{', '.join(f'{b:g}' for b in sorted(known))} DN; is it this camera's profile?",
+                              LfprocWarning, stacklevel=2)
+    mask, views, mask_source = _mask_from(mask, views=views)
+    iso_info: dict[str, Any] = {"kind": "given"}
+    if isinstance(iso_layout, (str, os.PathLike)):
+        from .iso import ISO_PATTERNS, iso_pattern
+
+        name = str(iso_layout)
+        if name in ISO_PATTERNS and isos is None:
+            raise InputError(f"iso_layout {name!r}: pass isos= (the ISO values of the pattern)")
+        iso_map = iso_pattern(iso_layout, size=dn.shape[1:], isos=isos if isos is not None else (100,),
+                              block_px=block_px, random_state=random_state)
+        if name in ISO_PATTERNS:
+            iso_info = {"kind": name, "isos": [_num(v) for v in isos]}
+            if name == "block":
+                iso_info["block_px"] = int(block_px)
+            if name == "random":
+                iso_info["seed"] = random_state if isinstance(random_state, (int, np.integer)) else None
+        else:
+            iso_info = {"kind": "file", "path": name}
+    else:
+        iso_map = np.asarray(iso_layout, dtype=np.float32)
+    parameters: dict[str, Any] = {
+        "source": "raw", "lfproc_version": __version__,
+        "frames": [{"path": str(p), "sha256": file_sha256(p), **m} for p, m in zip(paths, metas)]}
+    if mask_source:
+        parameters["mask_source"] = mask_source
+    try:
+        return Capture(
+            dn=dn,
+            iso=iso_map,
+            exposures_s=exposures_s,
+            mask=mask,
+            profile=profile,
+            views=views,
+            cfa_pattern=cfa_pattern,
+            gamma=gamma,
+            bias_dn=bias_dn,
+            iso_pattern=iso_info,
+            parameters=parameters,
+        )
+    except ShapeError as exc:
+        if mask_source and "mask" in str(exc):
+            raise ShapeError(f"{mask_source}: {exc}") from None
+        raise
 
 
 # -- previews --------------------------------------------------------------------------------

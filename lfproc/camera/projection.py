@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._util import check_choice, check_random_state
+from .._util import ReadOnlyState, check_choice, check_random_state, freeze, frozen_array
 from ..errors import InputError, ShapeError
 
 __all__ = [
@@ -56,6 +56,9 @@ __all__ = [
     "cfa_index_map",
     "build_operator",
     "sampling_rate",
+    "PatchOperators",
+    "patch_operators",
+    "patch_grid",
 ]
 
 MASK_KINDS = ("random", "shifted")
@@ -94,8 +97,40 @@ def cfa_index_map(pattern: str, size: tuple[int, int], *, offset: tuple[int, int
     return tile[rows[:, None], cols[None, :]]
 
 
+def _as_int(value, name: str, *, low: int) -> int:
+    """An integer option (integral floats such as 4.0 accepted) >= ``low``, else InputError."""
+    ok = not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+    if ok and np.isfinite(value) and int(value) == value and int(value) >= low:
+        return int(value)
+    raise InputError(f"{name}: expected an integer >= {low}, got {value!r}")
+
+
+def _pair(value, name: str) -> tuple[int, int]:
+    """Two positive integers (views or a size), else InputError: a zero-sized view has no pixels."""
+    try:
+        a, b = value
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected two integers >= 1, got {value!r}") from None
+    try:
+        return _as_int(a, name, low=1), _as_int(b, name, low=1)
+    except InputError:
+        raise InputError(f"{name}: expected two integers >= 1, got {tuple(value)!r}") from None
+
+
+def check_transmittances(values: np.ndarray, name: str) -> None:
+    """Raise :class:`InputError` unless every value is a finite transmittance in [0, 1]."""
+    values = np.asarray(values)
+    bad_nan = int(np.count_nonzero(~np.isfinite(values)))
+    if bad_nan:
+        raise InputError(f"{name}: expected finite transmittances in [0, 1], found {bad_nan} NaN or Inf values")
+    lo, hi = float(values.min(initial=0)), float(values.max(initial=0))
+    if lo < 0 or hi > 1:
+        n = int(np.count_nonzero((values < 0) | (values > 1)))
+        raise InputError(f"{name}: expected transmittances in [0, 1], found {n} values outside (range [{lo:.4g}, {hi:.4g}])")
+
+
 @dataclass(frozen=True, eq=False)
-class MaskCode:
+class MaskCode(ReadOnlyState):
     """The mask codes of all shots (see the module documentation for the layouts).
 
     Parameters
@@ -117,20 +152,23 @@ class MaskCode:
 
     def __post_init__(self):
         check_choice("mask kind", self.kind, MASK_KINDS)
-        codes = np.asarray(self.codes, dtype=np.float32)
+        codes = np.asarray(self.codes)
+        if not (np.issubdtype(codes.dtype, np.floating) or np.issubdtype(codes.dtype, np.integer)
+                or codes.dtype == bool):
+            raise ShapeError(f"mask codes: expected numeric transmittances, got dtype {codes.dtype}")
+        codes = frozen_array(self.codes, dtype=np.float32)
         want = 6 if self.kind == "random" else 4
         if codes.ndim != want:
             raise ShapeError(f"mask codes ({self.kind}): expected {want} dimensions, got shape {codes.shape}")
-        if not np.isfinite(codes).all() or codes.min(initial=0) < 0 or codes.max(initial=0) > 1:
-            raise InputError("mask codes: expected finite transmittances in [0, 1]")
+        if codes.size == 0:
+            raise ShapeError(f"mask codes ({self.kind}): every axis needs at least one element, got shape {codes.shape}")
+        check_transmittances(codes, "mask codes")
         if self.period is not None:
-            p = int(self.period)
-            if p < 1 or p != self.period:
-                raise InputError(f"mask period: expected a positive integer, got {self.period!r}")
+            p = _as_int(self.period, "mask period", low=1)
             if codes.shape[-3:-1] != (p, p):
                 raise ShapeError(f"mask codes: a period of {p} needs {p} x {p} tiles, got {codes.shape[-3:-1]}")
-        if int(self.shift) < 0:
-            raise InputError(f"mask shift: expected a non-negative integer, got {self.shift}")
+            object.__setattr__(self, "period", p)
+        object.__setattr__(self, "shift", _as_int(self.shift, "mask shift", low=0))
         object.__setattr__(self, "codes", codes)
 
     @property
@@ -229,12 +267,13 @@ def make_mask(
     MaskCode
     """
     check_choice("mask", kind, MASK_KINDS)
-    if int(shots) < 1 or int(shots) != shots:
-        raise InputError(f"shots: expected an integer >= 1, got {shots!r}")
-    if period is not None and (int(period) != period or int(period) < 1):
-        raise InputError(f"mask period: expected a positive integer, got {period!r}")
+    shots = _as_int(shots, "shots", low=1)
+    nv, nu = _pair(views, "mask views (V, U)")
+    size = _pair(size, "mask size (H, W)")
+    channels = _as_int(channels, "mask channels", low=1)
+    period = None if period is None else _as_int(period, "mask period", low=1)
+    shift = _as_int(shift, "mask shift", low=0)
     rng = check_random_state(random_state)
-    nv, nu = views
     if kind == "random":
         tile = (period, period) if period is not None else tuple(size)
         codes = decode_levels(rng.integers(0, MASK_LEVELS, (shots, nv, nu, *tile, channels), dtype=np.uint8))
@@ -244,7 +283,7 @@ def make_mask(
         else:
             base = (size[0] + shift * (nv - 1), size[1] + shift * (nu - 1))
         codes = decode_levels(rng.integers(0, MASK_LEVELS, (shots, *base, channels), dtype=np.uint8))
-    return MaskCode(kind=kind, codes=codes, period=None if period is None else int(period), shift=int(shift))
+    return MaskCode(kind=kind, codes=freeze(codes), period=period, shift=shift)
 
 
 def decode_levels(levels: np.ndarray) -> np.ndarray:
@@ -278,25 +317,46 @@ class ProjectionOperator:
     Notes
     -----
     Use :func:`build_operator` to make one from a :class:`MaskCode` and a CFA pattern.
+    The operator is immutable and its arrays are read-only (weights are checked to be
+    finite transmittances in [0, 1]); :meth:`restrict` shares memory with its parent.
     """
 
     def __init__(self, weights, cfa_index, *, channels: int = 3, period=None, offset=(0, 0)):
         weights = np.asarray(weights)
-        if weights.dtype not in (np.float32, np.float64):
-            weights = weights.astype(np.float32)
-        cfa_index = np.asarray(cfa_index)
+        if not (np.issubdtype(weights.dtype, np.floating) or np.issubdtype(weights.dtype, np.integer)
+                or weights.dtype == bool):
+            raise ShapeError(f"projection weights: expected numeric transmittances, got dtype {weights.dtype}")
         if weights.ndim != 5:
             raise ShapeError(f"projection weights: expected shape (S, V, U, H, W), got {weights.shape}")
+        if weights.size == 0:
+            raise ShapeError(f"projection weights: every axis needs at least one element, got shape {weights.shape}")
+        weights = frozen_array(weights, dtype=weights.dtype if weights.dtype in (np.float32, np.float64) else np.float32)
+        check_transmittances(weights, "projection weights")
+        channels = _as_int(channels, "channels", low=1)
+        cfa_index = np.asarray(cfa_index)
         if cfa_index.shape != weights.shape[3:]:
             raise ShapeError(f"cfa_index: expected shape {weights.shape[3:]}, got {cfa_index.shape}")
-        if cfa_index.size and (cfa_index.min() < 0 or cfa_index.max() >= channels):
+        if not np.issubdtype(cfa_index.dtype, np.integer):
+            raise InputError(f"cfa_index: expected integer colour indices, got dtype {cfa_index.dtype}")
+        if cfa_index.min() < 0 or cfa_index.max() >= channels:
             raise InputError(f"cfa_index: expected colour indices in 0..{channels - 1}")
-        self.weights = weights
-        self.cfa_index = cfa_index.astype(np.intp)
-        self.channels = int(channels)
-        self.period = None if period is None else (int(period[0]), int(period[1]))
-        self.offset = (int(offset[0]), int(offset[1]))
-        self._onehot = None
+        init = object.__setattr__
+        init(self, "weights", weights)
+        init(self, "cfa_index", frozen_array(cfa_index, dtype=np.intp))
+        init(self, "channels", channels)
+        init(self, "period", None if period is None else (_as_int(period[0], "period", low=1),
+                                                          _as_int(period[1], "period", low=1)))
+        init(self, "offset", (int(offset[0]), int(offset[1])))
+        init(self, "_onehot", None)
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"ProjectionOperator is immutable (cannot set {name!r}); build a new operator")
+
+    def __delattr__(self, name):
+        raise AttributeError(f"ProjectionOperator is immutable (cannot delete {name!r})")
+
+    def __setstate__(self, state):
+        ReadOnlyState.__setstate__(self, state)
 
     # -- shapes ------------------------------------------------------------------------
     @property
@@ -335,8 +395,8 @@ class ProjectionOperator:
 
     # -- application -------------------------------------------------------------------
     def _onehot_map(self, dtype) -> np.ndarray:
-        if self._onehot is None:
-            self._onehot = np.eye(self.channels, dtype=np.float32)[self.cfa_index]  # (H, W, C)
+        if self._onehot is None:  # a cache, not state: (H, W, C)
+            object.__setattr__(self, "_onehot", freeze(np.eye(self.channels, dtype=np.float32)[self.cfa_index]))
         return self._onehot.astype(dtype, copy=False)
 
     def forward(self, lf: np.ndarray) -> np.ndarray:
@@ -394,8 +454,7 @@ class ProjectionOperator:
     # -- patches -----------------------------------------------------------------------
     def _check_window(self, top: int, left: int, size: int) -> None:
         h, w = self.size
-        if int(size) < 1:
-            raise InputError(f"patch size: expected a positive integer, got {size}")
+        size = _as_int(size, "patch size", low=1)
         if not (0 <= top and 0 <= left and top + size <= h and left + size <= w):
             raise InputError(f"patch at ({top}, {left}) of size {size} does not fit in the sensor of {h} x {w}")
 
@@ -428,7 +487,7 @@ class ProjectionOperator:
         if tops.shape != lefts.shape or tops.ndim != 1:
             raise ShapeError(f"patch_sparse: tops and lefts must be 1-D of equal length, got {tops.shape}, {lefts.shape}")
         h, w = self.size
-        size = int(size)
+        size = _as_int(size, "patch size", low=1)
         if tops.size and (tops.min() < 0 or lefts.min() < 0 or tops.max() + size > h or lefts.max() + size > w):
             raise InputError(f"patch_sparse: patches of size {size} must lie inside the sensor of {h} x {w}")
         s_n, (nv, nu), c_n = self.shots, self.views, self.channels
@@ -514,4 +573,200 @@ def build_operator(mask: MaskCode, *, views: tuple[int, int], size: tuple[int, i
     if mask.period is not None:
         p = math.lcm(int(mask.period), 2)
         period = (p, p)
-    return ProjectionOperator(np.ascontiguousarray(weights, dtype=dtype), cfa, channels=3, period=period)
+    return ProjectionOperator(freeze(np.ascontiguousarray(weights, dtype=dtype)), freeze(cfa), channels=3, period=period)
+
+
+# -- per-phase patch operators (the reconstruction's view of Phi) ------------------------------
+
+def patch_grid(size: tuple[int, int], patch: int, stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """Top (or left) corners of patches of ``patch`` pixels every ``stride`` pixels covering ``size``.
+
+    Per axis: ``0, stride, 2 stride, ...`` up to ``size - patch``, plus ``size - patch`` when the
+    grid does not reach the border (so every pixel is covered).
+
+    Returns
+    -------
+    tops, lefts : 1-D int arrays (the grid is their outer product)
+    """
+    patch, stride = int(patch), int(stride)
+    if patch < 1 or stride < 1:
+        raise InputError(f"patch grid: expected positive patch size and stride, got {patch} and {stride}")
+    out = []
+    for n in size:
+        if n < patch:
+            raise ShapeError(f"patch grid: patches of {patch} pixels do not fit a sensor of {tuple(size)} pixels")
+        axis = np.arange(0, n - patch + 1, stride)
+        if axis[-1] != n - patch:
+            axis = np.append(axis, n - patch)
+        out.append(axis.astype(np.intp))
+    return out[0], out[1]
+
+
+@dataclass(frozen=True, eq=False)
+class PatchOperators:
+    """The distinct patch matrices ``Phi_p`` of a set of patches, and which patch uses which.
+
+    Each patch matrix (``m x n``, ``m = S * size^2``, ``n = V * U * size^2 * C``; row and
+    column orders of the module notes) has one non-zero per row and view. It is held in
+    gather form: ``Phi_g @ x == (vals[g] * x[cols[g]]).sum(-1)``.
+
+    Attributes
+    ----------
+    cols : ndarray of shape (G, m, V*U), int32
+        Column index of every non-zero (it depends on the patch only through its CFA phase).
+    vals : ndarray of shape (G, m, V*U), float32
+        Mask transmittances.
+    index : ndarray of shape (B,), intp
+        ``index[b]`` is the operator of patch ``b`` (in the order the patches were given).
+    positions : ndarray of shape (G, 2), intp
+        Sensor position (top, left) of one patch that uses each operator.
+    size, views, shots, channels : the patch geometry.
+    periodic : bool
+        True when operators are shared by phase (a periodic mask): ``G`` does not grow with
+        the sensor; False: one operator per patch position.
+    """
+
+    cols: np.ndarray
+    vals: np.ndarray
+    index: np.ndarray
+    positions: np.ndarray
+    size: int
+    views: tuple[int, int]
+    shots: int
+    channels: int
+    periodic: bool
+
+    @property
+    def n_operators(self) -> int:
+        return int(self.vals.shape[0])
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(m, n)`` of each patch matrix."""
+        nv, nu = self.views
+        return self.shots * self.size**2, nv * nu * self.size**2 * self.channels
+
+    def dense(self, g: int) -> np.ndarray:
+        """Dense ``(m, n)`` matrix of operator ``g`` (for tests and small problems)."""
+        out = np.zeros(self.shape, dtype=self.vals.dtype)
+        np.put_along_axis(out, self.cols[g].astype(np.intp), self.vals[g], axis=1)
+        return out
+
+    def times(self, atoms: np.ndarray, g=None) -> np.ndarray:
+        """``Phi_g @ atoms`` for operators ``g`` (default all): ``(G, m, K)`` (or ``(m, K)`` for one ``g``).
+
+        ``atoms`` is ``(n, K)`` (a dictionary); computed as a sum over views of scaled row
+        gathers, so no ``(m, V*U, K)`` intermediate is built.
+        """
+        atoms = np.asarray(atoms)
+        one = g is not None and np.ndim(g) == 0
+        gs = np.arange(self.n_operators) if g is None else np.atleast_1d(np.asarray(g, dtype=np.intp))
+        dtype = np.result_type(atoms.dtype, np.float32)
+        out = np.zeros((len(gs), self.shape[0], atoms.shape[1]), dtype=dtype)
+        for i, gi in enumerate(gs):
+            cols, vals = self.cols[gi], self.vals[gi].astype(dtype)
+            for k in range(cols.shape[1]):
+                out[i] += vals[:, k, None] * atoms[cols[:, k]]
+        return out[0] if one else out
+
+    def row_sums(self) -> np.ndarray:
+        """Total transmittance seen by each measurement, ``(G, m)`` (``Phi_g @ ones``)."""
+        return self.vals.sum(axis=-1, dtype=np.float64).astype(np.float32)
+
+
+def _mask_values(mask: MaskCode, rows: np.ndarray, cols: np.ndarray, colour: np.ndarray,
+                 views: tuple[int, int]) -> np.ndarray:
+    """Transmittance of every shot and view at sensor pixels ``(rows, cols)`` in colour ``colour``.
+
+    ``rows``, ``cols``, ``colour`` are integer arrays of one shape ``X``; returns ``(S, V, U, *X)``.
+    Reads the codes directly (a periodic tile is indexed modulo its period), never the
+    expanded ``(S, V, U, H, W)`` weights.
+    """
+    nv, nu = views
+    if mask.kind == "random":
+        if mask.period is not None:
+            rows, cols = rows % mask.period, cols % mask.period
+        return mask.codes[:, :, :, rows, cols, colour]
+    sh = int(mask.shift)
+    extra = (1,) * rows.ndim
+    r = rows[None, None] + sh * np.arange(nv).reshape(nv, 1, *extra)
+    c = cols[None, None] + sh * np.arange(nu).reshape(1, nu, *extra)
+    if mask.period is not None:
+        r, c = r % mask.period, c % mask.period
+    return mask.codes[:, r, c, colour[None, None]]
+
+
+def patch_operators(mask: MaskCode, *, views: tuple[int, int], cfa_pattern: str, tops, lefts, size: int,
+                    sensor_size: tuple[int, int] | None = None) -> PatchOperators:
+    """The distinct patch matrices of the patches at ``(tops[b], lefts[b])``, from the mask codes and the CFA.
+
+    With a periodic mask (period ``P``) two patches have the same matrix when their
+    positions agree modulo ``lcm(P, 2)`` (the mask tile and the Bayer quad), so only one
+    operator per such phase is built: memory independent of the sensor size. Without a
+    period every patch gets its own operator (build them per batch of patches).
+
+    Parameters
+    ----------
+    mask : MaskCode
+    views : (V, U)
+    cfa_pattern : str
+        Bayer layout from the sensor's top-left pixel.
+    tops, lefts : 1-D int arrays of equal length
+        Patch corners on the sensor.
+    size : int
+        Patch side in pixels.
+    sensor_size : (H, W), optional
+        Checks that the patches lie inside the sensor (and the codes cover it).
+
+    Returns
+    -------
+    PatchOperators
+        ``dense(index[b])`` equals ``build_operator(...).patch_matrix(tops[b], lefts[b], size)``.
+    """
+    tops = np.atleast_1d(np.asarray(tops, dtype=np.intp))
+    lefts = np.atleast_1d(np.asarray(lefts, dtype=np.intp))
+    if tops.shape != lefts.shape or tops.ndim != 1:
+        raise ShapeError(f"patch_operators: tops and lefts must be 1-D of equal length, got {tops.shape}, {lefts.shape}")
+    size = int(size)
+    if size < 1:
+        raise InputError(f"patch size: expected a positive integer, got {size}")
+    if not isinstance(mask, MaskCode):
+        raise InputError(f"patch_operators: expected a MaskCode, got {type(mask).__name__}")
+    nv, nu = int(views[0]), int(views[1])
+    if tops.size and (tops.min() < 0 or lefts.min() < 0):
+        raise InputError("patch_operators: patch corners must be non-negative")
+    if sensor_size is not None:
+        h, w = sensor_size
+        mask.check(views=(nv, nu), size=(h, w))
+        if tops.size and (tops.max() + size > h or lefts.max() + size > w):
+            raise InputError(f"patch_operators: patches of size {size} must lie inside the sensor of {h} x {w}")
+    if mask.channels != 3:
+        raise ShapeError(f"a Bayer CFA needs a 3-colour mask, this one has {mask.channels} colours")
+    periodic = mask.period is not None
+    if periodic:
+        p = math.lcm(int(mask.period), 2)
+        keys = np.stack([tops % p, lefts % p], axis=1)
+    else:
+        keys = np.stack([tops, lefts], axis=1)
+    uniq, first, index = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    index = index.reshape(-1)
+    positions = np.stack([tops[first], lefts[first]], axis=1) if len(first) else np.zeros((0, 2), np.intp)
+    ii = np.arange(size)
+    rows = positions[:, 0, None, None] + ii[None, :, None]  # (G, size, 1)
+    cols_ = positions[:, 1, None, None] + ii[None, None, :]  # (G, 1, size)
+    rows, cols_ = np.broadcast_arrays(rows, cols_)
+    tile = np.array([_COLOUR_INDEX[ch] for ch in check_choice("cfa_pattern", str(cfa_pattern).upper(), CFA_PATTERNS)],
+                    dtype=np.intp).reshape(2, 2)
+    colour = tile[rows % 2, cols_ % 2]  # (G, size, size)
+    values = _mask_values(mask, rows, cols_, colour, (nv, nu))  # (S, V, U, G, size, size)
+    s_n = mask.shots
+    g_n = len(positions)
+    vals = values.transpose(3, 0, 4, 5, 1, 2).reshape(g_n, s_n * size * size, nv * nu)
+    view = np.arange(nv * nu)
+    pix = ii[:, None] * size + ii[None, :]
+    col = (view[None, None, None, :] * size * size + pix[None, :, :, None]) * 3 + colour[..., None]  # (G, sz, sz, VU)
+    col = np.broadcast_to(col[:, None], (g_n, s_n, size, size, nv * nu)).reshape(g_n, -1, nv * nu)
+    return PatchOperators(cols=np.ascontiguousarray(col, dtype=np.int32),
+                          vals=np.ascontiguousarray(vals, dtype=np.float32),
+                          index=index.astype(np.intp), positions=positions.astype(np.intp), size=size,
+                          views=(nv, nu), shots=s_n, channels=3, periodic=periodic)

@@ -18,6 +18,20 @@ Inverse (:func:`calibrated_observation`): the radiance estimate
 ``I_bias = I_0 + h t I_dark`` is what the mean of many black frames taken with the same
 settings gives, so ``T`` estimates ``E`` without the dark signal.
 
+Fixed pattern (:func:`fixed_pattern_correction`): a sensor's PRNU (per-pixel gain ``g``, mean
+1) and DSNU (per-pixel offset ``o``, electrons) enter the forward model as
+``e = Poisson(t (E g + I_dark)) + N(0, sigma_read^2) + o``. The calibrated observation corrects
+them (dark-signal correction: ``h o`` is subtracted from the linearised signal; flat-field
+correction: the signal is divided by ``g``), so ``T`` estimates ``E`` per pixel:
+``T = (I_max ((I - I_bias) / I_max)^gamma - h o) / (h t g)`` with variance
+``(h^2 t (T g + I_dark) + sigma_read_dn^2 + sigma_q^2) / (h t g)^2 + T^2 var(g) / g^2 + var(o) / (t g)^2``,
+where ``var(g)`` and ``var(o)`` are the uncertainties of the maps used: 0 for a simulated
+sensor (its maps are drawn from the profile's ``fixed_pattern_seed``, exactly known), the
+estimation variance recorded by ``lfproc calibrate`` for measured maps (``flat_field_std``,
+``bias_frame_std_dn``), and the PRNU/DSNU themselves (``prnu^2``, ``dsnu_e^2``) where a
+measured profile has no map that fits the image (the fixed pattern is then uncorrected
+and acts as one more noise term of known variance).
+
 Both take scalar or per-pixel ISO maps, so one call models a multi-ISO sensor.
 """
 
@@ -26,11 +40,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 import numpy as np
 
-from .._util import check_positive, check_random_state
+from .._util import ReadOnlyState, check_positive, check_random_state, freeze, frozen_array
 from ..calib import load_profile
 from ..errors import InputError, ShapeError
 
-__all__ = ["expose", "calibrated_observation", "Observation", "iso_maps", "fixed_pattern"]
+__all__ = ["expose", "calibrated_observation", "Observation", "iso_maps", "fixed_pattern", "FixedPattern",
+           "fixed_pattern_correction"]
 
 
 def iso_maps(profile, iso, shape: tuple[int, ...]) -> dict[str, np.ndarray]:
@@ -60,6 +75,108 @@ def fixed_pattern(profile, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarr
     prnu = 1.0 + profile.prnu * rng.standard_normal(shape) if profile.prnu else np.ones(shape)
     dsnu = profile.dsnu_e * rng.standard_normal(shape) if profile.dsnu_e else np.zeros(shape)
     return prnu, dsnu
+
+
+@dataclass(frozen=True)
+class FixedPattern:
+    """Fixed-pattern maps of one sensor image and how well they are known (all ``(H, W)``).
+
+    ``gain`` (PRNU, the signal is divided by it; ones where not corrected), ``offset_e``
+    (DSNU in electrons, subtracted; zeros where not corrected), ``gain_var`` and
+    ``offset_var_e2``: the variance of the true map around the one used (0 where exact), and
+    ``gain_source`` / ``offset_source``: where the maps come from (``none``, ``simulated``,
+    ``flat_field``, ``bias_frames``, ``uncorrected``, possibly with the reason).
+    """
+
+    gain: np.ndarray
+    offset_e: np.ndarray
+    gain_var: np.ndarray
+    offset_var_e2: np.ndarray
+    gain_source: str = "none"
+    offset_source: str = "none"
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(self.gain.shape)
+
+
+def _has_fixed_pattern(profile) -> bool:
+    return bool(profile.prnu or profile.dsnu_e or profile.flat_field is not None or profile.bias_frames)
+
+
+def _fixed_pattern_maps(profile, shape: tuple[int, int], iso, *, simulate: bool) -> FixedPattern:
+    """The maps of :func:`fixed_pattern_correction`; with ``simulate`` the parts a measured
+    profile does not know come from the seed maps (a plausible sensor with its statistics)."""
+    shape = tuple(int(n) for n in shape)
+    known = not profile.measured or simulate
+    seed_gain, seed_offset = (fixed_pattern(profile, shape) if (profile.prnu or profile.dsnu_e) and known
+                              else (None, None))
+    gain, gain_var, gain_src = np.ones(shape), np.zeros(shape), "none"
+    flat = profile.flat_field
+    misfit = "" if flat is None or flat.shape == shape else (
+        f" (the profile's flat_field map is {flat.shape[0]}x{flat.shape[1]}, the image {shape[0]}x{shape[1]})")
+    if flat is not None and not misfit:
+        gain = np.asarray(flat, dtype=np.float64)
+        gain_var = np.full(shape, float(profile.flat_field_std) ** 2)
+        gain_src = "flat_field"
+    elif profile.prnu and known:
+        gain, gain_src = seed_gain, "simulated" + misfit
+    elif profile.prnu:
+        gain_var = np.full(shape, float(profile.prnu) ** 2)
+        gain_src = "uncorrected" + (misfit or " (measured profile without a flat_field map)")
+    offset, offset_var, offset_src = np.zeros(shape), np.zeros(shape), "none"
+    if profile.dsnu_e and known:
+        offset, offset_src = seed_offset, "simulated"
+    elif profile.dsnu_e:
+        offset_var = np.full(shape, float(profile.dsnu_e) ** 2)
+        offset_src = "uncorrected (measured profile without bias frames that fit the image)"
+    frames = {k: f for k, f in profile.bias_frames.items() if tuple(f.shape) == shape}
+    if frames and iso is not None:
+        iso_arr = np.broadcast_to(np.asarray(iso, dtype=np.float64), shape)
+        used = []
+        for value in np.unique(iso_arr):
+            key = int(round(float(value)))
+            if key not in frames:
+                continue
+            sel = iso_arr == value
+            h = profile.require(value, "gain_dn_per_e")["gain_dn_per_e"]
+            frame = np.asarray(frames[key], dtype=np.float64)
+            offset[sel] = (frame - frame.mean())[sel] / h
+            offset_var[sel] = (float(profile.bias_frame_std_dn.get(key, 0.0)) / h) ** 2
+            used.append(key)
+        if used:
+            offset_src = "bias_frames (ISO " + ", ".join(map(str, used)) + ")"
+    return FixedPattern(gain=gain, offset_e=offset, gain_var=gain_var, offset_var_e2=offset_var,
+                        gain_source=gain_src, offset_source=offset_src)
+
+
+def fixed_pattern_correction(profile, shape: tuple[int, int], iso=None) -> FixedPattern:
+    """The PRNU and DSNU maps that correct a sensor image of ``shape``, and their uncertainty.
+
+    From the profile, in this order (see the module documentation for the model):
+
+    * PRNU: a measured ``flat_field`` map of the image's size (variance ``flat_field_std^2``);
+      else, for a simulated sensor (a profile not measured by ``lfproc calibrate``), the map
+      :func:`fixed_pattern` draws from ``fixed_pattern_seed`` (exact); else, for a measured
+      profile with ``prnu > 0`` but no fitting map, no correction and variance ``prnu^2``.
+    * DSNU: per ISO, the measured master bias frame of the image's size (offset = frame minus
+      its mean, over the ISO's gain; variance ``bias_frame_std_dn^2 / h^2``); else the
+      simulated sensor's map (exact); else, measured without frames, no correction and
+      variance ``dsnu_e^2``.
+
+    Parameters
+    ----------
+    profile : CameraProfile or name
+    shape : (H, W)
+        Size of the sensor image.
+    iso : float or ndarray (H, W), optional
+        ISO of every pixel (selects the bias frames; without it they are not used).
+
+    Returns
+    -------
+    FixedPattern
+    """
+    return _fixed_pattern_maps(load_profile(profile), shape, iso, simulate=False)
 
 
 def _power(x: np.ndarray, p: float) -> np.ndarray:
@@ -93,7 +210,8 @@ def expose(
     noise : bool
         False gives the noiseless expected code (still quantised and clipped).
     fixed_pattern_noise : bool
-        Apply the profile's PRNU/DSNU maps (when they are non-zero).
+        Apply the profile's PRNU/DSNU maps (when it has any): its measured ``flat_field`` and
+        bias frames where they fit the image, else the maps drawn from ``fixed_pattern_seed``.
     random_state : int, Generator or None
 
     Returns
@@ -112,8 +230,9 @@ def expose(
         raise InputError(f"gamma: expected a value >= 1, got {gamma}")
     m = iso_maps(profile, iso, E.shape)
     rng = check_random_state(random_state)
-    if fixed_pattern_noise and (profile.prnu or profile.dsnu_e):
-        prnu, dsnu = fixed_pattern(profile, E.shape)
+    if fixed_pattern_noise and _has_fixed_pattern(profile):
+        maps = _fixed_pattern_maps(profile, E.shape, iso, simulate=True)
+        prnu, dsnu = maps.gain, maps.offset_e
     else:
         prnu, dsnu = 1.0, 0.0
     mean_e = t * (E * prnu + m["dark_current_e_per_s"])
@@ -130,12 +249,14 @@ def expose(
     return dn.astype(np.uint16)
 
 
-@dataclass(frozen=True)
-class Observation:
-    """Calibrated observations of a sensor image (all arrays ``(H, W)``).
+@dataclass(frozen=True, eq=False)
+class Observation(ReadOnlyState):
+    """Calibrated observations of a sensor image (all arrays ``(H, W)``, or ``(S, H, W)`` for
+    the shots of a capture).
 
     ``radiance`` (T, e-/s), ``variance`` (of T, (e-/s)^2), ``weight`` (1/std(T), 0 where
-    unusable), ``saturated`` and ``black_clipped`` masks.
+    unusable), ``saturated`` and ``black_clipped`` masks. The arrays are read-only
+    (float32 and bool; see :func:`lfproc._util.frozen_array`).
     """
 
     radiance: np.ndarray
@@ -143,6 +264,17 @@ class Observation:
     weight: np.ndarray
     saturated: np.ndarray
     black_clipped: np.ndarray
+
+    def __post_init__(self):
+        shape = np.shape(self.radiance)
+        for name, dtype in (("radiance", np.float32), ("variance", np.float32), ("weight", np.float32),
+                            ("saturated", bool), ("black_clipped", bool)):
+            value = getattr(self, name)
+            if np.shape(value) != shape:
+                raise ShapeError(f"observation {name}: expected shape {shape} (that of radiance), got {np.shape(value)}")
+            if dtype is bool and np.asarray(value).dtype != bool:
+                raise InputError(f"observation {name}: expected a boolean mask, got dtype {np.asarray(value).dtype}")
+            object.__setattr__(self, name, frozen_array(value, dtype=dtype))
 
     @property
     def saturated_fraction(self) -> float:
@@ -164,6 +296,7 @@ def calibrated_observation(
     saturation_margin_dn: float = 0.5,
     variance_from: str = "measurement",
     radiance_estimate: np.ndarray | None = None,
+    correct_fixed_pattern: "bool | FixedPattern" = True,
 ) -> Observation:
     """Radiance estimate ``T``, its variance and weights from sensor codes (method.md section 3).
 
@@ -173,12 +306,20 @@ def calibrated_observation(
         Sensor codes (DN, black level included).
     exposure_s, iso, profile, gamma : as for :func:`expose`.
     bias_dn : float or ndarray (H, W), optional
-        Bias frame. Default: the black level plus the mean dark signal ``h t I_dark``.
+        Bias frame. Default: the black level plus the mean dark signal ``h t I_dark`` (and the
+        DSNU is corrected from the profile). A given bias frame is taken to hold the DSNU already:
+        only the flat-field correction is applied then.
     saturation_margin_dn : float
         Codes at or above ``saturation - margin`` are saturated (weight 0).
     variance_from : {"measurement", "estimate"}
         Plug-in signal of the photon-noise term: ``T`` itself (default) or
         ``radiance_estimate`` (e.g. the current HDR estimate of an iterative merge).
+    correct_fixed_pattern : bool or FixedPattern
+        True (default): correct the PRNU and DSNU with :func:`fixed_pattern_correction` of
+        the profile for ``dn``'s shape and add the maps' uncertainty to the variance (a no-op
+        for a profile without fixed pattern); a :class:`FixedPattern` of ``dn``'s shape: use
+        those maps; False: no correction (for codes that are not a sensor image, e.g. a table
+        of codes or decoded views).
 
     Returns
     -------
@@ -186,24 +327,61 @@ def calibrated_observation(
     """
     profile = load_profile(profile)
     t = check_positive("exposure_s", exposure_s)
-    dn = np.asarray(dn, dtype=np.float64)
+    dn = np.asarray(dn)
+    if not (np.issubdtype(dn.dtype, np.integer) or np.issubdtype(dn.dtype, np.floating)):
+        raise InputError(f"sensor image: expected DN codes (integers or floats), got dtype {dn.dtype}")
+    dn = dn.astype(np.float64, copy=False)
     if dn.ndim != 2:
         raise ShapeError(f"sensor image: expected shape (H, W), got {dn.shape}")
-    gamma = profile.gamma if gamma is None else float(gamma)
+    n_bad = int(np.count_nonzero(~np.isfinite(dn)))
+    if n_bad:
+        raise InputError(f"sensor image: expected finite DN codes, found {n_bad} NaN or Inf values")
+    gamma = profile.gamma if gamma is None else check_positive("gamma", gamma)
+    if gamma < 1:
+        # the response I = I_max (h e / I_max)^(1/gamma) of expose() needs gamma >= 1 (as the profile does)
+        raise InputError(f"gamma: expected a value >= 1, got {gamma}")
     m = iso_maps(profile, iso, dn.shape)
     h = m["gain_dn_per_e"]
     if bias_dn is None:
         bias = m["black_level_dn"] + h * t * m["dark_current_e_per_s"]
     else:
-        bias = np.broadcast_to(np.asarray(bias_dn, dtype=np.float64), dn.shape)
+        try:
+            bias = np.broadcast_to(np.asarray(bias_dn, dtype=np.float64), dn.shape)
+        except (TypeError, ValueError):
+            raise ShapeError(f"bias_dn: expected a number or a map of shape {dn.shape}, got {np.shape(bias_dn)}") from None
+        if not np.isfinite(bias).all():
+            raise InputError("bias_dn: expected finite DN values, found NaN or Inf")
+    if isinstance(correct_fixed_pattern, FixedPattern):
+        fp = correct_fixed_pattern
+        if fp.shape != dn.shape:
+            raise ShapeError(f"fixed pattern: maps of shape {fp.shape} do not fit the sensor image {dn.shape}")
+    elif correct_fixed_pattern is True:
+        fp = _fixed_pattern_maps(profile, dn.shape, iso, simulate=False) if _has_fixed_pattern(profile) else None
+    elif correct_fixed_pattern is False:
+        fp = None
+    else:
+        raise InputError(f"correct_fixed_pattern: expected True, False or a FixedPattern, got {correct_fixed_pattern!r}")
     imax = float(profile.white_level_dn)
     rel = (dn - bias) / imax
     linear_dn = imax * _power(rel, gamma)  # h * electrons
-    T = linear_dn / (h * t)
+    g = 1.0
+    if fp is not None:
+        if bias_dn is None:
+            linear_dn = linear_dn - h * fp.offset_e  # dark-signal (DSNU) correction
+        g = fp.gain  # flat-field (PRNU) correction
+    T = linear_dn / (h * t * g)
     if variance_from == "estimate":
         if radiance_estimate is None:
             raise InputError("variance_from='estimate' needs radiance_estimate")
-        signal = np.maximum(np.broadcast_to(radiance_estimate, dn.shape), 0)
+        try:
+            signal = np.broadcast_to(np.asarray(radiance_estimate, dtype=np.float64), dn.shape)
+        except (TypeError, ValueError):
+            raise ShapeError(
+                f"radiance_estimate: expected a map of shape {dn.shape}, got {np.shape(radiance_estimate)}"
+            ) from None
+        if not np.isfinite(signal).all():
+            raise InputError("radiance_estimate: expected finite values, found NaN or Inf")
+        signal = np.maximum(signal, 0)
     elif variance_from == "measurement":
         signal = np.maximum(T, 0)
     else:
@@ -216,17 +394,21 @@ def calibrated_observation(
         half = 0.5 / imax
         var_q = (imax * (_power(rel + half, gamma) - _power(rel - half, gamma))) ** 2 / 12.0
     read_dn2 = (m["read_noise_e"] * h) ** 2
-    var_dn = h**2 * t * (signal + m["dark_current_e_per_s"]) + read_dn2 + var_q
-    variance = var_dn / (h * t) ** 2
+    var_dn = h**2 * t * (signal * g + m["dark_current_e_per_s"]) + read_dn2 + var_q
+    variance = var_dn / (h * t * g) ** 2
+    if fp is not None:  # the maps' own uncertainty (module documentation)
+        variance = variance + signal**2 * fp.gain_var / g**2
+        if bias_dn is None:
+            variance = variance + fp.offset_var_e2 / (t * g) ** 2
     saturated = dn >= m["saturation_dn"] - saturation_margin_dn
     black_clipped = dn <= 0
     usable = ~(saturated | black_clipped)
     weight = np.where(usable, 1.0 / np.sqrt(variance), 0.0)
     return Observation(
-        radiance=T.astype(np.float32),
-        variance=variance.astype(np.float32),
-        weight=weight.astype(np.float32),
-        saturated=saturated,
-        black_clipped=black_clipped,
+        radiance=freeze(T.astype(np.float32)),
+        variance=freeze(variance.astype(np.float32)),
+        weight=freeze(weight.astype(np.float32)),
+        saturated=freeze(saturated),
+        black_clipped=freeze(black_clipped),
     )
 

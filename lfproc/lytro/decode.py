@@ -43,7 +43,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .._util import check_choice
+from .._util import check_choice, freeze
 from .._version import __version__
 from ..errors import InputError, ShapeError
 from ..lightfield import LightField
@@ -537,5 +537,5 @@ def decode_capture(capture: str | os.PathLike, *, white_db: str | os.PathLike | 
                    "unusable_values": "inpainted from usable samples (OpenCV Navier-Stokes)" if fill else "0",
                    "usable_fraction": float((w > 0).mean()), "mean_weight": float(w.mean())},
     }
-    return LightField(data=data, variance=var, units="relative", colour_space=colour_space,
+    return LightField(data=freeze(data), variance=freeze(var), units="relative", colour_space=colour_space,
                       exposure_s=cap.exposure_s, iso=cap.iso, source=str(capture), attrs=attrs)

@@ -1,0 +1,13 @@
+"""Joint HDR light-field reconstruction from coded multi-ISO captures (stage 5, its second half).
+
+:func:`reconstruct` solves, for every patch of the sensor, the weighted lasso
+``argmin_a 1/2 ||W (Phi_p D a - T_p)||^2 + mu ||a||_1`` (method.md section 4) with a batched
+ADMM (default), FISTA or OMP, and averages the overlapping patch estimates. Periodic masks
+share one patch operator per phase (:func:`lfproc.camera.projection.patch_operators`), so the
+solvers' work is matrix-matrix products; blocks of patches run in this process or on Dask.
+"""
+
+from ._reconstruct import DEFAULTS, SCALES, patch_count, reconstruct
+from ._solvers import SOLVERS
+
+__all__ = ["reconstruct", "patch_count", "DEFAULTS", "SCALES", "SOLVERS"]

@@ -1,0 +1,456 @@
+"""The reconstruction driver: patches, blocks, scale handling, Dask, the output light field.
+
+Patches of the dictionary's size lie on a grid of ``stride`` pixels (plus one last row and
+column flush with the sensor's border, so every pixel is covered). The grid is cut into
+*blocks* of whole patch rows (about ``block_patches`` patches each); a block is the unit of
+work: its patches are grouped by patch operator (phase), solved in batches, and their
+estimates summed into the block's own accumulator. Blocks are the same whatever runs them
+(this process or Dask workers), and the accumulators are added to the image in block order,
+so the output does not depend on how the blocks were scheduled.
+
+Scale handling (the data span 16 stops or more). Each patch ``p`` is solved in its own
+units: the measurements are divided by ``c_p = sqrt(n) * rms(T_i / r_i)`` over the usable
+measurements (``r_i`` the total mask transmittance of measurement ``i``: ``T_i / r_i`` is the
+radiance a flat patch would need; ``c_p`` is then the l2 norm of that flat patch, the norm
+the dictionary's atoms and training patches are normalised to), and the weights by their
+root mean square over the usable measurements, and the data term is taken as a mean over
+the ``m`` measurements: each patch solves
+``1/(2m) ||W' (Phi_p D b - T_p / c_p)||^2 + mu ||b||_1``. ``mu`` is therefore relative to a
+light-field patch of unit l2 norm with weights of mean square one, the same for dark and
+bright patches, and does not change with the number of shots; the code is scaled back by
+``c_p``. With this reading the paper's ``mu = 1e-4`` is also where the reconstruction of a
+smooth noisy scene is best (tests/test_reconstruct.py; README), whereas ``1e-4`` against the
+summed data term (100x less regularisation) overfits the noise. ``scale="global"`` uses one ``c`` and one weight scale for
+the whole capture instead (the 99.9th percentile of the usable ``T`` over the mean row
+transmittance, and the rms of all usable weights): what normalising the capture to its peak
+would do. The README gives the measured difference.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._util import check_choice, progress
+from .._version import __version__
+from ..errors import InputError, ShapeError
+from ..lightfield import LightField
+from ._solvers import SOLVERS, BatchOperator, SharedOperator, admm, fista, omp
+
+__all__ = ["reconstruct", "DEFAULTS", "SCALES", "patch_count"]
+
+SCALES = ("patch", "global")
+#: Defaults of :func:`reconstruct` (the paper's settings where it gives them: method.md section 4).
+DEFAULTS = {"stride": 4, "mu": 1e-4, "tol": 2.0**-15, "max_iter": {"admm": 300, "fista": 1000, "omp": None},
+            "block_patches": 512, "scale": "patch"}
+#: Bytes of per-patch operators ``A_p`` materialised at once for non-periodic masks.
+_BATCH_OPERATOR_BYTES = 256 * 2**20
+
+
+@dataclass(frozen=True)
+class _Settings:
+    solver: str
+    mu: float
+    max_iter: int
+    tol: float
+    sparsity: int
+    scale: str
+    c_global: float
+    w_global: float
+
+
+def patch_count(size: tuple[int, int], patch: int, stride: int) -> int:
+    """Number of patches :func:`reconstruct` solves for a sensor of ``size``."""
+    from ..camera.projection import patch_grid
+
+    tops, lefts = patch_grid(size, patch, stride)
+    return len(tops) * len(lefts)
+
+
+def _int_option(name: str, value, *, low: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or int(value) < low:
+        raise InputError(f"{name}: expected an integer >= {low}, got {value!r}")
+    return int(value)
+
+
+def _coverage(n: int, starts: np.ndarray, patch: int) -> np.ndarray:
+    count = np.zeros(n + 1, dtype=np.int64)
+    np.add.at(count, starts, 1)
+    np.add.at(count, starts + patch, -1)
+    return np.cumsum(count)[:n]
+
+
+def _gather(array: np.ndarray, tops: np.ndarray, lefts: np.ndarray, size: int) -> np.ndarray:
+    """``array[:, t:t+size, l:l+size]`` of every patch, ``(B, S * size * size)`` (measurement order)."""
+    ii = np.arange(size)
+    rows = tops[:, None, None] + ii[None, :, None]
+    cols = lefts[:, None, None] + ii[None, None, :]
+    out = array[:, rows, cols]  # (S, B, size, size)
+    return np.ascontiguousarray(out.transpose(1, 0, 2, 3).reshape(len(tops), -1))
+
+
+def _solve_group(op, y, w, rowsum, settings: _Settings, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Codes of one batch sharing an operator type; returns (codes (B, K), scale c_p (B,), iterations (B,))."""
+    usable = w > 0
+    m_use = usable.sum(axis=1)
+    flat = np.where(usable, y / np.maximum(rowsum, 1e-12), 0.0).astype(np.float64)
+    c_p = np.sqrt(n * (flat * flat).sum(axis=1) / np.maximum(m_use, 1))
+    w64 = w.astype(np.float64)
+    omega = np.sqrt((w64 * w64).sum(axis=1) / np.maximum(m_use, 1))
+    ok = (m_use > 0) & (c_p > 0) & (omega > 0)
+    b_n, k_n = len(y), op.shape[1]
+    codes = np.zeros((b_n, k_n), dtype=np.float32)
+    iters = np.zeros(b_n, dtype=np.int32)
+    if not ok.any():
+        return codes, np.where(ok, c_p, 0.0), iters
+    rows = np.flatnonzero(ok)
+    sub = op if ok.all() else op.subset(rows)
+    cp, om = c_p[rows], omega[rows]
+    yn = (y[rows] / cp[:, None]).astype(np.float32)
+    wn = (w[rows] / om[:, None]).astype(np.float32)
+    m = y.shape[1]  # mu weighs the data term's mean over the measurements (module notes)
+    if settings.scale == "patch":
+        mu = np.full(len(rows), settings.mu * m)
+    else:  # one mu for the raw problem of every patch (module notes)
+        mu = settings.mu * m * (settings.c_global / cp) * (settings.w_global / om) ** 2
+    if settings.solver == "admm":
+        z, it = admm(sub, wn, yn, mu, max_iter=settings.max_iter, tol=settings.tol)
+    elif settings.solver == "fista":
+        z, it = fista(sub, wn, yn, mu, max_iter=settings.max_iter, tol=settings.tol)
+    else:
+        z, it = omp(sub, wn, yn, settings.sparsity)
+    codes[rows] = z
+    iters[rows] = it
+    return codes, np.where(ok, c_p, 0.0), iters
+
+
+def _solve_block(task: dict, shared: dict) -> dict:
+    """Solve the patches of one block; return its accumulator and figures (runs in a worker or in process)."""
+    from ..camera.projection import PatchOperators
+
+    atoms = shared["atoms"]
+    n, k_n = atoms.shape
+    v_n, u_n, size, _, c_n = shared["patch"]
+    settings: _Settings = shared["settings"]
+    row0 = task["row0"]
+    tops, lefts = task["tops"], task["lefts"]
+    y_all = _gather(task["T"], tops - row0, lefts, size)
+    w_all = _gather(task["W"], tops - row0, lefts, size)
+    b_n = len(tops)
+    codes_scale = np.zeros(b_n)
+    iters = np.zeros(b_n, dtype=np.int32)
+    estimates = np.zeros((b_n, n), dtype=np.float32)
+    if shared["periodic"]:
+        index = task["phase"]
+        for g in np.unique(index):
+            sel = np.flatnonzero(index == g)
+            op = SharedOperator(shared["A"][g], shared["gram"][g])
+            rowsum = shared["rowsum"][g][None, :]
+            codes, cp, it = _solve_group(op, y_all[sel], w_all[sel], rowsum, settings, n)
+            estimates[sel] = (codes @ atoms.T) * cp[:, None].astype(np.float32)
+            codes_scale[sel], iters[sel] = cp, it
+    else:
+        ops = PatchOperators(**task["operators"])
+        m = ops.shape[0]
+        per = max(1, _BATCH_OPERATOR_BYTES // (4 * m * k_n))
+        for start in range(0, b_n, per):
+            sel = np.arange(start, min(start + per, b_n))
+            A = ops.times(atoms, sel)
+            op = BatchOperator(A)
+            rowsum = ops.row_sums()[sel]
+            codes, cp, it = _solve_group(op, y_all[sel], w_all[sel], rowsum, settings, n)
+            estimates[sel] = (codes @ atoms.T) * cp[:, None].astype(np.float32)
+            codes_scale[sel], iters[sel] = cp, it
+            del A, op
+    rows = int(tops.max() - row0 + size)
+    width = task["width"]
+    acc = np.zeros((v_n, u_n, rows, width, c_n), dtype=np.float32)
+    patches = estimates.reshape(b_n, v_n, u_n, size, size, c_n)
+    for b in range(b_n):  # fixed order: the block's patches as listed
+        t, l = int(tops[b] - row0), int(lefts[b])
+        acc[:, :, t:t + size, l:l + size, :] += patches[b]
+    return {"row0": row0, "acc": acc, "empty": int((codes_scale == 0).sum()), "iterations": iters}
+
+
+def _load_inputs(capture, dictionary):
+    from ..camera.capture import Capture, load_capture
+    from ..dictionary import Dictionary, load_dictionary
+
+    if isinstance(capture, (str, os.PathLike)):
+        capture = load_capture(capture)
+    if not isinstance(capture, Capture):
+        raise InputError(f"reconstruct: expected a Capture or a capture file, got {type(capture).__name__}")
+    if not isinstance(dictionary, Dictionary):
+        dictionary = load_dictionary(dictionary)
+    return capture, dictionary
+
+
+def reconstruct(
+    capture,
+    dictionary="default",
+    *,
+    solver: str = "admm",
+    stride: int = DEFAULTS["stride"],
+    mu: float = DEFAULTS["mu"],
+    max_iter: int | None = None,
+    tol: float = DEFAULTS["tol"],
+    sparsity: int | None = None,
+    scale: str = DEFAULTS["scale"],
+    block_patches: int = DEFAULTS["block_patches"],
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress_bar: bool | None = None,
+) -> LightField:
+    """Reconstruct the HDR light field of a coded multi-ISO capture (method.md section 4).
+
+    Per patch ``p`` (the dictionary's patch: ``V x U`` views of ``P x P`` pixels, 3 colours):
+    ``a* = argmin_a 1/2 ||W (Phi_p D a - T_p)||^2 + mu ||a||_1`` with ``T`` the calibrated
+    observations of every shot (e-/s) and ``W = 1/std(T)``, zero where a pixel is saturated or
+    black-clipped; the patch estimate is ``D a*``; overlapping estimates are averaged.
+
+    Parameters
+    ----------
+    capture : Capture or path of a capture file
+    dictionary : Dictionary, ``"default"`` (the shipped one) or path of a dictionary file
+    solver : {"admm", "fista", "omp"}
+        ``admm`` (default; Woodbury solve, one ``m x m`` system per patch), ``fista`` (step
+        ``1/L``), ``omp`` (greedy, ``sparsity`` atoms or a chi-square residual: the fast mode).
+    stride : int
+        Patch spacing in pixels (1 .. patch size; 4 as the paper). Any stride works with the
+        Bayer CFA: patch operators carry their CFA phase.
+    mu : float
+        l1 weight, relative to a light-field patch of unit l2 norm with weights of mean
+        square one (module notes); the paper's 1e-4 by default. Ignored by ``omp``.
+    max_iter : int, optional
+        Iteration limit (default 300 for ADMM, 1000 for FISTA). Ignored by ``omp``.
+    tol : float
+        Stop a patch when the relative change of its code is at most ``tol`` (2^-15).
+    sparsity : int, optional
+        Atoms per patch for ``omp`` (default: the dictionary's training sparsity).
+    scale : {"patch", "global"}
+        Per-patch scale normalisation (default) or one scale for the capture (module notes).
+    block_patches : int
+        About this many patches per block, the unit of work (memory is bounded by a block).
+        The output depends on it only through float rounding in the batched products.
+    workers : int, optional
+        Solve blocks on a local Dask cluster of this many processes (one thread each).
+    scheduler : str, optional
+        Address of a running Dask scheduler (``tcp://host:8786``); ``"synchronous"`` or None
+        with ``workers=None``: in this process. The output is identical either way.
+    progress_bar : bool, optional
+        Show patches/s and the remaining time (None: when stderr is a terminal).
+
+    Returns
+    -------
+    LightField
+        ``(V, U, H, W, 3)`` in the units of the light field the capture was simulated from
+        (the capture's ``radiance_scale`` is divided out), or ``e-/s`` for a real capture.
+        ``attrs["reconstruction"]`` records the lfproc version, every parameter and figures
+        (patches, iterations, seconds...). Negative estimates are clipped to zero.
+
+    Raises
+    ------
+    ShapeError
+        The dictionary's patch does not fit the capture (views, colours, sensor size).
+    InputError
+        Unknown solver or scale, a stride outside 1..patch size, bad numbers, a capture
+        whose measurements all have weight zero.
+    FileFormatError, MissingFileError
+        Unreadable capture or dictionary files.
+    """
+    from ..camera.capture import observations
+    from ..camera.projection import patch_grid, patch_operators
+
+    started = time.perf_counter()
+    check_choice("solver", solver, SOLVERS)
+    check_choice("scale", scale, SCALES)
+    if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)):
+        raise InputError(f"stride: expected a positive integer, got {stride!r}")
+    try:
+        mu = float(mu)
+        tol = float(tol)
+    except (TypeError, ValueError):
+        raise InputError(f"mu and tol: expected numbers, got {mu!r} and {tol!r}") from None
+    if not (math.isfinite(mu) and mu >= 0):
+        raise InputError(f"mu: expected a non-negative number, got {mu}")
+    if not (math.isfinite(tol) and tol >= 0):
+        raise InputError(f"tol: expected a non-negative number, got {tol}")
+    if max_iter is None:
+        max_iter = DEFAULTS["max_iter"][solver] or 1
+    max_iter = _int_option("max_iter", max_iter)
+    block_patches = _int_option("block_patches", block_patches)
+    if workers is not None:
+        workers = _int_option("workers", workers)
+    capture, dictionary = _load_inputs(capture, dictionary)
+    v_n, u_n, size, _, c_n = dictionary.patch
+    if (v_n, u_n) != tuple(capture.views) or c_n != 3:
+        raise ShapeError(
+            f"dictionary {dictionary.name or dictionary.preset!r}: patch {list(dictionary.patch)} does not fit the "
+            f"capture: expected {capture.views[0]} x {capture.views[1]} views and 3 colours")
+    h, w = capture.size
+    if size > min(h, w):
+        raise ShapeError(f"dictionary patch of {size} x {size} pixels does not fit the capture's sensor of {h} x {w}")
+    stride = int(stride)
+    if not 1 <= stride <= size:
+        raise InputError(f"stride: expected 1..{size} (the dictionary's patch size), got {stride}")
+    if sparsity is None:
+        sparsity = dictionary.sparsity
+    sparsity = _int_option("sparsity", sparsity)
+
+    obs = observations(capture)
+    T = np.ascontiguousarray(obs.radiance, dtype=np.float32)
+    W = np.ascontiguousarray(obs.weight, dtype=np.float32)
+    usable = W > 0
+    if not usable.any():
+        raise InputError("capture: every measurement has weight zero (all saturated or black-clipped); nothing to "
+                         "reconstruct from")
+    n = dictionary.n
+    mean_rowsum = float(np.mean(capture.mask.codes)) * v_n * u_n
+    c_global = math.sqrt(n) * float(np.percentile(np.abs(T[usable]), 99.9)) / max(mean_rowsum, 1e-12)
+    w_global = float(np.sqrt(np.mean(W[usable].astype(np.float64) ** 2)))
+    settings = _Settings(solver=solver, mu=mu, max_iter=max_iter, tol=tol, sparsity=sparsity, scale=scale,
+                         c_global=max(c_global, 1e-30), w_global=max(w_global, 1e-30))
+
+    tops, lefts = patch_grid((h, w), size, stride)
+    rows_per_block = max(1, block_patches // len(lefts))
+    atoms = np.ascontiguousarray(dictionary.atoms, dtype=np.float32)
+    shared: dict[str, Any] = {"atoms": atoms, "patch": dictionary.patch, "settings": settings,
+                              "periodic": capture.mask.period is not None}
+    grid_t = np.repeat(tops, len(lefts))
+    grid_l = np.tile(lefts, len(tops))
+    op_args = dict(views=capture.views, cfa_pattern=capture.cfa_pattern, size=size, sensor_size=(h, w))
+    phase = None
+    n_operators = None
+    if shared["periodic"]:
+        ops = patch_operators(capture.mask, tops=grid_t, lefts=grid_l, **op_args)
+        phase = ops.index
+        A = ops.times(atoms)  # (G, m, K): the distinct patch matrices times D
+        shared["A"] = A
+        shared["gram"] = [a.astype(np.float64) @ a.T.astype(np.float64) for a in A]
+        shared["rowsum"] = ops.row_sums()
+        n_operators = ops.n_operators
+    tasks = []
+    for i in range(0, len(tops), rows_per_block):
+        bt = tops[i:i + rows_per_block]
+        sel = slice(i * len(lefts), (i + len(bt)) * len(lefts))
+        row0, row1 = int(bt[0]), int(bt[-1] + size)
+        task = {"row0": row0, "tops": grid_t[sel], "lefts": grid_l[sel], "width": w,
+                "T": T[:, row0:row1], "W": W[:, row0:row1]}
+        if phase is not None:
+            task["phase"] = phase[sel]
+        tasks.append(task)
+
+    def attach_operators(task):
+        if not shared["periodic"] and "operators" not in task:
+            ops = patch_operators(capture.mask, tops=task["tops"], lefts=task["lefts"], **op_args)
+            task["operators"] = {f: getattr(ops, f) for f in ("cols", "vals", "index", "positions", "size", "views",
+                                                             "shots", "channels", "periodic")}
+        return task
+
+    total = acc = None
+    acc = np.zeros((v_n, u_n, h, w, c_n), dtype=np.float32)
+    empty = 0
+    iterations: list[np.ndarray] = []
+    bar = progress(total=len(grid_t), desc="reconstruct", unit="patch",
+                   disable=None if progress_bar is None else not progress_bar)
+
+    def add(result):
+        nonlocal empty
+        r0 = result["row0"]
+        part = result["acc"]
+        acc[:, :, r0:r0 + part.shape[2]] += part
+        empty += result["empty"]
+        iterations.append(result["iterations"])
+
+    use_dask = workers is not None or (scheduler is not None and scheduler != "synchronous")
+    try:
+        if not use_dask:
+            for task in tasks:
+                result = _solve_block(attach_operators(task), shared)
+                add(result)
+                bar.update(len(task["tops"]))
+        else:
+            _run_dask(tasks, shared, attach_operators, add, bar, workers=workers, scheduler=scheduler)
+    finally:
+        bar.close()
+
+    count = _coverage(h, tops, size)[:, None] * _coverage(w, lefts, size)[None, :]
+    data = acc / count[None, None, :, :, None].astype(np.float32)
+    negative = float((data < 0).mean())
+    np.maximum(data, 0, out=data)
+    radiance_scale = capture.radiance_scale
+    if radiance_scale is not None:
+        data /= np.float32(radiance_scale)
+        units = capture.parameters.get("light_field_units") or "relative"
+    else:
+        units = "e-/s"
+    its = np.concatenate(iterations) if iterations else np.zeros(0)
+    seconds = time.perf_counter() - started
+    record = {
+        "lfproc_version": __version__,
+        "solver": solver,
+        "dictionary": {"name": dictionary.name, "preset": dictionary.preset, "patch": list(dictionary.patch),
+                       "atoms": dictionary.n_atoms, "sparsity": dictionary.sparsity},
+        "stride": stride,
+        "mu": mu,
+        "mu_meaning": "1/(2m)||W(Phi D b - T)||^2 + mu||b||_1 per patch, T scaled to a unit-l2 patch, W to mean "
+                      "square one" if scale == "patch" else "as 'patch' but with one scale for the whole capture",
+        "tol": tol,
+        "max_iter": max_iter if solver != "omp" else None,
+        "sparsity": sparsity if solver == "omp" else None,
+        "scale": scale,
+        "block_patches": block_patches,
+        "patches": int(len(grid_t)),
+        "operators": n_operators if n_operators is not None else int(len(grid_t)),
+        "periodic_operator": bool(shared["periodic"]),
+        "empty_patches": int(empty),
+        "negative_fraction_clipped": negative,
+        "iterations_mean": float(its.mean()) if its.size else 0.0,
+        "iterations_max": int(its.max()) if its.size else 0,
+        "radiance_scale": radiance_scale,
+        "capture_ground_truth": capture.ground_truth,
+        "seconds": seconds,
+        "scheduler": "in-process" if not use_dask else (scheduler or f"local:{workers}"),
+    }
+    return LightField(data=data, units=units, colour_space="camera-rgb" if radiance_scale is None else "linear-srgb",
+                      source="lfproc.reconstruct", attrs={"reconstruction": record})
+
+
+def _run_dask(tasks, shared, attach_operators, add, bar, *, workers, scheduler) -> None:
+    import logging
+
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler and scheduler != "synchronous":
+        client = Client(scheduler)
+    else:
+        cluster = LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True, dashboard_address=":0",
+                               silence_logs=logging.ERROR)
+        client = Client(cluster)
+    try:
+        shared_future = client.scatter(shared, broadcast=True)
+        futures = {}
+        for i, task in enumerate(tasks):
+            futures[client.submit(_solve_block, attach_operators(task), shared_future, key=f"recon-block-{i}-"
+                                  f"{os.getpid()}-{id(tasks)}", pure=False)] = i
+        done: dict[int, dict] = {}
+        next_index = 0
+        for future in as_completed(futures):
+            i = futures[future]
+            done[i] = future.result()
+            bar.update(len(tasks[i]["tops"]))
+            future.release()
+            while next_index in done:  # add in block order: the same sums as in process
+                add(done.pop(next_index))
+                next_index += 1
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()

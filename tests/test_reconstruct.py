@@ -1,0 +1,353 @@
+"""Joint reconstruction (lfproc.recon): per-phase operators, solvers, Dask, round trips, bad input."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+import lfproc
+from lfproc.camera.capture import Capture, load_capture
+from lfproc.camera.projection import MASK_KINDS, build_operator, make_mask, patch_grid, patch_operators
+from lfproc.camera.simulate import auto_radiance_scale, simulate_capture
+from lfproc.cli.main import main
+from lfproc.dictionary import Dictionary, dct_dictionary, save_dictionary
+from lfproc.errors import InputError, ShapeError
+from lfproc.recon import SOLVERS, reconstruct
+
+VIEWS = (5, 5)
+
+
+# -- per-phase patch operators ----------------------------------------------------------------
+
+@pytest.mark.parametrize("kind", MASK_KINDS)
+@pytest.mark.parametrize("period", [None, 4, 3])
+def test_patch_operators_equal_the_operators_patch_matrices(kind, period):
+    """The reference is ProjectionOperator.patch_matrix, built from the expanded weights array."""
+    size = (21, 19)
+    for cfa in ("RGGB", "GBRG"):
+        mask = make_mask(kind, shots=2, views=VIEWS, size=size, period=period, random_state=4)
+        op = build_operator(mask, views=VIEWS, size=size, cfa_pattern=cfa)
+        tops, lefts = patch_grid(size, 9, 4)
+        t, l = np.repeat(tops, len(lefts)), np.tile(lefts, len(tops))
+        ops = patch_operators(mask, views=VIEWS, cfa_pattern=cfa, tops=t, lefts=l, size=9, sensor_size=size)
+        for b in range(len(t)):
+            np.testing.assert_array_equal(ops.dense(ops.index[b]), op.patch_matrix(t[b], l[b], 9))
+        D = np.random.default_rng(0).standard_normal((ops.shape[1], 5)).astype(np.float32)
+        np.testing.assert_allclose(ops.times(D), np.stack([ops.dense(g) @ D for g in range(ops.n_operators)]),
+                                   rtol=1e-5, atol=1e-5)
+        if period is None:
+            assert ops.n_operators == len(t)
+        else:  # phases modulo lcm(period, 2): grid phases plus the border row and column
+            p = np.lcm(period, 2)
+            assert ops.n_operators == len({(a % p, b % p) for a, b in zip(t, l)})
+
+
+def test_periodic_operators_do_not_grow_with_the_sensor():
+    small, large = (4 * 10 + 8, 4 * 10 + 8), (4 * 100 + 8, 4 * 120 + 8)
+    counts = []
+    for size in (small, large):
+        mask = make_mask("random", shots=2, views=VIEWS, size=size, period=4, random_state=1)
+        tops, lefts = patch_grid(size, 8, 4)
+        ops = patch_operators(mask, views=VIEWS, cfa_pattern="RGGB", tops=np.repeat(tops, len(lefts)),
+                              lefts=np.tile(lefts, len(tops)), size=8)
+        counts.append((ops.n_operators, ops.vals.nbytes, len(ops.index)))
+    assert counts[0][:2] == counts[1][:2] == (1, 1 * 2 * 64 * 25 * 4)
+    assert counts[1][2] == 101 * 121
+
+
+def test_patch_grid_covers_the_sensor():
+    tops, lefts = patch_grid((30, 26), 9, 4)
+    assert tops.tolist() == [0, 4, 8, 12, 16, 20, 21]
+    assert lefts.tolist() == [0, 4, 8, 12, 16, 17]
+    with pytest.raises(ShapeError):
+        patch_grid((8, 30), 9, 4)
+
+
+# -- a planted sparse patch ---------------------------------------------------------------------
+
+def _planted(seed=0, k_atoms=300):
+    """A 5x5 x 9x9 x 3 patch exactly 10-sparse in a random dictionary (a constant atom plus 9 Gaussian ones).
+
+    Gaussian atoms make Phi D a well-conditioned sensing matrix at 2.67 % sampling (162
+    measurements for 300 atoms); the constant atom's coefficient keeps the light field positive.
+    """
+    rng = np.random.default_rng(seed)
+    patch = (5, 5, 9, 9, 3)
+    n = int(np.prod(patch))
+    atoms = rng.standard_normal((n, k_atoms))
+    atoms[:, 0] = 1.0
+    atoms /= np.linalg.norm(atoms, axis=0)
+    dictionary = Dictionary(atoms=atoms.astype(np.float32), patch=patch, sparsity=10, preset="random")
+    code = np.zeros(k_atoms)
+    support = rng.choice(np.arange(1, k_atoms), 9, replace=False)
+    code[support] = rng.choice([-1.0, 1.0], 9) * (0.5 + rng.random(9))
+    varying = dictionary.atoms.astype(np.float64) @ code
+    code[0] = 3 * max(-varying.min(), 1e-3) / dictionary.atoms[0, 0]
+    lf = lfproc.LightField((dictionary.atoms.astype(np.float64) @ code).reshape(patch).astype(np.float32))
+    return dictionary, code, lf
+
+
+@pytest.fixture(scope="module")
+def planted():
+    dictionary, code, lf = _planted()
+    # noise-free, and a scale that saturates no pixel at the higher ISO (else fewer than 162 measurements)
+    scale = 0.5 * auto_radiance_scale(lf.data, profile="paper-none", iso=400, exposure_s=0.004)
+    capture = simulate_capture(lf, profile="paper-none", noise=False, shots=2, isos=[100, 400],
+                               iso_pattern_kind="random", radiance_scale=scale, random_state=1)
+    return dictionary, code, lf, capture
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_a_10_sparse_patch_is_recovered_from_two_noise_free_shots(planted, solver):
+    dictionary, _, lf, capture = planted
+    assert capture.sampling_rate == pytest.approx(2 / 75)
+    # noise-free data: a weaker l1 weight than the default (which is set for noisy captures) removes the
+    # lasso's shrinkage bias; OMP has no weight
+    out = reconstruct(capture, dictionary, solver=solver, max_iter=2000, mu=1e-7)
+    err = out.data.astype(np.float64) - lf.data
+    psnr = 10 * np.log10(float(lf.data.max()) ** 2 / np.mean(err**2))
+    assert psnr >= 50, f"{solver}: {psnr:.1f} dB"
+    assert out.units == "relative" and out.shape == lf.shape
+    rec = out.attrs["reconstruction"]
+    assert rec["solver"] == solver and rec["patches"] == 1 and rec["lfproc_version"] == lfproc.__version__
+
+
+def test_omp_finds_the_planted_support(planted):
+    from lfproc.recon._reconstruct import _gather
+    from lfproc.recon._solvers import SharedOperator, omp
+    from lfproc.camera.capture import observations
+
+    dictionary, code, _, capture = planted
+    obs = observations(capture)
+    ops = patch_operators(capture.mask, views=VIEWS, cfa_pattern=capture.cfa_pattern, tops=[0], lefts=[0], size=9)
+    y = _gather(obs.radiance, np.array([0]), np.array([0]), 9)
+    w = _gather(obs.weight, np.array([0]), np.array([0]), 9)
+    z, used = omp(SharedOperator(ops.times(dictionary.atoms)[0]), w, y / y.max(), 10)
+    assert set(np.flatnonzero(z[0])) == set(np.flatnonzero(code)) and used[0] == 10
+
+
+def test_admm_reaches_the_lasso_optimum():
+    """Independent reference: scikit-learn's coordinate-descent Lasso on the same weighted problem."""
+    from sklearn.linear_model import Lasso
+
+    from lfproc.recon._solvers import BatchOperator, SharedOperator, admm, fista
+
+    rng = np.random.default_rng(3)
+    m, k = 60, 120
+    A = rng.standard_normal((m, k)).astype(np.float32)
+    w = (0.5 + rng.random((2, m))).astype(np.float32)
+    w[1, :7] = 0  # unusable measurements
+    y = rng.standard_normal((2, m)).astype(np.float32)
+    mu = 0.5
+    for op in (SharedOperator(A), BatchOperator(np.stack([A, A]))):
+        z_admm, _ = admm(op, w, y, mu, max_iter=3000, tol=1e-7)
+        z_fista, _ = fista(op, w, y, mu, max_iter=20000, tol=1e-8)
+        for b in range(2):
+            ref = Lasso(alpha=mu / m, fit_intercept=False, tol=1e-12, max_iter=100000).fit(
+                w[b, :, None] * A.astype(np.float64), w[b] * y[b].astype(np.float64)).coef_
+            scale = np.linalg.norm(ref)
+            assert np.linalg.norm(z_admm[b] - ref) / scale < 1e-3
+            assert np.linalg.norm(z_fista[b] - ref) / scale < 1e-3
+
+
+# -- captures of a smooth scene ----------------------------------------------------------------
+
+#: Electrons/s per unit of the smooth scene: its brightest samples stay below saturation at ISO 1600
+#: (the automatic scale saturates ISO 100 at the scene's peak, and this scene is almost all peak).
+SMOOTH_SCALE = 2.5e3
+
+
+def _smooth_lf(size=(20, 22)):
+    """Smooth, positive, with a little parallax: well represented by a low-frequency DCT dictionary."""
+    v, u, y, x = np.meshgrid(np.arange(5), np.arange(5), np.arange(size[0]), np.arange(size[1]), indexing="ij")
+    base = 1.0 + 0.5 * np.sin((x + 0.3 * (u - 2)) / 7.0) * np.cos(y / 9.0)
+    rgb = np.stack([base, 0.8 * base + 0.1 * y / size[0], 1.2 - 0.4 * base / base.max()], axis=-1)
+    return lfproc.LightField(rgb.astype(np.float32) * 5.0)
+
+
+@pytest.fixture(scope="module")
+def small_dictionary():
+    return dct_dictionary((5, 5, 8, 8, 3), 200, sparsity=6)
+
+
+@pytest.fixture(scope="module")
+def smooth_capture():
+    return simulate_capture(_smooth_lf(), profile="paper-low", shots=2, mask_period=4, random_state=2,
+                            radiance_scale=SMOOTH_SCALE)
+
+
+def test_reconstruction_is_in_the_units_of_the_simulated_light_field(smooth_capture, small_dictionary):
+    truth = _smooth_lf()
+    out = reconstruct(smooth_capture, small_dictionary, solver="omp")
+    assert out.units == "relative"
+    ratio = out.data.mean() / truth.data.mean()
+    assert 0.9 < ratio < 1.1
+    rel = np.abs(out.data - truth.data).mean() / truth.data.mean()
+    assert rel < 0.1
+    # a real capture (no radiance scale) comes out in e-/s: the same numbers times the scale
+    real = dataclasses.replace(smooth_capture, radiance_scale=None)
+    out_e = reconstruct(real, small_dictionary, solver="omp")
+    assert out_e.units == "e-/s"
+    np.testing.assert_allclose(out_e.data / smooth_capture.radiance_scale, out.data, rtol=1e-4,
+                               atol=1e-6 * out.data.max())
+
+
+def test_reconstruct_does_not_mutate_its_inputs(smooth_capture, small_dictionary):
+    dn, codes, atoms = smooth_capture.dn.copy(), smooth_capture.mask.codes.copy(), small_dictionary.atoms.copy()
+    reconstruct(smooth_capture, small_dictionary, solver="fista", max_iter=5)
+    assert np.array_equal(dn, smooth_capture.dn) and np.array_equal(codes, smooth_capture.mask.codes)
+    assert np.array_equal(atoms, small_dictionary.atoms)
+
+
+@pytest.mark.parametrize("options", [dict(iso_pattern_kind="row", shots=1), dict(baseline="bracketing", shots=3),
+                                     dict(baseline="individual-iso", isos=[100, 1600]),
+                                     dict(mask="shifted", mask_period=None, shots=2)])
+def test_every_capture_kind_reconstructs(small_dictionary, options):
+    truth = _smooth_lf((16, 16))
+    capture = simulate_capture(truth, profile="paper-low", random_state=5, radiance_scale=SMOOTH_SCALE, **options)
+    out = reconstruct(capture, small_dictionary, solver="omp", stride=4)
+    assert out.shape == truth.shape
+    assert 0.8 < out.data.mean() / truth.data.mean() < 1.25
+
+
+def test_block_layout_changes_nothing_but_rounding(smooth_capture, small_dictionary):
+    a = reconstruct(smooth_capture, small_dictionary, solver="omp", block_patches=5)
+    b = reconstruct(smooth_capture, small_dictionary, solver="omp", block_patches=10_000)
+    np.testing.assert_allclose(a.data, b.data, rtol=1e-4, atol=1e-6 * a.data.max())
+
+
+@pytest.fixture(scope="module")
+def dask_scheduler():
+    import logging
+
+    from dask.distributed import LocalCluster
+
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                           silence_logs=logging.ERROR)
+    yield cluster.scheduler_address
+    cluster.close()
+
+
+@pytest.mark.parametrize("period, solver", [(4, "admm"), (None, "fista")])
+def test_dask_and_in_process_reconstructions_are_identical(dask_scheduler, small_dictionary, period, solver):
+    capture = simulate_capture(_smooth_lf((20, 22)), profile="paper-medium", shots=2, mask_period=period,
+                               random_state=7, radiance_scale=SMOOTH_SCALE)
+    options = dict(solver=solver, max_iter=30, block_patches=12)
+    here = reconstruct(capture, small_dictionary, **options)
+    there = reconstruct(capture, small_dictionary, scheduler=dask_scheduler, **options)
+    assert np.array_equal(here.data, there.data)
+    assert here.attrs["reconstruction"]["patches"] == 20 and there.attrs["reconstruction"]["scheduler"] == dask_scheduler
+
+
+# -- the command line --------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory, smooth_capture, small_dictionary):
+    root = tmp_path_factory.mktemp("recon")
+    truth = root / "truth.exr"
+    lfproc.write_lightfield(_smooth_lf(), truth)
+    capture = root / "shot.capture.npz"
+    from lfproc.camera.simulate import simulate_file
+
+    simulate_file(truth, capture, profile="paper-low", shots=2, mask_period=4, random_state=2,
+                  radiance_scale=SMOOTH_SCALE)
+    dictionary = root / "dct.npz"
+    save_dictionary(small_dictionary, dictionary)
+    return root, truth, capture, dictionary
+
+
+def test_simulate_reconstruct_evaluate_round_trip(files, capsys):
+    root, truth, capture, dictionary = files
+    out = root / "out.exr"
+    assert main(["reconstruct", str(capture), "-o", str(out), "--dictionary", str(dictionary), "--solver", "admm",
+                 "--max-iter", "50", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["patches"] == 20 and summary["solver"] == "admm" and summary["seconds"] > 0
+    assert summary["dictionary"] == str(dictionary)
+    assert main(["evaluate", str(out), str(truth), "--json"]) == 0
+    scores = json.loads(capsys.readouterr().out)
+    assert scores["pu21_psnr_db"] > 30, scores["pu21_psnr_db"]
+    lf = lfproc.read_lightfield(out)
+    rec = lf.attrs["reconstruction"]
+    assert rec["mu"] == 1e-4 and rec["stride"] == 4 and rec["lfproc_version"] == lfproc.__version__
+    # no overwrite without --force
+    assert main(["reconstruct", str(capture), "-o", str(out), "--dictionary", str(dictionary)]) == 2
+    assert "exists" in capsys.readouterr().err
+
+
+def _bad_capture_all_saturated(capture_path, root):
+    capture = load_capture(capture_path)
+    dn = np.full_like(capture.dn, int(capture.profile.white_level_dn))
+    bad = dataclasses.replace(capture, dn=dn)
+    path = root / "saturated.capture.npz"
+    bad.save(path, force=True)
+    return path
+
+
+@pytest.mark.parametrize("case", ["views", "colours", "weights", "stride", "solver", "corrupt-capture",
+                                  "corrupt-dictionary", "missing-default"])
+def test_bad_input_gets_one_line_and_exit_2(files, capsys, case, tmp_path):
+    root, _, capture, dictionary = files
+    out = tmp_path / "out.exr"
+    args = ["reconstruct", str(capture), "-o", str(out), "--dictionary", str(dictionary)]
+    expect = {
+        "views": "3 x 3",
+        "colours": "3 colours",
+        "weights": "weight zero",
+        "stride": "stride",
+        "solver": "solver",
+        "corrupt-capture": "capture",
+        "corrupt-dictionary": "bad.npz",
+        "missing-default": "default",
+    }[case]
+    if case in ("views", "colours"):
+        patch = (3, 3, 8, 8, 3) if case == "views" else (5, 5, 8, 8, 1)
+        other = tmp_path / "other.npz"
+        save_dictionary(dct_dictionary(patch, 50), other)
+        args[5] = str(other)
+        expect = "5 x 5 views and 3 colours"
+    elif case == "weights":
+        args[1] = str(_bad_capture_all_saturated(capture, tmp_path))
+    elif case == "stride":
+        args += ["--stride", "9"]
+    elif case == "solver":
+        args += ["--solver", "lbfgs"]
+    elif case == "corrupt-capture":
+        bad = tmp_path / "bad.capture.npz"
+        bad.write_bytes(b"PK\x03\x04" + b"\x00" * 100)
+        args[1] = str(bad)
+    elif case == "corrupt-dictionary":
+        bad = tmp_path / "bad.npz"
+        with zipfile.ZipFile(bad, "w") as zf:
+            zf.writestr("lfproc-dictionary.json", "{not json")
+        args[5] = str(bad)
+    elif case == "missing-default":
+        from lfproc.dictionary import shipped_path
+
+        if shipped_path("default").is_file():
+            pytest.skip("the default dictionary is shipped in this installation")
+        args = args[:4]
+    code = main(args)
+    err = capsys.readouterr().err
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("lfproc reconstruct: error:"), err
+    assert expect in lines[0], lines[0]
+    assert not out.exists()
+
+
+def test_api_bad_options(smooth_capture, small_dictionary):
+    with pytest.raises(InputError, match="solver"):
+        reconstruct(smooth_capture, small_dictionary, solver="cg")
+    with pytest.raises(InputError, match="stride"):
+        reconstruct(smooth_capture, small_dictionary, stride=0)
+    with pytest.raises(InputError, match="mu"):
+        reconstruct(smooth_capture, small_dictionary, mu=-1)
+    with pytest.raises(InputError, match="max_iter"):
+        reconstruct(smooth_capture, small_dictionary, max_iter=0)
+    with pytest.raises(ShapeError, match="sensor"):
+        reconstruct(simulate_capture(_smooth_lf((6, 30)), profile="paper-low", random_state=1), small_dictionary)
