@@ -496,6 +496,9 @@ def describe_lytro(path: str | os.PathLike) -> dict[str, Any]:
             "has_raw": c.has("imageRef") and bool(frame.get("imageRef")),
             "storage_files": len(_storage_entries(c.toc, path)),
         })
+        from .extract import contents_summary, lfp_contents
+
+        out["holds"] = contents_summary(lfp_contents(c))
         if out["has_raw"]:
             cap = _capture_from_container(c)
         elif c.ref("metadataRef") and c.has("metadataRef") or isinstance(frame.get("metadata"), dict):
