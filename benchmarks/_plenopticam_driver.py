@@ -2,7 +2,7 @@
 
 Runs ONLY under an interpreter that has PlenoptiCam (PyPI ``plenopticam``, GPL-3.0) installed,
 e.g. a throw-away venv; lfproc never imports PlenoptiCam and does not depend on it.
-The steps mirror PlenoptiCam 0.9.1's own ``plenopticam/bin/cli_script.py``: ``LfpReader`` (LFR ->
+The steps mirror PlenoptiCam 0.9.x's own ``plenopticam/bin/cli_script.py``: ``LfpReader`` (LFR ->
 Bayer), ``CaliFinder`` (white image from the caldata tar, matched by geometry hash),
 ``LfpCalibrator`` (micro-image centroids from the white image), ``LfpAligner`` (hot pixels,
 de-vignetting by the white image, Menon demosaic, resampling), ``LfpExtractor`` (sub-aperture
@@ -35,12 +35,21 @@ import time
 import traceback
 
 
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("plenopticam")
+    except Exception:  # noqa: BLE001
+        return "unknown"
+
+
 def _fail(msg: str) -> int:
     print(json.dumps({"error": " ".join(str(msg).split())}))
     return 1
 
 
-def run(capture: str, caldata: str, out: str, *, patch: int, pitch_px: int | None) -> dict:
+def run(capture: str, caldata: str, out: str, *, patch: int, pitch_px: int | None, cal_blur_px: float) -> dict:
     import numpy as np
     from plenopticam import misc
     from plenopticam.cfg import PlenopticamConfig
@@ -121,7 +130,16 @@ def run(capture: str, caldata: str, out: str, *, patch: int, pitch_px: int | Non
     if wht is None:
         raise RuntimeError("PlenoptiCam CaliFinder found no white image in the caldata tar "
                            "(no geometry-hash match)")
-    calibrator = LfpCalibrator(wht, cfg, sta)
+    wht_cal = wht
+    if cal_blur_px > 0:
+        # PlenoptiCam's centroid finder (LoG peaks) sees two peaks in each flat-topped virtual micro
+        # image and then misjudges the pitch; a Gaussian blur of its calibration input merges them.
+        # Only the calibration gets the blurred white image; devignetting (LfpAligner) gets the original.
+        from scipy.ndimage import gaussian_filter
+
+        wht_cal = gaussian_filter(np.asarray(wht, dtype=np.float64), cal_blur_px).astype(np.asarray(wht).dtype)
+        notes.append(f"white image blurred (Gaussian sigma {cal_blur_px:g} px) for LfpCalibrator only")
+    calibrator = LfpCalibrator(wht_cal, cfg, sta)
     if pitch_px is not None:
         # skip PlenoptiCam's scale-space micro-image size estimate (PitchEstimator)
         calibrator._M = pitch_px
@@ -145,7 +163,7 @@ def run(capture: str, caldata: str, out: str, *, patch: int, pitch_px: int | Non
         raise RuntimeError(f"PlenoptiCam returned views of shape {vp.shape}; expected (V, U, H, W, 3)")
     np.save(out, vp)
     shutil.rmtree(work, ignore_errors=True)
-    return {"calibrate_s": t_cal, "decode_s": t_dec,
+    return {"calibrate_s": t_cal, "decode_s": t_dec, "plenopticam_version": _version(),
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
             "shape": list(vp.shape), "patch": patch, "notes": notes}
 
@@ -158,12 +176,16 @@ def main(argv=None) -> int:
     ap.add_argument("--patch", type=int, default=7, help="PlenoptiCam micro-image patch size (views per side)")
     ap.add_argument("--pitch-px", type=int, default=None,
                     help="micro-image size in pixels for LfpCalibrator (default: PlenoptiCam estimates it)")
+    ap.add_argument("--calibration-blur-px", type=float, default=2.0,
+                    help="Gaussian sigma (px) of the blur applied to the white image given to LfpCalibrator "
+                         "(0: none); devignetting always uses the unblurred white image")
     args = ap.parse_args(argv)
     os.environ.setdefault("MPLBACKEND", "Agg")
     log = io.StringIO()
     try:
         with contextlib.redirect_stdout(log):
-            res = run(args.capture, args.caldata, args.out, patch=args.patch, pitch_px=args.pitch_px)
+            res = run(args.capture, args.caldata, args.out, patch=args.patch, pitch_px=args.pitch_px,
+                      cal_blur_px=args.calibration_blur_px)
     except Exception as exc:  # report PlenoptiCam's own failure as one line
         tail = " | ".join(line.strip() for line in log.getvalue().replace("\r", "\n").splitlines()
                           if line.strip())[-300:]

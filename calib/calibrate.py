@@ -50,7 +50,7 @@ from __future__ import annotations
 import math
 import os
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -58,15 +58,19 @@ import numpy as np
 
 from lfproc._util import check_positive, progress
 from lfproc._version import __version__
-from lfproc.errors import CalibrationError, InputError
+from lfproc.errors import CalibrationError, InputError, MissingFileError
 
 from .emva import SIGMA2_Q, EmvaDescriptor, evaluate, is_descriptor, read_descriptor, reduce_descriptor
 from .frames import FrameChecker, FrameRecord, _channel_names, read_frame, read_manifest
-from .profile import CameraProfile, IsoFigures
+from .profile import MONO, CameraProfile, IsoFigures
 
-__all__ = ["calibrate", "CalibrationResult", "DEFAULT_ISO_KEY"]
+__all__ = ["calibrate", "find_calibration_input", "CalibrationResult", "DEFAULT_ISO_KEY", "MANIFEST_NAMES"]
 
 DEFAULT_ISO_KEY = "default"
+#: EMVA 1288 figures copied into the profile's ``source["emva1288"]`` (per ISO key) for ``profile show``.
+EMVA_SOURCE_KEYS = ("quantum_efficiency", "temporal_dark_noise_dn", "saturation_variance_max_dn",
+                    "saturation_capacity_emva_e", "absolute_sensitivity_threshold_e", "snr_max_db",
+                    "dynamic_range_emva_db")
 _CLIP_PILE_FRACTION = 0.01  # a frame whose maximum code holds >= 1 % of its pixels is clipped there
 _CLIPPED_PAIR_FRACTION = 1e-4  # flat pairs with more clipped pixels stay out of the gain fit
 _BLACK_CLIP_FRACTION = 1e-3
@@ -470,6 +474,7 @@ def _calibrate_iso(iso_key: str, records: list[FrameRecord], *, cfa: str | None,
         fig["dynamic_range_stops"] = math.log2(fig["full_well_e"] / fig["read_noise_e"])
     else:
         fig["dynamic_range_stops"] = None
+    fig["quantum_efficiency"] = None  # no photon counts: see calibrate()
     # per CFA channel
     if "p00" in views:
         names = _channel_names(checker.cfa)
@@ -579,6 +584,42 @@ def _median(values):
 
 
 # -- public entry ------------------------------------------------------------------------------
+MANIFEST_NAMES = ("manifest.json", "manifest.csv")
+
+
+def find_calibration_input(path: str | os.PathLike) -> Path:
+    """The calibration input ``path`` names: the file itself, or, for a folder, the frame manifest
+    (``manifest.json``, else ``manifest.csv``) or the one EMVA 1288 descriptor inside it.
+
+    Raises
+    ------
+    MissingFileError
+        ``path`` does not exist.
+    InputError
+        A folder holding neither, or several descriptors and no manifest (they are named).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise MissingFileError(f"{path}: no such file or folder; expected a frame manifest (.csv/.json), an EMVA "
+                               "1288 descriptor, or a folder holding one")
+    if not path.is_dir():
+        return path
+    for name in MANIFEST_NAMES:
+        if (path / name).is_file():
+            return path / name
+    descriptors = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in (".txt", "")
+                         and is_descriptor(p))
+    if len(descriptors) == 1:
+        return descriptors[0]
+    if descriptors:
+        raise InputError(f"{path}: a folder with {len(descriptors)} EMVA 1288 descriptors "
+                         f"({', '.join(p.name for p in descriptors)}); name the one to use")
+    found = sorted(p.name for p in path.iterdir())
+    listing = ", ".join(found[:6]) + (" ..." if len(found) > 6 else "") if found else "nothing"
+    raise InputError(f"{path}: a folder; expected a frame manifest ({' or '.join(MANIFEST_NAMES)}) or an EMVA 1288 "
+                     f"descriptor (a .txt file starting with 'v' and 'n' lines) inside it, found {listing}")
+
+
 def calibrate(
     frames_or_manifest,
     *,
@@ -593,7 +634,8 @@ def calibrate(
     Parameters
     ----------
     frames_or_manifest : str, Path, list of FrameRecord or EmvaDescriptor
-        A manifest (CSV or JSON), an EMVA 1288 descriptor file, frame records (see
+        A manifest (CSV or JSON), an EMVA 1288 descriptor file, a folder holding one of them
+        (:func:`find_calibration_input`), frame records (see
         :func:`lfproc.calib.frames.read_manifest`) or a parsed descriptor.
     name : str, optional
         Profile name (default: the manifest's ``name``, else the input's file stem).
@@ -627,7 +669,7 @@ def calibrate(
     if isinstance(frames_or_manifest, EmvaDescriptor):
         return _calibrate_emva(frames_or_manifest, name=name, adc_bits=adc_bits, cfa_pattern=cfa_pattern, iso=iso)
     if isinstance(frames_or_manifest, (str, os.PathLike)):
-        source_path = Path(frames_or_manifest)
+        source_path = find_calibration_input(frames_or_manifest)
         if source_path.is_file() and source_path.suffix.lower() not in (".csv", ".json") and is_descriptor(source_path):
             return _calibrate_emva(read_descriptor(source_path), name=name, adc_bits=adc_bits,
                                    cfa_pattern=cfa_pattern, iso=iso)
@@ -640,6 +682,8 @@ def calibrate(
     if missing:
         raise InputError(f"{missing[0].where or missing[0].path}: missing ISO; every frame needs its ISO")
     cfa = cfa_pattern or options.get("cfa_pattern") or next((r.cfa_pattern for r in records if r.cfa_pattern), None)
+    if cfa is not None and str(cfa).upper() == MONO.upper():
+        cfa = MONO
     by_iso: dict[int, list[FrameRecord]] = {}
     for r in records:
         key = int(round(r.iso))
@@ -674,6 +718,8 @@ def calibrate(
         for v in (fig.get("saturation_dn"),):
             if v:
                 max_code = max(max_code, int(v))
+    unknown["quantum_efficiency"] = ("a frame manifest gives no photon counts, so no quantum efficiency, responsivity "
+                                     "or linearity (an EMVA 1288 descriptor's 'b' lines give them)")
     if len(set(shapes.values())) > 1:
         detail = ", ".join(f"ISO {k}: {s[0]}x{s[1]}" for k, s in shapes.items())
         raise CalibrationError(f"frames of different sizes across ISOs ({detail}); one sensor mode per calibration")
@@ -764,6 +810,14 @@ def _build(*, figures, curves, hot_pixels, bias_frames, unknown, name, adc_bits,
         bias_frames=bias_frames, unknown=profile_unknown, source=source,
         bias_frame_std_dn=bias_frame_std_dn or {}, flat_field=flat_field, flat_field_std=flat_field_std or 0.0,
     )
+    # one saturation code everywhere: the profile's (full well or ADC, whichever clips first)
+    for key, f in figures.items():
+        iso_int = iso_keys[key] if iso_keys else int(key)
+        if f.get("gain_dn_per_e") and f.get("full_well_e"):
+            f["saturation_dn"] = profile.saturation_dn(iso_int)
+    source["emva1288"] = {str(iso_keys[key] if iso_keys else key): {k: f.get(k) for k in EMVA_SOURCE_KEYS}
+                          for key, f in figures.items()}
+    profile = replace(profile, source=dict(source))
     notes = [f"ISO {k}: {n}" for k, f in figures.items() for n in f.get("notes", [])]
     return CalibrationResult(profile=profile, figures=figures, unknown=unknown, read_noise_model=read_model,
                              curves=curves, hot_pixels=hot_pixels, notes=notes, source=source)
@@ -776,33 +830,55 @@ def _calibrate_emva(desc: EmvaDescriptor, *, name, adc_bits, cfa_pattern, iso) -
     iso_int = int(iso) if iso is not None else 100
     unknown = {f"isos.{key}.{k}": v for k, v in unk_emva.items()}
     K = res["K"]
+    notes = list(data.notes)
+    # The profile's saturation code: where the over-exposed pairs pile up (as for frame manifests);
+    # the EMVA mean at the variance maximum (mu_y.sat) lies below it and is kept as its own figure.
+    saturation_dn = data.clip_code(_CLIP_PILE_FRACTION)
+    if saturation_dn is None and res["u_y_sat"] is not None:
+        saturation_dn = float(round(res["u_y_sat"]))
+        notes.append("no bright pair piles up at a top code: the saturation code is the mean at the variance "
+                     "maximum (EMVA mu_y.sat), rounded")
+    full_well = (saturation_dn - res["black_level_dn"]) / K if saturation_dn is not None else None
     fig = {
         "gain_dn_per_e": K,
         "read_noise_e": res["sigma_d"],
         "read_noise_dn": res["sigma_d"] * K,
         "temporal_dark_noise_dn": res["sigma_y_dark"],
         "black_level_dn": res["black_level_dn"],
-        "full_well_e": res["u_e_sat"],
-        "saturation_dn": res["u_y_sat"],
+        "full_well_e": full_well,
+        "saturation_dn": saturation_dn,
+        "saturation_variance_max_dn": res["u_y_sat"],
+        "saturation_capacity_emva_e": res["u_e_sat"],
+        "saturation_capacity_emva_photons": res["u_p_sat"],
+        "absolute_sensitivity_threshold_e": res["u_e_min"],
+        "absolute_sensitivity_threshold_photons": res["u_p_min"],
         "dark_current_e_per_s": res["u_I_mean"],
         "dark_current_var_e_per_s": res["u_I_var"],
         "dsnu_dn": res["DSNU1288_DN"],
         "dsnu_e": res["DSNU1288"],
         "prnu": res["PRNU1288"] / 100 if res["PRNU1288"] is not None else None,
         "quantum_efficiency": res["QE"],
+        "responsivity_dn_per_photon": res["R"],
+        "linearity_error_min_percent": res["LE_min"],
+        "linearity_error_max_percent": res["LE_max"],
         "dynamic_range_emva": res["DR"],
         "dynamic_range_emva_db": res["DR_dB"],
         "snr_max": res["SNR_max"],
         "snr_max_db": res["SNR_max_dB"],
         "emva1288": {k: v for k, v in res.items() if k != "curves"},
-        "notes": list(data.notes),
+        "notes": notes,
     }
     if fig["dark_current_e_per_s"] is not None and fig["dark_current_e_per_s"] < 0:
         fig["notes"].append(f"dark current from the mean is negative ({fig['dark_current_e_per_s']:.4g} e-/s); 0 recorded")
         fig["dark_current_e_per_s"] = 0.0
-    for src, dst in (("u_e_sat", "full_well_e"), ("u_I_mean", "dark_current_e_per_s"), ("DSNU1288", "dsnu_e"),
-                     ("PRNU1288", "prnu")):
-        if src in unk_emva:
+    for src, dst in (("u_p_sat", "full_well_e"), ("u_e_sat", "saturation_capacity_emva_e"),
+                     ("u_p_sat", "saturation_capacity_emva_photons"), ("u_y_sat", "saturation_variance_max_dn"),
+                     ("u_I_mean", "dark_current_e_per_s"), ("u_I_var", "dark_current_var_e_per_s"),
+                     ("DSNU1288", "dsnu_e"), ("PRNU1288", "prnu"), ("QE", "quantum_efficiency"),
+                     ("QE", "absolute_sensitivity_threshold_photons"), ("LE_min", "linearity_error_min_percent"),
+                     ("LE_max", "linearity_error_max_percent"), ("DR", "dynamic_range_emva_db"),
+                     ("SNR_max", "snr_max_db")):
+        if src in unk_emva and fig[dst] is None:
             unknown[f"isos.{key}.{dst}"] = unk_emva[src]
     if fig["full_well_e"] and fig["read_noise_e"]:
         fig["dynamic_range_stops"] = math.log2(fig["full_well_e"] / fig["read_noise_e"])
@@ -819,8 +895,14 @@ def _calibrate_emva(desc: EmvaDescriptor, *, name, adc_bits, cfa_pattern, iso) -
     unknown_all = dict(unknown)
     if iso is None:
         unknown_all["iso"] = f"EMVA 1288 data give no ISO; the figures are stored under ISO {iso_int}"
+    extra = {"emva1288_release": desc.release}
+    if cfa_pattern is None:
+        # an EMVA 1288 data set is one channel: a monochrome sensor (a colour camera is measured per channel)
+        cfa_pattern = MONO
+        extra["cfa_pattern_from"] = "EMVA 1288 data are one channel: recorded as a monochrome sensor (give --cfa " \
+                                    "for a Bayer sensor)"
     return _build(figures={key: fig}, curves=curves, hot_pixels={}, bias_frames={}, unknown=unknown_all,
                   name=name or (desc.path.stem if desc.path else "emva1288"), adc_bits=adc_bits or desc.bits,
-                  bits_from="argument" if adc_bits else "descriptor 'n' line", max_code=int(res["u_y_sat"] or 0),
+                  bits_from="argument" if adc_bits else "descriptor 'n' line", max_code=int(saturation_dn or 0),
                   cfa=cfa_pattern, input_path=desc.path, kind="emva1288", iso_keys={key: iso_int},
-                  extra_source={"emva1288_release": desc.release})
+                  extra_source=extra)

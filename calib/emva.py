@@ -269,6 +269,16 @@ class EmvaData:
     bits: int
     shape: tuple[int, int]
     notes: list[str] = field(default_factory=list)
+    max_code: np.ndarray | None = None
+    frac_at_max: np.ndarray | None = None
+
+    def clip_code(self, min_fraction: float = 0.01) -> float | None:
+        """The output code where over-exposed pairs pile up: the largest code that holds at least
+        ``min_fraction`` of a bright pair's pixels, or ``None`` when no pair piles up."""
+        if self.max_code is None:
+            return None
+        piles = [float(m) for m, f in zip(self.max_code, self.frac_at_max) if f >= min_fraction]
+        return max(piles) if piles else None
 
 
 def _read(path: Path, checker: FrameChecker, desc: EmvaDescriptor) -> np.ndarray:
@@ -338,7 +348,9 @@ def reduce_descriptor(desc: EmvaDescriptor) -> EmvaData:
             )
         a, b = (_read(p, checker, desc) for p in step.images)
         u_y, s2_y = pair_statistics(a, b)
-        rows.append((step.photons or 0.0, step.exposure_ns * 1e-9, u_y, s2_y, u_d, s2_d))
+        top = max(int(a.max()), int(b.max()))
+        at_top = (np.count_nonzero(a == top) + np.count_nonzero(b == top)) / (a.size + b.size)
+        rows.append((step.photons or 0.0, step.exposure_ns * 1e-9, u_y, s2_y, u_d, s2_d, top, at_top))
     rows.sort(key=lambda r: (r[0], r[1]))
     arr = np.array(rows, dtype=np.float64)
     spatial = spatial_dark = None
@@ -353,7 +365,7 @@ def reduce_descriptor(desc: EmvaDescriptor) -> EmvaData:
         spatial_dark = _stack(stacks["dark"][0].images, checker, desc)
     return EmvaData(texp_s=arr[:, 1], u_p=arr[:, 0], u_y=arr[:, 2], s2_y=arr[:, 3], u_ydark=arr[:, 4],
                     s2_ydark=arr[:, 5], spatial=spatial, spatial_dark=spatial_dark, bits=desc.bits,
-                    shape=(desc.height, desc.width), notes=notes)
+                    shape=(desc.height, desc.width), notes=notes, max_code=arr[:, 6], frac_at_max=arr[:, 7])
 
 
 # -- evaluation -----------------------------------------------------------------------------

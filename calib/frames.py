@@ -49,6 +49,7 @@ IMAGE_SUFFIXES = (".png", ".tif", ".tiff")
 RAW_SUFFIXES = (".dng", ".cr2", ".cr3", ".nef", ".arw", ".orf", ".rw2", ".raf", ".pef", ".srw", ".3fr", ".iiq",
                 ".erf", ".mrw", ".nrw", ".x3f", ".rwl", ".kdc", ".dcr", ".sr2", ".mef", ".mos")
 _CFA = ("RGGB", "GRBG", "GBRG", "BGGR")
+_MONO = "mono"  # a monochrome sensor (calib.profile.MONO)
 _COLUMNS = ("path", "kind", "iso", "exposure_s", "temperature_c", "group", "cfa_pattern")
 
 
@@ -151,8 +152,10 @@ def _record(row: dict[str, Any], *, base: Path, where: str, defaults: dict[str, 
     cfa = row.get("cfa_pattern") or defaults.get("cfa_pattern")
     if cfa is not None:
         cfa = str(cfa).strip().upper() or None
-        if cfa is not None and cfa not in _CFA:
-            raise InputError(f"{where}: cfa_pattern: expected one of {', '.join(_CFA)}, found {cfa!r}")
+        if cfa == _MONO.upper():
+            cfa = _MONO
+        if cfa is not None and cfa not in _CFA + (_MONO,):
+            raise InputError(f"{where}: cfa_pattern: expected one of {', '.join(_CFA + (_MONO,))}, found {cfa!r}")
     p = Path(str(path).strip().replace("\\", "/"))
     if not p.is_absolute():
         p = base / p
@@ -351,7 +354,7 @@ def read_frame(path: str | os.PathLike) -> Frame:
 
 def _channel_names(cfa: str | None) -> tuple[str, str, str, str]:
     """Names of the CFA positions (0,0), (0,1), (1,0), (1,1): R, Gr, Gb, B (Gr = green in the red row)."""
-    if cfa is None:
+    if cfa is None or cfa == _MONO:
         return ("c00", "c01", "c10", "c11")
     names = []
     for i, letter in enumerate(cfa):

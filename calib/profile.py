@@ -31,15 +31,21 @@ from typing import Any
 
 import numpy as np
 
+from lfproc._util import FrozenDict, frozen_array
 from lfproc._version import __version__
 from lfproc.errors import FileFormatError, MissingFileError, ProfileError
-from lfproc.io._atomic import atomic_file
+from lfproc.io._atomic import atomic_outputs
 
 __all__ = [
+    "MONO",
+    "BAYER_PATTERNS",
+    "describe_profile",
     "CameraProfile",
     "IsoFigures",
     "load_profile",
     "save_profile",
+    "is_profile_file",
+    "bias_sidecar_path",
     "paper_gain_dn_per_e",
     "SHIPPED_PROFILES",
     "SCHEMA",
@@ -50,7 +56,10 @@ SCHEMA = "lfproc.camera_profile"
 SCHEMA_VERSION = 1
 _PROFILE_DIR = Path(__file__).resolve().parent / "profiles"
 SHIPPED_PROFILES = ("illum", "paper-none", "paper-low", "paper-medium", "paper-high")
-_CFA = ("RGGB", "GRBG", "GBRG", "BGGR")
+#: ``cfa_pattern`` of a monochrome sensor (no colour filter array).
+MONO = "mono"
+BAYER_PATTERNS = ("RGGB", "GRBG", "GBRG", "BGGR")
+_CFA = BAYER_PATTERNS + (MONO,)
 
 
 def paper_gain_dn_per_e(iso: float, *, adc_bits: int, full_well_e: float) -> float:
@@ -93,7 +102,9 @@ class CameraProfile:
     gamma : float
         Power-law response exponent (1 = linear raw).
     cfa_pattern : str
-        Bayer layout as a row-major string from the top-left pixel, e.g. ``"RGGB"``.
+        Bayer layout as a row-major string from the top-left pixel, e.g. ``"RGGB"``, or
+        ``"mono"`` for a monochrome sensor (no colour filters; the coded-mask camera simulator
+        needs a Bayer layout and refuses it).
     isos : dict
         ISO (int) -> :class:`IsoFigures`.
     dark_current_e_per_s : float
@@ -112,6 +123,12 @@ class CameraProfile:
         Measured per-pixel PRNU gain map (mean 1 per CFA position) from flat frames.
     flat_field_std : float
         Relative standard deviation of each value of ``flat_field`` as an estimate (0 = exact).
+
+        ISO -> master bias frame (DN, a finite 2-D array).
+
+    ``isos`` and ``bias_frames`` are stored as read-only mappings and the bias frames as
+    read-only arrays (copied once unless already read-only), so a validated profile
+    cannot be changed; use :func:`dataclasses.replace` to derive a new one.
     unknown : dict
         Field name -> reason, for figures the calibration could not determine.
     """
@@ -158,6 +175,7 @@ class CameraProfile:
             if ff.ndim != 2 or not np.issubdtype(ff.dtype, np.floating) or not np.isfinite(ff).all() or (ff <= 0).any():
                 raise ProfileError(f"profile {self.name}: flat_field: expected an (H, W) map of positive finite gains, "
                                    f"found {ff.dtype} of shape {ff.shape}")
+            object.__setattr__(self, "flat_field", frozen_array(self.flat_field))
         if self.cfa_pattern not in _CFA:
             raise ProfileError(f"profile {self.name}: cfa_pattern: expected one of {', '.join(_CFA)}, got {self.cfa_pattern!r}")
         if not self.isos:
@@ -169,11 +187,34 @@ class CameraProfile:
                 value = getattr(figs, f.name)
                 if value is not None:
                     _check_number(value, f"isos.{iso}.{f.name}", low=0, strict=f.name == "gain_dn_per_e")
+        object.__setattr__(self, "isos", FrozenDict(self.isos))
+        frames = {}
+        for iso, frame in dict(self.bias_frames).items():
+            arr = np.asarray(frame)
+            if arr.ndim != 2 or arr.size == 0 or not (np.issubdtype(arr.dtype, np.number) and np.isfinite(arr).all()):
+                raise ProfileError(
+                    f"profile {self.name}: bias frame of ISO {iso}: expected a finite 2-D array, found "
+                    f"{arr.dtype} of shape {arr.shape}"
+                )
+            frames[iso] = frozen_array(frame)
+        object.__setattr__(self, "bias_frames", FrozenDict(frames))
+
+    def __setstate__(self, state):
+        # pickle and copy.deepcopy bring new (writeable) bias arrays: make them read-only again
+        for name, value in state.items():
+            if name == "bias_frames":
+                value = FrozenDict({k: frozen_array(v) for k, v in value.items()})
+            object.__setattr__(self, name, value)
 
     # -- lookups ---------------------------------------------------------------------
     @property
     def iso_values(self) -> list[int]:
         return sorted(self.isos)
+
+    @property
+    def is_mono(self) -> bool:
+        """True for a monochrome sensor (``cfa_pattern == "mono"``)."""
+        return self.cfa_pattern == MONO
 
     def iso_figures(self, iso: float) -> IsoFigures:
         """Figures of one ISO; :class:`ProfileError` naming the available ISOs otherwise."""
@@ -334,6 +375,36 @@ def _check_number(value, name: str, *, integer: bool = False, low=None, high=Non
         raise ProfileError(f"field {name!r}: expected a value <= {high}, found {value!r}")
 
 
+def describe_profile(profile: CameraProfile) -> dict[str, Any]:
+    """The profile as one JSON-ready dict: its JSON form, the bias frames' shapes and the
+    saturation code of every ISO (:meth:`CameraProfile.saturation_dn`, ``None`` when unknown).
+    ``lfproc profile show`` and ``lfproc info`` print it."""
+    doc = profile.to_json()
+    doc = {"kind": "camera_profile", **doc}
+    doc["bias_frames"] = {str(iso): list(frame.shape) for iso, frame in sorted(profile.bias_frames.items())}
+    doc["flat_field"] = None if profile.flat_field is None else list(profile.flat_field.shape)
+    doc["saturation_dn"] = {}
+    for iso in profile.iso_values:
+        try:
+            doc["saturation_dn"][str(iso)] = profile.saturation_dn(iso)
+        except ProfileError:  # an ISO without gain: its saturation is unknown
+            doc["saturation_dn"][str(iso)] = None
+    return doc
+
+
+def is_profile_file(path: str | os.PathLike) -> bool:
+    """True when ``path`` is a JSON file whose ``schema`` is a camera profile's."""
+    path = Path(path)
+    if not path.is_file() or path.suffix.lower() != ".json":
+        return False
+    try:
+        with open(path, encoding="utf-8") as fh:
+            head = fh.read(4096)
+    except (OSError, UnicodeDecodeError):
+        return False
+    return f'"{SCHEMA}"' in head
+
+
 def load_profile(name_or_path: str | os.PathLike | CameraProfile) -> CameraProfile:
     """Load a shipped profile by name (see :data:`SHIPPED_PROFILES`) or a profile JSON file."""
     if isinstance(name_or_path, CameraProfile):
@@ -374,23 +445,29 @@ def load_profile(name_or_path: str | os.PathLike | CameraProfile) -> CameraProfi
     return CameraProfile.from_json(doc, where=str(path), bias_frames=bias, flat_field=flat)
 
 
+def bias_sidecar_path(path: str | os.PathLike) -> Path:
+    """Where :func:`save_profile` writes the bias frames of a profile saved at ``path``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.bias.npz")
+
+
 def save_profile(profile: CameraProfile, path: str | os.PathLike, *, force: bool = False) -> Path:
-    """Write a profile as JSON (atomically), its bias frames in a sidecar ``<stem>.bias.npz`` and its
-    flat-field map in ``<stem>.flat.npz``."""
+    """Write a profile as JSON, its bias frames in a sidecar ``<stem>.bias.npz`` and its flat-field
+    map in ``<stem>.flat.npz``; all or none (:func:`lfproc.io.atomic_outputs`)."""
     path = Path(path)
     doc = profile.to_json()
-    if profile.bias_frames:
-        side = path.with_name(f"{path.stem}.bias.npz")
-        with atomic_file(side, force=force) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez_compressed(fh, **{f"iso_{iso}": frame for iso, frame in profile.bias_frames.items()})
-        doc["bias_frame_file"] = side.name
+    outputs = [path, bias_sidecar_path(path)] if profile.bias_frames else [path]
+    flat_at = len(outputs)
     if profile.flat_field is not None:
-        side = path.with_name(f"{path.stem}.flat.npz")
-        with atomic_file(side, force=force) as tmp:
-            with open(tmp, "wb") as fh:
+        outputs.append(path.with_name(f"{path.stem}.flat.npz"))
+    with atomic_outputs(outputs, force=force) as staged:
+        if profile.bias_frames:
+            with open(staged[1], "wb") as fh:
+                np.savez_compressed(fh, **{f"iso_{iso}": frame for iso, frame in profile.bias_frames.items()})
+            doc["bias_frame_file"] = outputs[1].name
+        if profile.flat_field is not None:
+            with open(staged[flat_at], "wb") as fh:
                 np.savez_compressed(fh, flat_field=np.asarray(profile.flat_field, dtype=np.float32))
-        doc["flat_field_file"] = side.name
-    with atomic_file(path, force=force) as tmp:
-        tmp.write_text(json.dumps(doc, indent=2))
+            doc["flat_field_file"] = outputs[flat_at].name
+        staged[0].write_text(json.dumps(doc, indent=2))
     return path

@@ -8,7 +8,8 @@ Files written (atomically, as one folder):
   exposure time with their fitted lines (the dark current);
 * ``read_noise_vs_iso.png``: read noise (DN and e-) against ISO with the fitted
   ``sqrt(K^2 sigma_pre^2 + sigma_post^2)``;
-* ``summary.md``: a table of every ISO's figures, the read-noise model and the unknowns.
+* ``summary.md``: tables of every ISO's profile figures and EMVA 1288 figures, the read-noise
+  model and the unknowns; ``figures.json``: every figure.
 """
 
 from __future__ import annotations
@@ -24,9 +25,10 @@ from lfproc.io._atomic import atomic_dir
 
 from .calibrate import CalibrationResult
 
-__all__ = ["write_report", "summary_markdown", "SUMMARY_COLUMNS"]
+__all__ = ["write_report", "summary_markdown", "SUMMARY_COLUMNS", "PROFILE_COLUMNS", "EMVA_COLUMNS", "format_value"]
 
-SUMMARY_COLUMNS = (
+#: The figures stored in the camera profile (``lfproc profile show`` prints the same values).
+PROFILE_COLUMNS = (
     ("gain_dn_per_e", "gain (DN/e-)"),
     ("read_noise_dn", "read noise (DN)"),
     ("read_noise_e", "read noise (e-)"),
@@ -37,14 +39,27 @@ SUMMARY_COLUMNS = (
     ("dark_current_var_e_per_s", "dark current, var. (e-/s)"),
     ("saturation_dn", "saturation (DN)"),
     ("full_well_e", "full well (e-)"),
-    ("saturation_capacity_emva_e", "EMVA sat. capacity (e-)"),
-    ("dynamic_range_emva_db", "DR EMVA (dB)"),
-    ("snr_max_db", "SNR max (dB)"),
     ("hot_pixels", "hot pixels"),
 )
+#: EMVA 1288 figures (Release 4 "Linear"); the saturation capacity is taken at the variance
+#: maximum, below the saturation code where over-exposed frames pile up.
+EMVA_COLUMNS = (
+    ("quantum_efficiency", "QE eta"),
+    ("responsivity_dn_per_photon", "responsivity R (DN/p)"),
+    ("temporal_dark_noise_dn", "sigma_y.dark (DN)"),
+    ("saturation_variance_max_dn", "mu_y.sat (DN)"),
+    ("saturation_capacity_emva_e", "sat. capacity mu_e.sat (e-)"),
+    ("absolute_sensitivity_threshold_e", "abs. sensitivity mu_e.min (e-)"),
+    ("snr_max_db", "SNR max (dB)"),
+    ("dynamic_range_emva_db", "DR (dB)"),
+    ("linearity_error_min_percent", "linearity error min (%)"),
+    ("linearity_error_max_percent", "linearity error max (%)"),
+)
+SUMMARY_COLUMNS = PROFILE_COLUMNS + EMVA_COLUMNS
 
 
-def _fmt(value) -> str:
+def format_value(value) -> str:
+    """A figure for tables: ``unknown`` for None, 5 significant digits for floats."""
     if value is None:
         return "unknown"
     if isinstance(value, float):
@@ -52,15 +67,29 @@ def _fmt(value) -> str:
     return str(value)
 
 
-def summary_markdown(result: CalibrationResult) -> str:
-    """The Markdown summary: a table (one column per ISO), read-noise model, unknowns, notes."""
+_fmt = format_value
+
+
+def _table(result: CalibrationResult, columns) -> list[str]:
     isos = list(result.figures)
-    lines = [f"# Calibration of `{result.profile.name}`", "",
-             f"lfproc {__version__}; input: {result.source.get('input')}; method: {result.source.get('method')}", "",
-             "| figure | " + " | ".join(f"ISO {k}" for k in isos) + " |",
-             "|---|" + "---|" * len(isos)]
-    for key, label in SUMMARY_COLUMNS:
+    lines = ["| figure | " + " | ".join(f"ISO {k}" for k in isos) + " |", "|---|" + "---|" * len(isos)]
+    for key, label in columns:
         lines.append(f"| {label} | " + " | ".join(_fmt(result.figures[k].get(key)) for k in isos) + " |")
+    return lines
+
+
+def summary_markdown(result: CalibrationResult) -> str:
+    """The Markdown summary: the profile's figures and the EMVA 1288 figures (one column per ISO),
+    read-noise model, unknowns, notes."""
+    profile = result.profile
+    sensor = "monochrome" if profile.is_mono else f"Bayer {profile.cfa_pattern}"
+    lines = [f"# Calibration of `{profile.name}`", "",
+             f"lfproc {__version__}; input: {result.source.get('input')}; method: {result.source.get('method')}; "
+             f"sensor: {sensor}, {profile.adc_bits} bit", "",
+             "## Profile figures", ""]
+    lines += _table(result, PROFILE_COLUMNS)
+    lines += ["", "## EMVA 1288 figures", ""]
+    lines += _table(result, EMVA_COLUMNS)
     m = result.read_noise_model
     lines += ["", "## Read noise across ISOs", ""]
     if m.get("sigma_pre_e") is not None:

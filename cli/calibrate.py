@@ -1,7 +1,8 @@
 """``lfproc calibrate``: measure a camera profile, or simulate the frames a profile predicts.
 
 * ``lfproc calibrate INPUT -o PROFILE.json [--report DIR] [--json] [--force]``: INPUT is a
-  frame manifest (CSV/JSON) or an EMVA 1288 descriptor.
+  frame manifest (CSV/JSON), an EMVA 1288 descriptor, or a folder holding one of them (as
+  ``calibrate simulate-frames`` writes).
 * ``lfproc calibrate simulate-frames --profile PROFILE -o DIR [--format manifest|emva]
   [--seed N] [--size H W] [--iso ISO ...] [--force]``.
 
@@ -18,9 +19,6 @@ from lfproc.errors import InputError
 from ._common import add_json, emit, parse_size
 
 SIMULATE = "simulate-frames"
-_KEYS = ("gain_dn_per_e", "read_noise_dn", "read_noise_e", "black_level_dn", "full_well_e", "dark_current_e_per_s",
-         "dark_current_var_e_per_s", "saturation_dn", "dsnu_e", "prnu", "dynamic_range_emva_db", "snr_max_db",
-         "hot_pixels")
 
 
 def register(sub, common) -> None:
@@ -30,14 +28,17 @@ def register(sub, common) -> None:
         "saturation and full well per ISO from a frame manifest (CSV/JSON) or an EMVA 1288 descriptor. "
         f"lfproc calibrate {SIMULATE} --profile PROFILE -o DIR: write the frames a profile predicts.",
     )
-    p.add_argument("input", metavar="INPUT", help=f"manifest (.csv/.json), EMVA 1288 descriptor, or the word {SIMULATE}")
+    p.add_argument("input", metavar="INPUT", help="manifest (.csv/.json), EMVA 1288 descriptor, a folder holding one "
+                   f"(manifest.json, manifest.csv or one descriptor), or the word {SIMULATE}")
     p.add_argument("-o", "--output", required=True, type=Path,
                    help="profile JSON to write (calibrate) or output folder (simulate-frames)")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.add_argument("--report", type=Path, metavar="DIR", help="write PNG plots and a Markdown summary to DIR")
     p.add_argument("--name", help="profile name (default: from the input)")
     p.add_argument("--adc-bits", type=int, help="ADC resolution (default: from the frames)")
-    p.add_argument("--cfa", choices=("RGGB", "GRBG", "GBRG", "BGGR"), help="CFA layout when the frames lack one")
+    p.add_argument("--cfa", choices=("RGGB", "GRBG", "GBRG", "BGGR", "mono"),
+                   help="CFA layout when the frames lack one; 'mono' for a monochrome sensor (the default for EMVA "
+                        "1288 data; frame manifests default to RGGB, recorded as unknown)")
     add_json(p)
     g = p.add_argument_group(f"{SIMULATE} options")
     g.add_argument("--profile", help="camera profile: shipped name or JSON path")
@@ -71,19 +72,28 @@ def run(args) -> int:
     if given:
         raise InputError(f"{', '.join(given)}: only for 'lfproc calibrate {SIMULATE}'")
     from lfproc.calib.calibrate import calibrate
-    from lfproc.calib.profile import save_profile
-    from lfproc.io import check_output
+    from lfproc.calib.profile import bias_sidecar_path, save_profile
+    from lfproc.io import atomic_outputs, check_output
 
     check_output(args.output, force=args.force)
     if args.report is not None:
         check_output(args.report, force=args.force)
     result = calibrate(args.input, name=args.name, adc_bits=args.adc_bits, cfa_pattern=args.cfa)
-    save_profile(result.profile, args.output, force=args.force)
+    # the profile, its bias sidecar and the report are published together: a run killed at any
+    # moment leaves all of them or none (and a re-run as it was then succeeds)
+    outputs = [args.output]
+    if result.profile.bias_frames:
+        outputs.append(bias_sidecar_path(args.output))
+    if args.report is not None:
+        outputs.append(args.report)
+    with atomic_outputs(outputs, force=args.force) as staged:
+        save_profile(result.profile, staged[0])
+        if args.report is not None:
+            from lfproc.calib.report import write_report
+
+            write_report(result, staged[-1])
     out = {"profile": str(args.output), "name": result.profile.name}
     if args.report is not None:
-        from lfproc.calib.report import write_report
-
-        write_report(result, args.report, force=args.force)
         out["report"] = str(args.report)
     if args.json:
         out["isos"] = result.figures
@@ -98,15 +108,23 @@ def run(args) -> int:
 
 
 def _table(result) -> None:
+    """The profile's figures, then the EMVA 1288 figures (the same tables as the report's summary)."""
+    from lfproc.calib.report import EMVA_COLUMNS, PROFILE_COLUMNS
+
     isos = list(result.figures)
-    width = max(len(k) for k in _KEYS)
-    print(f"{'ISO':<{width}}  " + "  ".join(f"{k:>12}" for k in isos))
-    for key in _KEYS:
-        cells = []
-        for iso in isos:
-            v = result.figures[iso].get(key)
-            text = "unknown" if v is None else (f"{v:.6g}" if isinstance(v, float) else str(v))
-            cells.append(f"{text:>12}")
-        print(f"{key:<{width}}  " + "  ".join(cells))
+    profile = result.profile
+    print(f"sensor  {'monochrome' if profile.is_mono else 'Bayer ' + profile.cfa_pattern}, {profile.adc_bits} bit")
+    width = max(len(k) for k, _ in PROFILE_COLUMNS + EMVA_COLUMNS)
+    for title, columns in (("profile figures", PROFILE_COLUMNS), ("EMVA 1288 figures", EMVA_COLUMNS)):
+        print()
+        print(f"{title:<{width}}  " + "  ".join(f"{'ISO ' + k:>12}" for k in isos))
+        for key, _ in columns:
+            cells = []
+            for iso in isos:
+                v = result.figures[iso].get(key)
+                text = "unknown" if v is None else (f"{v:.6g}" if isinstance(v, float) else str(v))
+                cells.append(f"{text:>12}")
+            print(f"{key:<{width}}  " + "  ".join(cells))
+    print()
     for k, why in sorted(result.unknown.items()):
         print(f"unknown {k}: {why}")

@@ -48,6 +48,11 @@ def run(args) -> int:
         "manifest": report["manifest"],
     }
     emit(result, as_json=args.json)
+    processed = set(report["processed"])
+    for row in report["rows"]:
+        if row["scene"] in processed:
+            for message in row.get("warnings", []):
+                print(f"lfproc dataset: scene {row['scene']}: warning: {message}", file=sys.stderr)
     if failed:
         for name, message in failed.items():
             print(f"lfproc dataset: scene {name} failed: {message}", file=sys.stderr)

@@ -21,6 +21,13 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
+    from lfproc.errors import OutputExistsError
+
+    if args.output.exists() and not args.force:
+        raise OutputExistsError(
+            f"{args.output}: the output folder exists (an earlier demo?); run 'lfproc demo -o {args.output} --force' "
+            "to replace it, or give another folder with -o DIR")
+
     def log(message: str) -> None:
         if not args.json:
             print(f"  {message}", file=sys.stderr, flush=True)

@@ -10,8 +10,10 @@ from ._common import add_json, emit
 
 
 def register(sub, common) -> None:
-    p = sub.add_parser("info", parents=[common], help="describe a light field, image or capture file",
-                       description="Print the shape, value range, dynamic range, saturation and metadata of a file.")
+    p = sub.add_parser("info", parents=[common], help="describe a light field, image, capture or profile file",
+                       description="Print the shape, value range, dynamic range, saturation and metadata of a file: "
+                                   "a light field (EXR, folder of views), an image, a Lytro file, a coded capture "
+                                   "(.capture.npz) or a camera profile (JSON).")
     p.add_argument("path", type=Path, help="light-field file or folder, image, Lytro file, capture or profile")
     p.add_argument("--nonfinite", choices=("raise", "zero", "clip"), default="raise",
                    help="what to do with NaN/Inf samples (default: refuse the file)")
@@ -20,5 +22,12 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    emit(describe(args.path, nonfinite=args.nonfinite), as_json=args.json)
+    doc = describe(args.path, nonfinite=args.nonfinite)
+    if doc.get("kind") == "camera_profile" and not args.json:
+        from .profile import print_profile
+
+        print(f"kind  camera_profile\npath  {doc['path']}")
+        print_profile(doc)
+        return 0
+    emit(doc, as_json=args.json)
     return 0

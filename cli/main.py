@@ -2,7 +2,8 @@
 
 Expected errors (any :class:`lfproc.LfprocError`, and OS errors on files) print one line
 ``lfproc COMMAND: error: ...`` on stderr and exit with code 2; ``--debug`` shows the
-traceback instead. Bad options are reported by argparse, also with code 2.
+traceback instead. lfproc's warnings (:class:`lfproc.errors.LfprocWarning`) print one line
+``lfproc COMMAND: warning: ...`` each and do not change the exit code. Bad options are reported by argparse, also with code 2.
 """
 
 from __future__ import annotations
@@ -10,9 +11,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
+from functools import partial
 
 from lfproc._version import __version__
-from lfproc.errors import LfprocError
+from lfproc.errors import LfprocError, LfprocWarning
 
 # One module of lfproc.cli per sub-command, in the order `lfproc --help` lists them.
 COMMANDS = (
@@ -30,6 +33,7 @@ COMMANDS = (
     "virtual-illum",
     "whites",
     "decode",
+    "extract",
     "calibrate",
     "profile",
     "dictionary",
@@ -53,6 +57,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None, *, command: str, show) -> None:
+    if issubclass(category, LfprocWarning):
+        print(f"lfproc {command}: warning: {message}", file=sys.stderr)
+    else:
+        show(message, category, filename, lineno, file, line)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``lfproc`` with ``argv`` (default: ``sys.argv[1:]``); return the exit code."""
     parser = build_parser()
@@ -61,7 +72,12 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # argparse: --help/--version (0) or a bad option (2)
         return int(exc.code or 0)
     try:
-        return int(args.run(args) or 0)
+        with warnings.catch_warnings():
+            # lfproc's own warnings are shown as one line each (once per message), whatever the
+            # interpreter's filters say; other warnings keep the usual handling
+            warnings.simplefilter("default", LfprocWarning)
+            warnings.showwarning = partial(_show_warning, command=args.command, show=warnings.showwarning)
+            return int(args.run(args) or 0)
     except (LfprocError, OSError) as exc:
         if args.debug:
             raise

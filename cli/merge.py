@@ -12,8 +12,10 @@ def register(sub, common) -> None:
         "merge", parents=[common], help="merge an exposure bracket into an HDR light field",
         description="Merge INPUTs (Lytro captures, lfproc light-field EXRs or view folders, camera raws, 8/16-bit "
                     "JPEG/PNG/TIFF with EXIF) taken with different exposures into one HDR light field (1x1 views "
-                    "for 2-D images). ml: noise-aware maximum likelihood (needs a camera profile; writes the "
-                    "variance); debevec: hat weights, with camera-response recovery for 8-bit images. Default: "
+                    "for 2-D images). ml: noise-aware inverse-variance estimator, writes the variance (raw or "
+                    "linear data: needs a camera profile and ISOs; 8-bit images: recovered camera response, "
+                    "noise measured on the bracket, no profile or ISO); debevec: Debevec & Malik hat weights in "
+                    "the log domain, with camera-response recovery for 8-bit images. Default: "
                     "debevec for 8-bit images or without a profile, ml otherwise. Pixels saturated in every "
                     "exposure get the shortest exposure's saturation value and are counted.")
     p.add_argument("inputs", nargs="+", type=Path, metavar="INPUT", help="the bracket, one file per exposure")
@@ -37,7 +39,7 @@ def run(args) -> int:
 
     from lfproc.bracket import merge_files
     from lfproc.errors import InputError
-    from lfproc.io import check_output, write_lightfield
+    from lfproc.io import atomic_outputs, check_output, write_lightfield
     from lfproc.lightfield import LightField
 
     if args.output.suffix.lower() != ".exr":
@@ -49,13 +51,14 @@ def run(args) -> int:
     isos = parse_floats(args.isos, option="--isos") if args.isos else None
     merged, info = merge_files(args.inputs, method=args.method, profile=args.profile, exposures_s=exposures,
                                isos=isos, white_db=args.white_db, n_iter=args.iterations, random_state=args.seed)
-    write_lightfield(merged, args.output, force=args.force)
-    if args.mask is not None:
-        mask = np.asarray(info["saturated_everywhere"], dtype=np.float32)
-        if mask.ndim == 5:
-            mask = mask.max(axis=-1, keepdims=True)
-        write_lightfield(LightField(data=mask, source=f"saturated-everywhere mask of {args.output}"), args.mask,
-                         force=args.force)
+    outputs = [args.output] if args.mask is None else [args.output, args.mask]
+    with atomic_outputs(outputs, force=args.force) as staged:  # both outputs or neither
+        write_lightfield(merged, staged[0])
+        if args.mask is not None:
+            mask = np.asarray(info["saturated_everywhere"], dtype=np.float32)
+            if mask.ndim == 5:
+                mask = mask.max(axis=-1, keepdims=True)
+            write_lightfield(LightField(data=mask, source=f"saturated-everywhere mask of {args.output}"), staged[1])
     v, u = merged.views
     h, w = merged.size
     result = {

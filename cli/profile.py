@@ -6,9 +6,12 @@ PROFILE is a shipped profile name (``illum``, ``paper-none``, ``paper-low``,
 
 from __future__ import annotations
 
-from lfproc.errors import ProfileError
+from lfproc.calib.calibrate import EMVA_SOURCE_KEYS
+from lfproc.calib.profile import describe_profile
 
 from ._common import add_json, emit
+
+__all__ = ["describe_profile", "register", "run_show", "print_profile"]
 
 _ISO_KEYS = ("gain_dn_per_e", "read_noise_e", "read_noise_dn", "dark_current_e_per_s", "black_level_dn", "full_well_e",
              "dsnu_dn", "prnu")
@@ -26,45 +29,48 @@ def register(sub, common) -> None:
     show.set_defaults(run=run_show)
 
 
-def describe_profile(profile) -> dict:
-    """The profile as one JSON-ready dict (its JSON form plus the bias frames' shapes)."""
-    doc = profile.to_json()
-    doc["bias_frames"] = {str(iso): list(frame.shape) for iso, frame in sorted(profile.bias_frames.items())}
-    doc["flat_field"] = None if profile.flat_field is None else list(profile.flat_field.shape)
-    doc["saturation_dn"] = {}
-    for iso in profile.iso_values:
-        try:
-            doc["saturation_dn"][str(iso)] = profile.saturation_dn(iso)
-        except ProfileError:  # an ISO without gain: its saturation is unknown
-            doc["saturation_dn"][str(iso)] = None
-    return doc
-
-
 def run_show(args) -> int:
     from lfproc.calib.profile import load_profile
 
-    profile = load_profile(args.profile)
-    doc = describe_profile(profile)
+    doc = describe_profile(load_profile(args.profile))
     if args.json:
         emit(doc, as_json=True)
         return 0
+    print_profile(doc)
+    return 0
+
+
+def print_profile(doc: dict) -> None:
+    """Print a :func:`describe_profile` dict as text (``profile show``, ``info PROFILE.json``)."""
     head = {k: doc[k] for k in ("name", "description", "adc_bits", "white_level_dn", "black_level_dn", "full_well_e",
                                 "gamma", "cfa_pattern", "dark_current_e_per_s", "prnu", "dsnu_e")}
+    if head["cfa_pattern"] == "mono":
+        head["cfa_pattern"] = "mono (monochrome sensor)"
     if doc["bias_frames"]:
         head["bias_frames"] = ", ".join(f"ISO {k}: {v[0]}x{v[1]}" for k, v in doc["bias_frames"].items())
     if doc["flat_field"]:
         head["flat_field"] = f"{doc['flat_field'][0]}x{doc['flat_field'][1]} (relative std {doc['flat_field_std']:.3g})"
     emit(head, as_json=False)
     print()
-    width = max(len(k) for k in _ISO_KEYS + ("saturation_dn",))
-    isos = [str(i) for i in profile.iso_values]
+    emva = (doc.get("source") or {}).get("emva1288") or {}
+    emva_keys = sorted({k for figs in emva.values() if isinstance(figs, dict) for k in figs},
+                       key=lambda k: _EMVA_ORDER.index(k) if k in _EMVA_ORDER else len(_EMVA_ORDER))
+    width = max(len(k) for k in _ISO_KEYS + ("saturation_dn",) + tuple(emva_keys))
+    isos = list(doc["isos"])
     print(f"{'ISO':<{width}}  " + "  ".join(f"{i:>10}" for i in isos))
     for key in _ISO_KEYS:
         print(f"{key:<{width}}  " + "  ".join(_cell(doc["isos"][i][key]) for i in isos))
     print(f"{'saturation_dn':<{width}}  " + "  ".join(_cell(doc["saturation_dn"][i]) for i in isos))
+    if emva_keys:
+        print()
+        print(f"{'EMVA 1288 (calibration)':<{width}}  " + "  ".join(f"{i:>10}" for i in isos))
+        for key in emva_keys:
+            print(f"{key:<{width}}  " + "  ".join(_cell((emva.get(i) or {}).get(key)) for i in isos))
     for key, why in sorted(doc["unknown"].items()):
         print(f"unknown {key}: {why}")
-    return 0
+
+
+_EMVA_ORDER = EMVA_SOURCE_KEYS
 
 
 def _cell(value) -> str:

@@ -36,6 +36,9 @@ def register(sub, common) -> None:
     p.add_argument("--relative-exposures", default=None, help="exposure of each shot relative to --exposure-s")
     p.add_argument("--radiance-scale", type=float, default=None,
                    help="electrons/s per light-field unit (default: automatic, recorded in the capture)")
+    p.add_argument("--reference-exposure-s", type=float, default=0.004,
+                   help="exposure at which the automatic radiance scale saturates the scene's brightest expected "
+                        "signal (default 0.004); --exposure-s longer than this saturates more, as in a camera")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: drawn and recorded)")
     add_json(p)
     p.set_defaults(run=run)
@@ -62,6 +65,7 @@ def run(args) -> int:
         baseline=args.baseline,
         relative_exposures=rel,
         radiance_scale=args.radiance_scale,
+        reference_exposure_s=args.reference_exposure_s,
         random_state=args.seed,
     )
     emit(summary, as_json=args.json)

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from ._util import freeze
 from .errors import DependencyError, FileFormatError, InputError, MissingFileError
 from .lightfield import LightField
 
@@ -41,6 +42,9 @@ __all__ = [
     "read_exif_exposure",
     "read_bracket",
     "merge_files",
+    "CAMERA_RESPONSES",
+    "camera_response",
+    "simulate_ldr_bracket",
 ]
 
 LYTRO_SUFFIXES = (".lfr", ".lfp")
@@ -115,7 +119,7 @@ def _read_ldr(path: Path) -> LightField:
     else:
         raise FileFormatError(f"{path}: expected 8- or 16-bit samples, found {raw.dtype}")
     attrs["exif"] = exif
-    return LightField(data=np.ascontiguousarray(data)[None, None], units="relative",
+    return LightField(data=freeze(np.ascontiguousarray(data))[None, None], units="relative",
                       colour_space="camera-rgb" if data.shape[-1] == 3 else "luminance",
                       exposure_s=exif["exposure_s"], iso=exif["iso"], saturation_level=1.0, source=str(path),
                       attrs=attrs)
@@ -141,7 +145,7 @@ def _read_raw(path: Path) -> LightField:
     exif = read_exif_exposure(path)
     t = float(t) if t else exif["exposure_s"]
     iso = float(iso) if iso else exif["iso"]
-    return LightField(data=(rgb.astype(np.float32) / 65535)[None, None], units="relative", colour_space="camera-rgb",
+    return LightField(data=freeze(rgb.astype(np.float32) / 65535)[None, None], units="relative", colour_space="camera-rgb",
                       exposure_s=t, iso=iso, saturation_level=1.0, source=str(path),
                       attrs={"raw_black_level": black, "raw_white_level": white, "exif": exif})
 
@@ -285,7 +289,8 @@ def merge_files(
         with_variance = all(lf.variance is not None and lf.units != "dn" for lf in lfs)
         method = "debevec" if codes8 or (profile is None and not with_variance) else "ml"
     own_variance = all(lf.variance is not None and lf.units != "dn" for lf in lfs)
-    if method == "ml" and not own_variance and isos is None and any(lf.iso is None for lf in lfs):
+    codes8 = any(lf.attrs.get("codes_bits") == 8 for lf in lfs)
+    if method == "ml" and not own_variance and not codes8 and isos is None and any(lf.iso is None for lf in lfs):
         bad = next(p for p, lf in zip(paths, lfs) if lf.iso is None)
         raise InputError(f"{bad}: no ISO in its metadata; method ml needs one (give --isos)")
     merged, info = merge_lightfields(lfs, method=method, profile=profile, n_iter=n_iter, random_state=random_state,
@@ -293,3 +298,136 @@ def merge_files(
     merged = merged.replace(attrs=dict(merged.attrs) | {"sources": [str(p) for p in paths]})
     info["method"] = method
     return merged, info
+
+
+# -- synthetic 8-bit brackets with a known answer --------------------------------------------------
+
+CAMERA_RESPONSES = ("camera", "srgb")
+
+
+def _srgb_oetf(x: np.ndarray) -> np.ndarray:
+    import colour
+
+    return np.asarray(colour.models.eotf_inverse_sRGB(np.clip(x, 0, 1)), dtype=np.float64)
+
+
+def camera_response(x, kind: str = "camera") -> np.ndarray:
+    """Normalised code ``f(x)`` in [0, 1] of linear sensor exposure ``x`` (clipped at 1 for ``srgb``, 2 for ``camera``).
+
+    ``"srgb"``: the sRGB encoding (colour-science), clipping at ``x = 1``. ``"camera"``: a
+    camera-JPEG-like curve, an extended-Reinhard highlight shoulder ``y = x (1 + x / 4) / (1 + x)``
+    (reaching 1 at ``x = 2``: one stop of highlight roll-off) followed by the sRGB encoding;
+    measured consumer-camera responses (e.g. the DoRF database of Grossberg & Nayar) share
+    that shape: sRGB-like in the shadows, compressed in the highlights.
+    """
+    from ._util import check_choice
+
+    check_choice("response", kind, CAMERA_RESPONSES)
+    x = np.clip(np.asarray(x, dtype=np.float64), 0, None)
+    if kind == "camera":
+        x = np.minimum(x, 2.0)
+        x = x * (1 + x / 4) / (1 + x)
+    return _srgb_oetf(x)
+
+
+def simulate_ldr_bracket(
+    radiance,
+    exposures_s: Sequence[float],
+    *,
+    response: str = "camera",
+    full_well_e: float = 20000.0,
+    read_noise_e: float = 3.0,
+    jpeg_quality: int | None = 90,
+    mid_grey: float = 0.18,
+    random_state=None,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """An 8-bit JPEG exposure bracket of a known HDR image, for testing merges against a reference.
+
+    Each exposure ``t``: linear exposure ``x = k L t`` (``k`` puts the median luminance at
+    ``mid_grey`` in the median exposure), photo-electrons ``Poisson(x * full_well_e)`` plus
+    Gaussian read noise, back to ``x``, the camera response :func:`camera_response`, rounding to
+    8-bit codes and a JPEG round trip through OpenCV (4:2:0 chroma subsampling, as cameras do).
+    The HDR image is the reference of the merged result (up to the scale ``k``).
+
+    Parameters
+    ----------
+    radiance : ndarray (H, W, 3) or LightField with one view
+        Linear RGB radiance (non-negative, finite).
+    exposures_s : sequence of floats
+    response : {"camera", "srgb"}
+    full_well_e, read_noise_e : float
+        Sensor noise (electrons at ``x = 1``; read noise in electrons).
+    jpeg_quality : int in 1..100, or None for no JPEG compression
+    mid_grey : float
+    random_state : int, Generator or None
+
+    Returns
+    -------
+    codes : ndarray (N, H, W, 3), uint8
+    info : dict
+        ``scale`` (``k``), ``response`` (kind), ``response_g`` (the true ``g = ln f^-1`` at the
+        code centres, ``g(128) = 0``, shape (256,)), ``well_exposed`` (H, W) mask: pixels whose
+        three channels are within codes 8..247 in at least one exposure (the pixels any merge can
+        recover), and the parameters.
+    """
+    import cv2
+
+    from ._util import check_random_state
+    from .lightfield import LightField
+
+    if isinstance(radiance, LightField):
+        if radiance.views != (1, 1):
+            raise InputError(f"radiance: expected one view, got a {radiance.views[0]}x{radiance.views[1]} light field")
+        radiance = radiance.data[0, 0]
+    L = np.asarray(radiance, dtype=np.float64)
+    if L.ndim != 3 or L.shape[2] != 3:
+        raise InputError(f"radiance: expected an RGB image (H, W, 3), got shape {L.shape}")
+    if not np.isfinite(L).all() or (L < 0).any():
+        raise InputError("radiance: expected finite non-negative values")
+    t = np.asarray(exposures_s, dtype=np.float64)
+    if t.ndim != 1 or t.size < 2 or not (np.isfinite(t).all() and (t > 0).all()):
+        raise InputError(f"exposures_s: expected two or more positive times, got {list(np.ravel(t))}")
+    if jpeg_quality is not None and not 1 <= int(jpeg_quality) <= 100:
+        raise InputError(f"jpeg_quality: expected 1..100 or None, got {jpeg_quality}")
+    for name, v in (("full_well_e", full_well_e), ("mid_grey", mid_grey)):
+        if not (np.isfinite(v) and v > 0):
+            raise InputError(f"{name}: expected a positive number, got {v}")
+    if not (np.isfinite(read_noise_e) and read_noise_e >= 0):
+        raise InputError(f"read_noise_e: expected a non-negative number, got {read_noise_e}")
+    camera_response(0.5, response)  # validates the name
+    rng = check_random_state(random_state)
+    Y = L @ np.array([0.2126, 0.7152, 0.0722])
+    positive = Y[Y > 0]
+    if positive.size == 0:
+        raise InputError("radiance: the image is black")
+    k = mid_grey / float(np.median(positive)) / float(np.median(t))
+    codes = []
+    for ti in t:
+        e = rng.poisson(np.minimum(L * k * ti * full_well_e, 1e12)).astype(np.float64)
+        if read_noise_e > 0:
+            e += rng.normal(0.0, read_noise_e, e.shape)
+        z = np.clip(np.round(255 * camera_response(e / full_well_e, response)), 0, 255).astype(np.uint8)
+        if jpeg_quality is not None:
+            ok, buf = cv2.imencode(".jpg", np.ascontiguousarray(z[..., ::-1]), [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
+            z = cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1]
+        codes.append(np.ascontiguousarray(z))
+    # the true inverse response at the code centres (code 0 and 255: a quarter code inside)
+    top = 2.0 if response == "camera" else 1.0
+    xs = np.geomspace(1e-9, top, 400_001)
+    ys = 255 * camera_response(xs, response)
+    zc = np.arange(256, dtype=np.float64)
+    zc[0], zc[255] = 0.25, 254.75
+    g = np.log(np.interp(zc, ys, xs))
+    lo, hi = np.interp([8.0, 247.0], ys, xs)
+    xt = L[None] * k * t[:, None, None, None]
+    well = ((xt >= lo) & (xt <= hi)).all(axis=-1).any(axis=0)
+    return np.stack(codes), {
+        "scale": k,
+        "response": response,
+        "response_g": g - g[128],
+        "well_exposed": well,
+        "exposures_s": t.tolist(),
+        "full_well_e": float(full_well_e),
+        "read_noise_e": float(read_noise_e),
+        "jpeg_quality": None if jpeg_quality is None else int(jpeg_quality),
+    }

@@ -7,6 +7,15 @@ used to build the white-image database of Lytro captures). When a scene holds Ly
 captures only those are the bracket; files named ``truth.*`` (the ground truth written by
 ``lfproc virtual-illum``) and hidden files are never part of it.
 
+Exposure times come from each input's metadata (EXIF ``ExposureTime``, lfproc's ``exposure_s``,
+Lytro metadata) unless the scene folder holds an **exposure file** (:data:`EXPOSURE_FILES`),
+which then gives them for every input of the bracket:
+
+* ``exposures.txt``: one line per input, ``NAME SECONDS`` (``img_1.jpg 1/8``; seconds as a
+  number or a fraction), or only ``SECONDS`` lines in the order of the inputs' sorted names;
+  ``#`` starts a comment;
+* ``exposures.json``: ``{"NAME": SECONDS, ...}`` or a list of seconds in that order.
+
 Layout of ``DATASET_DIR`` (every file written atomically)::
 
     scenes/<scene>/hdr.exr            the merged HDR light field
@@ -20,8 +29,8 @@ Layout of ``DATASET_DIR`` (every file written atomically)::
 Resuming: a scene whose done-record and outputs exist is skipped; its output folder is
 written as a whole (temporary folder, then rename) before the done-record, so an interrupted
 run leaves either a finished scene or none. A failed scene is reported and does not stop the
-others. A new run removes the hidden temporary folders a killed run left in ``scenes/``
-(run one build per data set at a time).
+others. A new run removes the hidden temporaries a killed run left (those whose process is gone:
+:func:`lfproc.io.clean_stale`).
 """
 
 from __future__ import annotations
@@ -32,16 +41,19 @@ import json
 import os
 import shutil
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ._version import __version__
 from ._util import file_sha256
-from .errors import InputError, MissingFileError
+from .errors import InputError, LfprocWarning, MissingFileError
 
 __all__ = [
     "Scene",
+    "EXPOSURE_FILES",
+    "read_exposure_file",
     "find_scenes",
     "process_scene",
     "build_dataset",
@@ -51,6 +63,8 @@ __all__ = [
 ]
 
 SCENE_OUTPUTS = ("hdr.exr", "preview.png", "histogram.png", "record.json")
+#: Per-scene exposure files, looked for in this order.
+EXPOSURE_FILES = ("exposures.txt", "exposures.json")
 MANIFEST_FIELDS = ("scene", "method", "exposures_s", "dynamic_range_stops", "saturated_fraction", "views", "size",
                    "units", "hdr", "preview", "histogram", "sources", "sha256")
 
@@ -63,6 +77,7 @@ class Scene:
     folder: Path
     inputs: tuple[Path, ...]
     caldata: Path | None = None
+    exposure_file: Path | None = None
 
 
 def _scene_of(folder: Path) -> Scene:
@@ -83,7 +98,86 @@ def _scene_of(folder: Path) -> Scene:
         elif p.is_dir():
             inputs.append(p)  # a folder of views
     lytro = [p for p in inputs if p.suffix.lower() in LYTRO_SUFFIXES]
-    return Scene(name=folder.name, folder=folder, inputs=tuple(lytro or inputs), caldata=caldata)
+    exposure_file = next((folder / n for n in EXPOSURE_FILES if (folder / n).is_file()), None)
+    return Scene(name=folder.name, folder=folder, inputs=tuple(lytro or inputs), caldata=caldata,
+                 exposure_file=exposure_file)
+
+
+def _seconds(text: str, where: str) -> float:
+    try:
+        if "/" in text:
+            num, den = text.split("/", 1)
+            value = float(num) / float(den)
+        else:
+            value = float(text)
+    except (ValueError, ZeroDivisionError):
+        raise InputError(f"{where}: expected seconds (a number or a fraction like 1/8), found {text!r}") from None
+    if not (value > 0 and value < float("inf")):
+        raise InputError(f"{where}: expected a positive exposure time in seconds, found {text!r}")
+    return value
+
+
+def read_exposure_file(path: str | os.PathLike, inputs) -> list[float]:
+    """Exposure times (s) of ``inputs`` (paths, in bracket order) from an exposure file (see the
+    module documentation); errors name the file and line and what is missing or extra."""
+    path = Path(path)
+    names = [Path(p).name for p in inputs]
+    order = sorted(range(len(names)), key=lambda i: names[i])
+    by_name: dict[str, float] = {}
+    in_order: list[float] = []
+    if path.suffix.lower() == ".json":
+        try:
+            doc = json.loads(path.read_text(encoding="utf-8"))
+        except (UnicodeDecodeError, ValueError) as exc:
+            raise InputError(f"{path}: not a JSON exposure file ({exc})") from None
+        if isinstance(doc, dict):
+            by_name = {str(k): _seconds(str(v), f"{path}: {k}") for k, v in doc.items()}
+        elif isinstance(doc, list):
+            in_order = [_seconds(str(v), f"{path}: item {i + 1}") for i, v in enumerate(doc)]
+        else:
+            raise InputError(f"{path}: expected an object {{\"NAME\": seconds}} or a list of seconds")
+    else:
+        for number, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+            line = raw.split("#", 1)[0].strip()
+            if not line:
+                continue
+            parts = line.split()
+            where = f"{path} line {number}"
+            if len(parts) == 1:
+                in_order.append(_seconds(parts[0], where))
+            elif len(parts) == 2:
+                by_name[parts[0]] = _seconds(parts[1], where)
+            else:
+                raise InputError(f"{where}: expected 'NAME SECONDS' or 'SECONDS', found {raw.strip()!r}")
+        if by_name and in_order:
+            raise InputError(f"{path}: mixes 'NAME SECONDS' and 'SECONDS' lines; use one form")
+    if by_name:
+        missing = [n for n in names if n not in by_name]
+        extra = sorted(set(by_name) - set(names))
+        if missing or extra:
+            raise InputError(f"{path}: " + "; ".join(
+                ([f"no exposure time for {', '.join(missing)}"] if missing else [])
+                + ([f"names not in the bracket: {', '.join(extra)}"] if extra else [])))
+        return [by_name[n] for n in names]
+    if len(in_order) != len(names):
+        raise InputError(f"{path}: {len(in_order)} exposure time(s) for {len(names)} inputs "
+                         f"({', '.join(sorted(names))})")
+    out = [0.0] * len(names)
+    for rank, i in enumerate(order):
+        out[i] = in_order[rank]
+    return out
+
+
+def _check_exposures(scene: Scene) -> None:
+    """Without an exposure file, every 2-D image of the bracket needs an EXIF exposure time."""
+    from .bracket import IMAGE_SUFFIXES_LDR, read_exif_exposure
+
+    for p in scene.inputs:
+        if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES_LDR and read_exif_exposure(p)["exposure_s"] is None:
+            raise InputError(
+                f"scene {scene.name}: {p.name} has no exposure time (no EXIF ExposureTime); write the bracket's "
+                f"times to {scene.folder / EXPOSURE_FILES[0]} ('NAME SECONDS' lines, e.g. '{p.name} 1/8') "
+                f"or {EXPOSURE_FILES[1]}")
 
 
 def find_scenes(scenes_dir: str | os.PathLike) -> list[Scene]:
@@ -125,7 +219,9 @@ def process_scene(
 ) -> dict[str, Any]:
     """Decode, merge and write one scene; return its manifest row (also written as records).
 
-    Writes ``scenes/<name>/`` (atomically, as a whole) and then ``done/<name>.json``.
+    Writes ``scenes/<name>/`` (atomically, as a whole) and then ``done/<name>.json``. lfproc's
+    warnings raised while merging (:class:`lfproc.errors.SaturationWarning`...) are recorded
+    in the row's ``warnings`` (``"Category: message"`` strings) instead of being emitted.
     """
     from .bracket import merge_files
     from .io import atomic_dir, atomic_file, write_lightfield
@@ -138,10 +234,27 @@ def process_scene(
     scene_out = out_dir / "scenes" / scene.name
     (out_dir / "scenes").mkdir(parents=True, exist_ok=True)
     (out_dir / "done").mkdir(parents=True, exist_ok=True)
+    exposures = None
+    if scene.exposure_file is not None:
+        exposures = read_exposure_file(scene.exposure_file, scene.inputs)
+    else:
+        _check_exposures(scene)
     with atomic_dir(scene_out, force=True) as tmp:
         white_db = _white_db(scene, tmp)
-        merged, info = merge_files(scene.inputs, method=method, profile=profile, white_db=white_db,
-                                   n_threads=n_threads)
+        # lfproc's warnings (saturation, convergence) belong to the scene: kept in its row, not
+        # printed by (or raised in) a worker process
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", LfprocWarning)
+            try:
+                merged, info = merge_files(scene.inputs, method=method, profile=profile, white_db=white_db,
+                                           exposures_s=exposures, n_threads=n_threads)
+            except InputError as exc:  # the command-line hint of lfproc merge does not apply here
+                message = str(exc).replace("give --exposures-s", f"write the bracket's times to "
+                                           f"{scene.folder / EXPOSURE_FILES[0]}")
+                raise InputError(message) from None
+        other = [w for w in caught if not issubclass(w.category, LfprocWarning)]
+        for w in other:  # not ours: pass them on as they were
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         if white_db is not None:
             shutil.rmtree(white_db, ignore_errors=True)
         write_lightfield(merged, tmp / "hdr.exr")
@@ -160,9 +273,11 @@ def process_scene(
             "preview": f"scenes/{scene.name}/preview.png",
             "histogram": f"scenes/{scene.name}/histogram.png",
             "sources": [str(p) for p in scene.inputs],
+            "exposure_file": str(scene.exposure_file) if scene.exposure_file else None,
             "sha256": [file_sha256(p) for p in scene.inputs],
             "lfproc_version": __version__,
             "seconds": round(time.perf_counter() - start, 3),
+            "warnings": [f"{w.category.__name__}: {w.message}" for w in caught if issubclass(w.category, LfprocWarning)],
         }
         (tmp / "record.json").write_text(json.dumps(row, indent=2))
     with atomic_file(out_dir / "done" / f"{scene.name}.json", force=True) as tmp:
@@ -205,7 +320,12 @@ def read_manifest(dataset_dir: str | os.PathLike) -> list[dict[str, Any]]:
 
 
 def _run_scene(scene: Scene, out_dir: str, method, profile) -> dict[str, Any]:
-    return process_scene(scene, out_dir, method=method, profile=profile, n_threads=1)
+    """Process one scene; a failure is returned as ``{"error": "Type: message"}`` (not raised, so
+    that Dask workers do not log it with a traceback: the build reports it in one line)."""
+    try:
+        return {"row": process_scene(scene, out_dir, method=method, profile=profile, n_threads=1)}
+    except Exception as exc:  # noqa: BLE001 - a failed scene must not stop the others
+        return {"error": f"{type(exc).__name__}: {exc}"}
 
 
 def build_dataset(
@@ -251,8 +371,10 @@ def build_dataset(
         from .calib import load_profile
 
         profile = load_profile(profile)
-    for stale in (out / "scenes").glob(".lfproc-tmp-*") if (out / "scenes").is_dir() else []:
-        shutil.rmtree(stale, ignore_errors=True)  # left by a killed run (one build per data set at a time)
+    from .io import clean_stale
+
+    for folder in (out, out / "scenes", out / "done"):
+        clean_stale(folder)  # temporaries left by killed runs (their process is gone)
     todo = [s for s in scenes if not _is_done(s, out)]
     skipped = [s.name for s in scenes if s not in todo]
     processed: list[str] = []
@@ -261,11 +383,11 @@ def build_dataset(
         bar = progress(total=len(todo), desc="scenes", disable=None if progress_bar is None else not progress_bar)
         if scheduler == "synchronous":
             for scene in todo:
-                try:
-                    _run_scene(scene, str(out), method, profile)
+                res = _run_scene(scene, str(out), method, profile)
+                if "error" in res:
+                    failed[scene.name] = res["error"]
+                else:
                     processed.append(scene.name)
-                except Exception as exc:  # noqa: BLE001 - a failed scene must not stop the others
-                    failed[scene.name] = f"{type(exc).__name__}: {exc}"
                 bar.update(1)
         else:
             _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, failed)
@@ -300,10 +422,11 @@ def _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, fa
         for future in as_completed(futures):
             scene = futures[future]
             exc = future.exception()
-            if exc is None:
-                processed.append(scene.name)
+            res = {"error": f"{type(exc).__name__}: {exc}"} if exc is not None else future.result()
+            if "error" in res:
+                failed[scene.name] = res["error"]
             else:
-                failed[scene.name] = f"{type(exc).__name__}: {exc}"
+                processed.append(scene.name)
             bar.update(1)
     finally:
         client.close()

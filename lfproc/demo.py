@@ -146,22 +146,20 @@ def stage_whites(ctx: _Context) -> dict[str, Any]:
     }
 
 
-def _decode_psnr(decoded: LightField, truth: LightField, border: int = 4) -> float:
-    """Linear PSNR over the samples the decoder marks usable, borders excluded, peak = max truth."""
-    from .lytro.decode import UNUSABLE_VARIANCE
+def _decode_scores(decoded: LightField, truth: LightField, info: dict[str, Any]) -> dict[str, float]:
+    """Linear PSNR of a decode against the truth (:mod:`lfproc.lytro.score`: the capture's clipped
+    truth left out, peak = 99.9th percentile of the rest, 4-pixel border excluded)."""
+    from .lytro.score import clip_level, score_decode
 
-    h = min(decoded.size[0], truth.size[0])
-    w = min(decoded.size[1], truth.size[1])
-    sl = (slice(None), slice(None), slice(border, h - border), slice(border, w - border))
-    a, b = decoded.data[sl], truth.data[sl]
-    ok = decoded.variance[sl] < UNUSABLE_VARIANCE
-    return float(10 * np.log10(b[ok].max() ** 2 / np.mean((a[ok] - b[ok]) ** 2)))
+    s = score_decode(decoded.data, truth.data, clip=clip_level(info))
+    return {"psnr_centre_db": round(s["psnr_centre_db"], 2), "psnr_all_views_db": round(s["psnr_all_views_db"], 2)}
 
 
 def stage_decode(ctx: _Context) -> dict[str, Any]:
     """Decode every capture of the bracket into 5x5 views (levels, devignetting with the selected white
     image, hot pixels, demosaicing, hexagonal-to-square resampling) and score the 0 EV decode against the
-    views the camera saw (linear PSNR over usable samples, 4-pixel border excluded)."""
+    views the camera saw (linear PSNR with the 99.9th percentile of the truth as peak, the samples the
+    capture clipped left out, 4-pixel border excluded)."""
     from .io import read_lightfield
     from .lytro.decode import decode_capture
 
@@ -180,7 +178,7 @@ def stage_decode(ctx: _Context) -> dict[str, Any]:
         "views": list(reference.views),
         "size": list(reference.size),
         "white_image": reference.attrs.get("white_image"),
-        "psnr_0ev_db": round(_decode_psnr(reference, truth), 2),
+        "psnr_0ev_db": _decode_scores(reference, truth, info),
     }
 
 
@@ -200,7 +198,7 @@ def stage_merge(ctx: _Context) -> dict[str, Any]:
     truth = ctx.state["illum_truth"]
     t0 = next(cap["exposure_s"] for cap in ctx.state["illum"]["captures"] if cap["exposure_ev"] == 0)
     h, w = (min(a, b) for a, b in zip(hdr.size, truth.size))
-    result = hdr.replace(data=hdr.data[:, :, :h, :w] * t0, variance=None, disparity=None)
+    result = hdr.replace(data=hdr.data[:, :, :h, :w] * t0, variance=None, disparity=None, exposure_s=t0)  # per second -> t0
     reference = truth.replace(data=truth.data[:, :, :h, :w], disparity=None, variance=None)
     scores = evaluate(result, reference, peak_luminance=c.peak_luminance)
     single = ctx.state["decoded"][[cap["exposure_ev"] for cap in ctx.state["illum"]["captures"]].index(0)]
@@ -220,15 +218,56 @@ def stage_merge(ctx: _Context) -> dict[str, Any]:
         "pu21_psnr_db_0ev_capture_alone": round(alone["pu21_psnr_db"], 2),
         "median_relative_error_above_10pct_of_peak": median_rel(0.1),
         "median_relative_error_above_1pct_of_peak": median_rel(0.01),
-        "note": "relative errors of dark samples follow the decoder's error floor (rms about 0.6 % of the "
-                "peak at 44 dB), which merging more exposures does not remove",
+        "note": "relative errors of dark samples follow the decoder's error floor (see the decode stage's "
+                "PSNR), which merging more exposures does not remove",
     }
+
+
+def _frames_contact_sheet(manifest: Path, out: Path) -> Path:
+    """One picture of a simulated calibration frame set: a row per ISO, columns bias, each dark
+    exposure and each flat level (the first frame of each set), each tile stretched to its own
+    1st-99th percentile and labelled."""
+    import cv2
+
+    from .calib.frames import read_frame, read_manifest
+
+    records, _ = read_manifest(manifest)
+    first: dict[tuple, Any] = {}
+    for r in records:
+        first.setdefault((int(round(r.iso)), r.kind, r.exposure_s), r)
+    isos = sorted({k[0] for k in first})
+    order = {"bias": 0, "dark": 1, "flat": 2}
+    columns = sorted({(k[1], k[2]) for k in first}, key=lambda c: (order.get(c[0], 3), c[1]))
+    tile, pad, label = 96, 4, 14
+    rows = []
+    for iso in isos:
+        cells = []
+        for kind, t in columns:
+            cell = np.full((tile + label, tile), 255, np.uint8)
+            rec = first.get((iso, kind, t))
+            if rec is not None:
+                x = read_frame(rec.path).data.astype(np.float32)
+                lo, hi = np.percentile(x, (1, 99))
+                img = np.clip((x - lo) / max(hi - lo, 1e-6) * 255, 0, 255).astype(np.uint8)
+                cell[label:] = cv2.resize(img, (tile, tile), interpolation=cv2.INTER_AREA)
+                text = f"{kind} {t:.3g}s" if kind != "bias" else "bias"
+                cv2.putText(cell, text, (2, label - 3), cv2.FONT_HERSHEY_PLAIN, 0.75, 0, 1, cv2.LINE_AA)
+            cells.append(np.pad(cell, ((0, pad), (0, pad)), constant_values=255))
+        head = np.full((tile + label + pad, 72), 255, np.uint8)
+        cv2.putText(head, f"ISO {iso}", (2, (tile + label) // 2), cv2.FONT_HERSHEY_PLAIN, 0.9, 0, 1, cv2.LINE_AA)
+        rows.append(np.hstack([head] + cells))
+    sheet = np.vstack(rows)
+    if not cv2.imwrite(str(out), sheet):
+        raise OSError(f"{out}: could not write the contact sheet")
+    return out
 
 
 def stage_calibrate(ctx: _Context) -> dict[str, Any]:
     """Calibrate a sensor: simulate the bias, dark and flat frames the paper's sensor (at the demo's
     noise level, with a stronger dark current so it is measurable) predicts, then measure gain,
-    read noise, dark current and full well per ISO from them and compare with the truth."""
+    read noise, dark current and full well per ISO from them and compare with the truth. The contact
+    sheet shows the first frame of each set (a row per ISO); the frames themselves are in
+    `calibration/simulated/frames/`."""
     from dataclasses import replace
 
     from .calib import load_profile, save_profile
@@ -240,7 +279,8 @@ def stage_calibrate(ctx: _Context) -> dict[str, Any]:
     base = load_profile(f"paper-{c.noise}")
     noisy = base.with_noise(read_noise_e=2.0, dark_current_e_per_s=50.0, name="demo-sensor-truth")
     truth = replace(noisy, isos={iso: f for iso, f in noisy.isos.items() if iso in c.isos})
-    manifest = simulate_frames(truth, ctx.path("calibration/frames"), size=(96, 96), seed=c.seed)
+    manifest = simulate_frames(truth, ctx.path("calibration/simulated"), size=(96, 96), seed=c.seed)
+    _frames_contact_sheet(manifest, ctx.path("calibration/frames_contact_sheet.png"))
     result = calibrate(manifest, name="demo-sensor")
     profile = result.profile
     save_profile(profile, ctx.path("calibration/profile.json"))
@@ -261,7 +301,7 @@ def stage_calibrate(ctx: _Context) -> dict[str, Any]:
     note = (f"read noise at ISO {low} is {expected_figures(truth, low)['read_noise_dn']:.2f} DN, below the "
             "quantisation step (1/sqrt(12) = 0.29 DN rms), so its relative error is the largest")
     return {"frames": sum(1 for _ in manifest.parent.rglob("*.png")), "worst_error_percent": worst, "per_iso": errors,
-            "note": note}
+            "note": note, "contact_sheet": "calibration/frames_contact_sheet.png"}
 
 
 def stage_simulate(ctx: _Context) -> dict[str, Any]:
@@ -316,6 +356,27 @@ STAGES: list[tuple[str, Callable[[_Context], dict[str, Any]]]] = [
 
 # -- driver ------------------------------------------------------------------------------------
 
+#: A folder with more files than this is listed in the Markdown report as one line.
+_MAX_FILES_LISTED = 8
+
+
+def _summarise_files(files: list[str]) -> tuple[list[str], list[str]]:
+    """The report's file list and its pictures: folders with many files (the raw calibration frames)
+    become one ``folder/ (N files)`` entry and their pictures are not embedded."""
+    by_folder: dict[str, list[str]] = {}
+    for f in files:
+        by_folder.setdefault(os.path.dirname(f), []).append(f)
+    listed, pictures = [], []
+    for folder, names in by_folder.items():
+        if len(names) > _MAX_FILES_LISTED:
+            kinds = sorted({os.path.splitext(n)[1].lstrip(".").upper() for n in names})
+            listed.append(f"{folder}/ ({len(names)} {'/'.join(kinds)} files)")
+        else:
+            listed += names
+            pictures += [n for n in names if n.endswith(".png")]
+    return listed, pictures
+
+
 def _report_markdown(config: DemoConfig, rows: list[dict[str, Any]], total_s: float) -> str:
     lines = [
         "# lfproc demo report",
@@ -326,14 +387,15 @@ def _report_markdown(config: DemoConfig, rows: list[dict[str, Any]], total_s: fl
         "| stage | time (s) | figures | files |",
         "|---|---|---|---|",
     ]
-    for row in rows:
+    summaries = [_summarise_files(row["files"]) for row in rows]
+    for row, (listed, _) in zip(rows, summaries):
         figures = "<br>".join(f"{k}: {json.dumps(v)}" for k, v in row["figures"].items())
-        files = "<br>".join(f"`{f}`" for f in row["files"])
+        files = "<br>".join(f"`{f}`" for f in listed)
         lines.append(f"| {row['stage']} | {row['seconds']:.1f} | {figures} | {files} |")
     lines.append("")
-    for row in rows:
+    for row, (_, pictures) in zip(rows, summaries):
         lines += [f"## {row['stage']}", "", row["doc"], ""]
-        lines += [f"![{f}]({f})" for f in row["files"] if f.endswith(".png")]
+        lines += [f"![{f}]({f})" for f in pictures]
         lines.append("")
     return "\n".join(lines)
 

@@ -26,7 +26,16 @@ __all__ = [
     "LfprocWarning",
     "SaturationWarning",
     "ConvergenceWarning",
+    "SATURATION_WARNING_FRACTION",
 ]
+
+#: :class:`SaturationWarning` is emitted when more than this share of the samples has lost its
+#: radiance to saturation: in a coded capture (:func:`lfproc.camera.simulate.simulate_capture`,
+#: :func:`lfproc.camera.capture.observations`) the share of its least sensitive pixels (lowest
+#: ISO x exposure) that are saturated -- higher ISOs saturate in highlights by design; in an
+#: exposure bracket (:mod:`lfproc.merge`) the share of samples saturated in every exposure.
+#: Captures of the synthetic scenes with the automatic radiance scale have about 0.1 %.
+SATURATION_WARNING_FRACTION = 0.10
 
 
 class LfprocError(Exception):
@@ -82,7 +91,8 @@ class LfprocWarning(UserWarning):
 
 
 class SaturationWarning(LfprocWarning):
-    """Input data are clipped (saturated) in a way that affects the result."""
+    """Input data are clipped (saturated) in a way that affects the result (more than
+    :data:`SATURATION_WARNING_FRACTION` of the samples)."""
 
 
 class ConvergenceWarning(LfprocWarning):

@@ -1,5 +1,5 @@
-"""Describe any file lfproc understands: light fields, images (and, as they come, Lytro
-captures, camera profiles and coded captures).
+"""Describe any file lfproc understands: light fields, images, Lytro files, coded captures
+and camera profiles.
 
 :func:`describe` looks at the file and hands it to the describer of its kind; each
 returns a JSON-serialisable dict whose first key is ``kind``.
@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import MissingFileError
+from .errors import FileFormatError, MissingFileError
 from .io.images import exr_parts
 from .io.lightfield_files import read_lightfield
 from .lightfield import LightField
@@ -52,6 +52,26 @@ def _is_lfp(path: Path) -> bool:
     return is_lfp(path)
 
 
+def _describe_json(path: Path) -> dict[str, Any]:
+    """A camera profile (``schema: lfproc.camera_profile``); any other JSON is named as such."""
+    import json
+
+    from .calib.profile import describe_profile, is_profile_file, load_profile
+
+    if is_profile_file(path):
+        out = describe_profile(load_profile(path))
+        out["path"] = str(path)
+        return out
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise FileFormatError(f"{path}: not a JSON file ({exc})") from None
+    schema = doc.get("schema") if isinstance(doc, dict) else None
+    raise FileFormatError(
+        f"{path}: a JSON file that lfproc info does not describe (schema {schema!r}); it describes camera profiles "
+        f"(schema 'lfproc.camera_profile'), light fields, images, Lytro files and coded captures")
+
+
 def describe(path: str | os.PathLike, **read_options) -> dict[str, Any]:
     """Describe the file or folder at ``path`` (see the module documentation)."""
     path = Path(path)
@@ -65,6 +85,8 @@ def describe(path: str | os.PathLike, **read_options) -> dict[str, Any]:
 
     if is_capture_file(path):
         return describe_capture(path)
+    if path.is_file() and path.suffix.lower() == ".json":
+        return _describe_json(path)
     lf = read_lightfield(path, **read_options)
     out = describe_lightfield(lf)
     out["path"] = str(path)

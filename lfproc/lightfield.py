@@ -25,6 +25,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from ._util import ReadOnlyState, frozen_array
 from .errors import InputError, ShapeError
 
 __all__ = ["LightField", "UNITS", "luminance", "clean_nonfinite", "REC709_LUMA"]
@@ -103,12 +104,16 @@ def clean_nonfinite(
 
 
 @dataclass(frozen=True, eq=False)
-class LightField:
+class LightField(ReadOnlyState):
     """A light field: float32 ``data`` of shape ``(V, U, H, W, C)`` and its metadata.
 
     Construction validates shape, dtype and values: data are converted to float32,
     must be finite and non-negative (see :func:`clean_nonfinite` to clean raw data
-    first). Instances are immutable: use :meth:`replace` to derive a new one.
+    first). Instances are immutable: use :meth:`replace` to derive a new one. The arrays
+    are read-only (writing into ``lf.data`` raises ``ValueError``), so a validated light
+    field cannot be corrupted; the caller's array is copied once unless it is already
+    read-only (:func:`lfproc._util.frozen_array`), and views such as :meth:`crop` share
+    memory with their parent.
 
     Parameters
     ----------
@@ -153,17 +158,17 @@ class LightField:
             raise ShapeError(f"light field: expected a numeric array, got dtype {data.dtype}")
         if min(data.shape) < 1:
             raise ShapeError(f"light field: every axis needs at least one element, got shape {data.shape}")
-        data = data.astype(np.float32, copy=False)
+        data = frozen_array(self.data, dtype=np.float32)
         clean_nonfinite(data, policy="raise", negative="raise", name="light field data")
         object.__setattr__(self, "data", data)
         if self.variance is not None:
-            var = np.asarray(self.variance).astype(np.float32, copy=False)
+            var = frozen_array(self.variance, dtype=np.float32)
             if var.shape != data.shape:
                 raise ShapeError(f"light field variance: expected shape {data.shape}, got {var.shape}")
             clean_nonfinite(var, policy="raise", negative="raise", name="light field variance")
             object.__setattr__(self, "variance", var)
         if self.disparity is not None:
-            disp = np.asarray(self.disparity).astype(np.float32, copy=False)
+            disp = frozen_array(self.disparity, dtype=np.float32)
             if disp.shape != data.shape[2:4]:
                 raise ShapeError(f"light field disparity: expected shape {data.shape[2:4]}, got {disp.shape}")
             if not np.isfinite(disp).all():

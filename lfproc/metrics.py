@@ -114,6 +114,9 @@ __all__ = [
     "pu2_psnr",
     "log_psnr",
     "mean_relative_error",
+    "log_luminance_error",
+    "align_result",
+    "ALIGN_MODES",
     "evaluate",
 ]
 
@@ -476,6 +479,34 @@ def log_psnr(result: Any, reference: Any, *, peak_luminance: float | None = 1000
     return float(_psnr_from_mse(mse, _log_peak(display_peak)))
 
 
+def log_luminance_error(result: Any, reference: Any, *, mask: Any = None, align: str = "gain") -> float:
+    """RMS of the natural-log luminance difference, after one fitted gain (``align="gain"``).
+
+    ``sqrt(mean((ln Y_res - ln Y_ref - c)^2))`` over the samples of ``mask`` (default: all)
+    whose reference luminance is positive; ``c`` is the mean log ratio (the least-squares gain,
+    since a merged radiance map from 8-bit images has an arbitrary scale) or 0 with
+    ``align="none"``. Luminance with :data:`PU21_LUMA` weights (RGB on the last axis; one
+    channel as is). Result luminances below 1e-12 of the reference mean are clamped there.
+    """
+    check_choice("align", align, ("gain", "none"))
+    res, ref = _check_pair(result, reference)
+    y_res = metric_luminance(res) if res.shape[-1] in (1, 3) and res.ndim > 1 else res
+    y_ref = metric_luminance(ref) if ref.shape[-1] in (1, 3) and ref.ndim > 1 else ref
+    keep = y_ref > 0
+    if mask is not None:
+        m = np.asarray(mask, dtype=bool)
+        if m.shape != keep.shape:
+            raise ShapeError(f"mask: expected shape {keep.shape} (the luminance), got {m.shape}")
+        keep &= m
+    if not keep.any():
+        raise InputError("log_luminance_error: no sample with a positive reference luminance in the mask")
+    floor = 1e-12 * float(y_ref[keep].mean())
+    d = np.log(np.maximum(y_res[keep], floor)) - np.log(y_ref[keep])
+    if align == "gain":
+        d = d - d.mean()
+    return float(np.sqrt(np.mean(d * d)))
+
+
 def mean_relative_error(result: Any, reference: Any, *, epsilon_relative: float = 1e-3) -> float:
     """Mean relative error of linear values: ``mean(|result - reference| / (reference + eps))``.
 
@@ -519,6 +550,91 @@ def _describe(lf: LightField) -> str:
     return f"{v}x{u} views of {h}x{w}x{c}"
 
 
+ALIGN_MODES = ("none", "exposure", "gain")
+
+
+def _exposure_product(lf: LightField) -> float | None:
+    if lf.exposure_s is None:
+        return None
+    return lf.exposure_s * (lf.iso / 100.0 if lf.iso is not None else 1.0)
+
+
+def align_result(result: LightField, reference: LightField, align: str = "none") -> tuple[LightField, dict[str, Any]]:
+    """Bring ``result`` to the reference's scale, or refuse a mismatch (``align="none"``).
+
+    * ``"none"``: no change. Different ``units``, or ``relative`` data of different known
+      exposures (``exposure_s`` x ISO/100; a merged radiance per second has ``exposure_s = 1``),
+      raise :class:`InputError` naming the two and the ``align`` choices.
+    * ``"exposure"``: same units required; the result is multiplied by the exposure ratio
+      ``(t_ref ISO_ref) / (t_res ISO_res)`` (both exposures must be known): exact for linear
+      data such as a decode and a merge of the same camera.
+    * ``"gain"``: one gain fitted on the data, ``exp(median(ln(Y_ref / Y_res)))`` over the pixels
+      whose reference luminance lies between its 1st and 99th percentiles of positive values
+      (clipped and black samples left out), for any units (HDR comparisons of relative data).
+
+    Returns the (new) result and ``{"align": mode, "gain": factor applied}``.
+    """
+    check_choice("align", align, ALIGN_MODES)
+    for name, lf in (("result", result), ("reference", reference)):
+        if not isinstance(lf, LightField):
+            raise InputError(f"evaluate: {name} must be a LightField, got {type(lf).__name__}")
+    e_res, e_ref = _exposure_product(result), _exposure_product(reference)
+    if align == "none":
+        if result.units != reference.units:
+            raise InputError(
+                f"evaluate: result is in {result.units!r}, reference in {reference.units!r}; expected the same units "
+                "(or align them: --align gain)"
+            )
+        if (result.units == "relative" and e_res is not None and e_ref is not None
+                and abs(math.log2(e_res / e_ref)) > 0.01):
+            raise InputError(
+                f"evaluate: result exposure {_describe_exposure(result)} differs from the reference's "
+                f"{_describe_exposure(reference)} ({math.log2(e_res / e_ref):+.2f} stops) in relative units; "
+                "align them (--align exposure, or --align gain)"
+            )
+        return result, {"align": "none", "gain": 1.0}
+    if align == "exposure":
+        if result.units != reference.units:
+            raise InputError(
+                f"evaluate: --align exposure needs the same units, got result {result.units!r} and reference "
+                f"{reference.units!r} (use --align gain)"
+            )
+        if e_res is None or e_ref is None:
+            which = "result" if e_res is None else "reference"
+            raise InputError(f"evaluate: --align exposure needs both exposure times; the {which} has none "
+                             "(use --align gain)")
+        gain = e_ref / e_res
+    else:
+        if result.shape != reference.shape:
+            raise ShapeError(
+                f"evaluate: result has {_describe(result)}, reference {_describe(reference)}; expected the same shape"
+            )
+        y_res = metric_luminance(result.data, channel_axis=-1)
+        y_ref = metric_luminance(reference.data, channel_axis=-1)
+        pos = y_ref > 0
+        if not pos.any():
+            raise InputError("evaluate: --align gain needs a reference with positive luminance")
+        lo, hi = np.percentile(y_ref[pos], [1, 99])
+        use = (y_ref >= lo) & (y_ref <= hi) & (y_res > 0)
+        if use.sum() < 16:
+            raise InputError("evaluate: --align gain found fewer than 16 pixels positive in both images")
+        gain = float(np.exp(np.median(np.log(y_ref[use]) - np.log(y_res[use]))))
+    attrs = dict(result.attrs) | {"evaluate_alignment": {"align": align, "gain": gain}}
+    aligned = result.replace(
+        data=result.data * np.float32(gain),
+        variance=None if result.variance is None else result.variance * np.float32(gain * gain),
+        units=reference.units, exposure_s=reference.exposure_s, iso=reference.iso,
+        saturation_level=None if result.saturation_level is None else result.saturation_level * gain,
+        attrs=attrs,
+    )
+    return aligned, {"align": align, "gain": float(gain)}
+
+
+def _describe_exposure(lf: LightField) -> str:
+    text = f"{lf.exposure_s:g} s"
+    return text + (f" at ISO {lf.iso:g}" if lf.iso is not None else "")
+
+
 def _check_lightfields(result: LightField, reference: LightField, scale_tolerance_stops: float | None) -> None:
     for name, lf in (("result", result), ("reference", reference)):
         if not isinstance(lf, LightField):
@@ -535,7 +651,7 @@ def _check_lightfields(result: LightField, reference: LightField, scale_toleranc
     if result.units != reference.units:
         raise InputError(
             f"evaluate: result is in {result.units!r}, reference in {reference.units!r}; expected the same units "
-            "(both images are scaled by one factor)"
+            "(or align them: --align gain)"
         )
     ref_max = float(reference.data.max())
     if not ref_max > 0:
@@ -557,7 +673,7 @@ def _check_lightfields(result: LightField, reference: LightField, scale_toleranc
 
 def evaluate(result: LightField, reference: LightField, *, peak_luminance: float | None = 1000.0,
              variant: Pu21Variant = "banding_glare", epsilon_relative: float = 1e-3,
-             scale_tolerance_stops: float | None = 4.0) -> dict[str, Any]:
+             scale_tolerance_stops: float | None = 4.0, align: str = "none") -> dict[str, Any]:
     """All metrics of a result light field against a reference, per view and averaged over views.
 
     Luminance (:data:`PU21_LUMA`) of every view is scaled by one factor,
@@ -576,7 +692,10 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
     epsilon_relative : regulariser of :func:`mean_relative_error`.
     scale_tolerance_stops : float or None, default 4
         Refuse pairs whose mean values differ by more than this many stops (different units or
-        exposure); ``None`` disables the check.
+        exposure) after the alignment; ``None`` disables the check.
+    align : {"none", "exposure", "gain"}
+        How the result is brought to the reference's scale first (:func:`align_result`):
+        ``"none"`` refuses different units or exposures.
 
     Returns
     -------
@@ -586,7 +705,10 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
         ``views``: list of dicts with ``v``, ``u`` and the same five figures, row-major;
         ``peak_luminance_cd_m2``, ``scale_factor`` (cd/m^2 per unit of the data),
         ``pu21_psnr_peak`` (256), ``pu2_psnr_peak``, ``log_psnr_peak``, ``angular_shape``,
-        ``size``, ``channels``, ``units``, ``pu21_variant``.
+        ``size``, ``channels``, ``units``, ``pu21_variant``; ``linear_psnr_db`` (PSNR of the
+        linear colour samples, peak = the reference's 99.9th percentile, so a small bright
+        source does not inflate it; per view too), ``linear_psnr_peak``; ``align`` and ``gain``
+        (the factor applied to the result).
 
     Raises
     ------
@@ -596,6 +718,7 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
         Different units, all-black reference, scales more than ``scale_tolerance_stops`` apart,
         ``peak_luminance=None`` with data not in cd/m2.
     """
+    result, alignment = align_result(result, reference, align)
     _check_lightfields(result, reference, scale_tolerance_stops)
     check_choice("variant", variant, PU21_VARIANTS)
     epsilon_relative = check_positive("epsilon_relative", epsilon_relative)
@@ -634,11 +757,17 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
     mre_v = np.stack([np.mean(_relative_error(result.data[v], reference.data[v], eps), axis=(1, 2, 3))
                       for v in range(nv)])
 
+    lin_peak = float(np.percentile(reference.data, 99.9))
+    if not lin_peak > 0:
+        lin_peak = float(reference.data.max())
+    lin_mse = np.stack([np.mean(np.square(result.data[v].astype(np.float64) - reference.data[v]), axis=(1, 2, 3))
+                        for v in range(nv)])
     figures = {
         "pu21_psnr_db": pu21_psnr_v,
         "pu21_ssim": pu21_ssim_v,
         "pu2_psnr_db": pu2_psnr_v,
         "log_psnr_db": log_psnr_v,
+        "linear_psnr_db": _psnr_from_mse(lin_mse, lin_peak),
         "mean_relative_error": mre_v,
     }
     views = [{"v": v, "u": u} | {k: float(a[v, u]) for k, a in figures.items()} for v in range(nv) for u in range(nu)]
@@ -651,10 +780,11 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
         "pu21_psnr_peak": PU21_PSNR_PEAK,
         "pu2_psnr_peak": pu2_peak,
         "log_psnr_peak": log_peak,
+        "linear_psnr_peak": lin_peak,
         "epsilon_relative": epsilon_relative,
         "angular_shape": [nv, nu],
         "size": [h, w],
         "channels": reference.channels,
         "units": reference.units,
-    }
+    } | alignment
     return out

@@ -207,41 +207,53 @@ def _preview_epi(lf: LightField, *, exposure_ev: float = 0.0, row: int | None = 
     return out
 
 
-def _preview_histogram(lf: LightField, *, exposure_ev: float = 0.0, width_px: int = 800,
-                       height_px: int = 500) -> np.ndarray:
-    """Histogram of log2 luminance (all views), with the robust dynamic range and saturation."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
+def _histogram_data(lf: LightField) -> dict[str, Any]:
+    """What the histogram preview draws: bin ``edges`` (stops, whole stops at both ends, 8 bins
+    a stop, 20 to 400 bins), ``fractions`` of all samples per bin, the 0.1/99.9 percentiles of
+    log2 luminance, the dynamic range, the saturated and zero fractions."""
     lum = lf.luminance().ravel()
     positive = lum[lum > 0]
-    n_zero = int(lum.size - positive.size)
-    dpi = 100
-    fig = Figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi)
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot(1, 1, 1)
-    dr = lf.dynamic_range_stops()
-    sat = lf.saturated_fraction()
+    out: dict[str, Any] = {"edges": None, "fractions": None, "p_lo": None, "p_hi": None,
+                           "dynamic_range_stops": lf.dynamic_range_stops(), "saturated": lf.saturated_fraction(),
+                           "zero_fraction": (lum.size - positive.size) / max(lum.size, 1)}
     if positive.size:
         stops = np.log2(positive.astype(np.float64))
         lo, hi = math.floor(stops.min()), math.ceil(stops.max())
         hi = max(hi, lo + 1)
         bins = np.linspace(lo, hi, int(min(400, max(20, 8 * (hi - lo)))) + 1)
         counts, edges = np.histogram(stops, bins=bins)
-        ax.stairs(counts / lum.size, edges, fill=True, color="#4c72b0")
+        out["edges"], out["fractions"] = edges, counts / lum.size
+        out["p_lo"], out["p_hi"] = (float(p) for p in np.percentile(stops, [0.1, 99.9]))
+    return out
+
+
+def _preview_histogram(lf: LightField, *, exposure_ev: float = 0.0, width_px: int = 800,
+                       height_px: int = 500) -> np.ndarray:
+    """Histogram of log2 luminance (all views), with the robust dynamic range and saturation."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    data = _histogram_data(lf)
+    dpi = 100
+    fig = Figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    if data["edges"] is not None:
+        edges = data["edges"]
+        ax.stairs(data["fractions"], edges, fill=True, color="#4c72b0")
         ax.set_yscale("log")
-        p_lo, p_hi = np.percentile(stops, [0.1, 99.9])
-        for p in (p_lo, p_hi):
+        for p in (data["p_lo"], data["p_hi"]):
             ax.axvline(p, color="#c44e52", linestyle="--", linewidth=1)
-        ax.axvspan(p_lo, p_hi, color="#c44e52", alpha=0.06)
-        ax.set_xlim(lo - 0.5, hi + 0.5)
+        ax.axvspan(data["p_lo"], data["p_hi"], color="#c44e52", alpha=0.06)
+        ax.set_xlim(edges[0] - 0.5, edges[-1] + 0.5)
     else:
         ax.text(0.5, 0.5, "no positive luminance", transform=ax.transAxes, ha="center")
     ax.set_xlabel("log2 luminance (stops)")
     ax.set_ylabel("fraction of pixels")
+    sat = data["saturated"]
     sat_text = "unknown (no saturation level)" if sat is None else f"{100 * sat:.3g} %"
-    text = (f"dynamic range (0.1-99.9 %): {dr:.1f} stops\n"
-            f"saturated: {sat_text}\nzero pixels: {100 * n_zero / max(lum.size, 1):.3g} %")
+    text = (f"dynamic range (0.1-99.9 %): {data['dynamic_range_stops']:.1f} stops\n"
+            f"saturated: {sat_text}\nzero pixels: {100 * data['zero_fraction']:.3g} %")
     ax.text(0.98, 0.97, text, transform=ax.transAxes, ha="right", va="top", fontsize=9,
             bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": "#999999"})
     nv, nu = lf.views

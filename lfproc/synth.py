@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from ._util import check_random_state
+from ._util import check_random_state, freeze
 from ._version import __version__
 from .errors import InputError, MissingFileError, ShapeError
 from .lightfield import REC709_LUMA, LightField, luminance
@@ -683,5 +683,5 @@ def synthesize(scene: str = "layers", *, size: tuple[int, int] = (256, 256), vie
                                 "disparity d at (y + (v-cv)*d, x + (u-cu)*d)",
         "lfproc_version": __version__,
     }
-    return LightField(data=data, disparity=disparity, units="relative", colour_space="linear-srgb",
+    return LightField(data=freeze(data), disparity=freeze(disparity), units="relative", colour_space="linear-srgb",
                       source=f"synth:{scene}", attrs=attrs)

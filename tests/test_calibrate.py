@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from lfproc.calib import load_profile
-from lfproc.calib.calibrate import calibrate
+from lfproc.calib.calibrate import calibrate, find_calibration_input
 from lfproc.calib.frames import read_manifest
 from lfproc.calib.report import write_report
 from lfproc.calib.simulate_frames import expected_figures, simulate_frames
@@ -85,12 +85,15 @@ def test_profile_and_read_noise_split(result, profile):
     m = result.read_noise_model
     assert m["sigma_pre_e"] == pytest.approx(2.8, rel=0.03)
     assert m["sigma_post_dn"] < 0.3
-    assert result.unknown == {}
+    assert list(result.unknown) == ["quantum_efficiency"]  # frames carry no photon counts
+    assert "photon counts" in result.unknown["quantum_efficiency"]
 
 
 def test_csv_and_json_manifests_agree(frames, result):
-    other = calibrate(frames.with_name("manifest.json"))
-    assert other.profile.name == "test-high-simulated"
+    # the folder simulate-frames wrote: calibrate finds its manifest.json
+    assert find_calibration_input(frames.parent) == frames.with_name("manifest.json")
+    other = calibrate(frames.parent)
+    assert other.profile.name == "test-high-simulated" and other.source["input"].endswith("manifest.json")
     for iso in ISOS:
         assert other.figures[str(iso)]["gain_dn_per_e"] == result.figures[str(iso)]["gain_dn_per_e"]
 
@@ -181,9 +184,19 @@ def test_report(result, tmp_path):
             "summary.md"} <= names
     for f in files:
         assert f.stat().st_size > 0
-    assert cv2.imread(str(tmp_path / "rep" / "photon_transfer.png")) is not None
+    assert cv2.imread(str(tmp_path / "rep" / "photon_transfer.png")).shape[2] == 3
     md = (tmp_path / "rep" / "summary.md").read_text()
-    assert "| gain (DN/e-) |" in md and "ISO 1600" in md and "sigma_pre" in md
+    # the table shows the measured figures, one column per ISO (the gains are near the true
+    # 0.2048, 0.819 and 3.276 DN/e- of paper-high at ISO 100, 400 and 1600)
+    row = next(line for line in md.splitlines() if line.startswith("| gain (DN/e-) |"))
+    cells = [float(c) for c in row.strip("|").split("|")[1:]]
+    np.testing.assert_allclose(cells, [result.figures[str(i)]["gain_dn_per_e"] for i in ISOS], rtol=1e-4)
+    np.testing.assert_allclose(cells, [0.2048, 0.819, 3.276], rtol=0.02)
+    sigma = float(md.split("sigma_pre = ")[1].split(" e-")[0])
+    assert sigma == pytest.approx(result.read_noise_model["sigma_pre_e"], rel=1e-3)
+    # figures.json holds the result's figures
+    doc = json.loads((tmp_path / "rep" / "figures.json").read_text())
+    assert doc["isos"]["400"]["gain_dn_per_e"] == result.figures["400"]["gain_dn_per_e"]
 
 
 # -- bad input -------------------------------------------------------------------------------
@@ -315,15 +328,15 @@ def test_hot_pixels_are_found_and_masked(tmp_path, profile):
 
 
 # -- CLI ---------------------------------------------------------------------------------------
-def test_cli_calibrate_json(frames, tmp_path, capsys):
+def test_cli_calibrate_json(frames, result, tmp_path, capsys):
     out = tmp_path / "p.json"
     assert main(["calibrate", str(frames), "-o", str(out), "--json", "--report", str(tmp_path / "rep")]) == 0
     doc = json.loads(capsys.readouterr().out)
-    for iso in ("100", "400", "1600"):
+    for iso in ("100", "400", "1600"):  # the command reports what the library measures
         figs = doc["isos"][iso]
         for key in ("gain_dn_per_e", "read_noise_dn", "read_noise_e", "black_level_dn", "full_well_e",
                     "dark_current_e_per_s"):
-            assert isinstance(figs[key], float)
+            assert figs[key] == pytest.approx(result.figures[iso][key], rel=1e-12)
     assert load_profile(out).isos[400].gain_dn_per_e == pytest.approx(0.819, rel=0.02)
     assert (tmp_path / "p.bias.npz").is_file() and (tmp_path / "rep" / "summary.md").is_file()
     assert (tmp_path / "p.flat.npz").is_file() and load_profile(out).flat_field.shape == (128, 128)
@@ -346,6 +359,11 @@ def test_cli_simulate_frames(tmp_path, capsys):
     assert len({r.exposure_s for r in records if r.kind == "dark"}) >= 3
     img = cv2.imread(str(records[0].path), cv2.IMREAD_UNCHANGED)
     assert img.dtype == np.uint16 and img.shape == (16, 24)
+    # the frames are the profile's sensor: paper-medium at ISO 200 has black level 64 DN and read
+    # noise 2 e- x 0.4095 DN/e- = 0.819 DN, 0.868 DN with the rounding's 1/12 DN^2
+    bias = [cv2.imread(str(r.path), cv2.IMREAD_UNCHANGED).astype(float) for r in records if r.kind == "bias"][:2]
+    assert np.mean(bias) == pytest.approx(64, abs=0.15)
+    assert np.std(bias[0] - bias[1]) / np.sqrt(2) == pytest.approx(np.sqrt(0.819**2 + 1 / 12), rel=0.12)
     params = json.loads((tmp_path / "s" / "simulation.json").read_text())
     assert params["seed"] == 2 and params["profile"] == "paper-medium" and "lfproc_version" in params
     assert main(["calibrate", "simulate-frames", "--profile", "paper-medium", "-o", str(tmp_path / "s")]) == 2
@@ -357,7 +375,9 @@ def test_cli_simulate_frames(tmp_path, capsys):
     [
         (["calibrate", "simulate-frames", "-o", "X"], "--profile is required"),
         (["calibrate", "M", "-o", "p.json", "--seed", "3"], "--seed: only for 'lfproc calibrate simulate-frames'"),
-        (["calibrate", "nothere.csv", "-o", "p.json"], "nothere.csv: no such manifest"),
+        (["calibrate", "nothere.csv", "-o", "p.json"], "nothere.csv: no such file or folder; expected a frame manifest"),
+        (["calibrate", ".", "-o", "p.json"], ".: a folder; expected a frame manifest (manifest.json or manifest.csv) "
+                                             "or an EMVA 1288 descriptor"),
     ],
 )
 def test_cli_errors_one_line(argv, match, tmp_path, capsys, monkeypatch):

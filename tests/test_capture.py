@@ -201,21 +201,52 @@ def test_describe_and_info_json(tmp_path, capsys, capture):
         assert out[key] == info[key]
 
 
+def _colour_count(image, rgb):
+    return int(np.sum(np.abs(image.astype(int) - np.round(np.asarray(rgb) * 255).astype(int)).sum(-1) <= 3))
+
+
 def test_preview(tmp_path, capsys, capture):
+    import matplotlib
+
     image = render_capture_preview(capture, "capture")
     assert image.dtype == np.uint8 and image.ndim == 3 and image.shape[2] == 3
     assert image.shape[1] > image.shape[0]  # three panels side by side
+    # the ISO map panel paints each of the four ISOs of the row pattern in its own viridis colour
+    # (0.05 .. 0.95 of the map, lowest ISO darkest), in equal shares (whole Bayer rows each)
     iso_only = render_capture_preview(capture, "iso")
     assert iso_only.shape[1] < image.shape[1]
+    cmap = matplotlib.colormaps["viridis"]
+    counts = [_colour_count(iso_only, cmap(x)[:3]) for x in np.linspace(0.05, 0.95, 4)]
+    assert min(counts) > 1000 and max(counts) < 1.5 * min(counts)
+    assert _colour_count(render_capture_preview(capture, "sensor"), cmap(0.05)[:3]) == 0
     with pytest.raises(InputError, match="preview kind: expected one of capture, sensor, iso, mask"):
         render_capture_preview(capture, "epi")
+    with pytest.raises(InputError, match="shot: expected 0..1, got 2"):
+        render_capture_preview(capture, "sensor", shot=2)
     path = capture.save(tmp_path / "a.capture.npz")
     assert main(["preview", str(path), "-o", str(tmp_path / "p.png"), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["kind"] == "capture" and cv2.imread(str(tmp_path / "p.png")).shape[:2] == tuple(out["size"])
+    assert out["kind"] == "capture" and out["isos"] == [100, 400, 800, 1600]
+    written = cv2.cvtColor(cv2.imread(str(tmp_path / "p.png")), cv2.COLOR_BGR2RGB)
+    np.testing.assert_array_equal(written, image)  # the file is the rendered picture
+    assert list(written.shape[:2]) == out["size"]
     assert main(["preview", str(path), "-o", str(tmp_path / "m.png"), "--kind", "mask"]) == 0
-    assert (tmp_path / "m.png").exists()
+    mask = cv2.cvtColor(cv2.imread(str(tmp_path / "m.png")), cv2.COLOR_BGR2RGB)
+    np.testing.assert_array_equal(mask, render_capture_preview(load_capture(path), "mask"))
     capsys.readouterr()
     # a light-field kind on a capture: one line, exit 2, nothing written
     assert main(["preview", str(path), "-o", str(tmp_path / "s.png"), "--kind", "sheet"]) == 2
     assert "capture previews" in capsys.readouterr().err and not (tmp_path / "s.png").exists()
+
+
+def test_describe_counts_a_hand_made_capture(tmp_path):
+    dn = np.full((1, 4, 4), 500, np.uint16)
+    dn[0, 0, 0] = 4095  # saturated (paper-low: 4095 at ISO 400)
+    dn[0, 1, 1] = 0  # black-clipped
+    dn[0, 2, 2] = 0
+    mask = make_mask("random", shots=1, views=(5, 5), size=(4, 4), random_state=0)
+    cap = Capture(dn=dn, iso=400, exposures_s=0.01, mask=mask, profile="paper-low")
+    info = describe_capture(cap.save(tmp_path / "h.capture.npz"))
+    assert info["saturated_fraction"] == 1 / 16 and info["black_clipped_fraction"] == 2 / 16
+    assert info["per_iso"] == {"400": {"fraction": 1.0, "saturated_fraction": 1 / 16, "black_clipped_fraction": 2 / 16}}
+    assert (info["dn_min"], info["dn_max"]) == (0, 4095) and info["sampling_rate_percent"] == pytest.approx(100 / 75)

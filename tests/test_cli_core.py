@@ -77,8 +77,20 @@ def test_bad_option_exits_2(capsys):
     assert code == 2 and "invalid choice" in err
 
 
-def test_convert_round_trip_and_force(shared_data, tmp_path, capsys):
-    src = shared_data / "lightfields/lowres_5x5/inria_hublais"
+@pytest.fixture(params=["written", "real"])
+def png_views(request, tmp_path):
+    """A folder of 8-bit sRGB PNG views: written here from a synthetic scene, or a real one (INRIA)."""
+    if request.param == "real":
+        return request.getfixturevalue("shared_data") / "lightfields/lowres_5x5/inria_hublais"
+    from lfproc.synth import synthesize
+
+    lf = synthesize("checker", size=(24, 32), views=5, random_state=3)
+    lf = lf.replace(data=np.clip(lf.data / np.percentile(lf.data, 90), 0, 1))
+    return write_lightfield(lf, tmp_path / "src_views", folder_format="png")
+
+
+def test_convert_round_trip_and_force(png_views, tmp_path, capsys):
+    src = png_views
     out = tmp_path / "hublais.exr"
     code, stdout, _ = run(capsys, "convert", str(src), str(out))
     assert code == 0 and "5x5 views" in stdout

@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
@@ -85,11 +86,23 @@ def test_build_failure_reported_then_resumed(scenes, tmp_path):
     for row in rows:
         assert row["method"] == "ml" and row["exposures_s"] == TIMES
         assert row["dynamic_range_stops"] > 8 and 0 < row["saturated_fraction"] < 0.5
-        assert len(row["sha256"]) == 5 and all(len(h) == 64 for h in row["sha256"])
+        scene = scenes / row["scene"]
+        assert row["sha256"] == [hashlib.sha256((scene / f"exposure_{k}.exr").read_bytes()).hexdigest()
+                                 for k in range(5)]
         for key in ("hdr", "preview", "histogram"):
             assert (out / row[key]).is_file()
         lf = read_lightfield(out / row["hdr"])
         assert lf.variance is not None and lf.units == "e-/s" and lf.shape == (3, 3, 24, 32, 3)
+        # radiometry: the scene was exposed at 2e5 e-/s per unit of truth.exr; where some exposure
+        # is unsaturated the merge recovers it (median relative error well under 1 %)
+        truth = read_lightfield(scene / "truth.exr").data * 2e5
+        ok = lf.data < 0.99 * lf.data.max()
+        assert abs(np.median(lf.data[ok] / truth[ok] - 1)) < 0.01
+        assert row["saturated_fraction"] == pytest.approx(1 - ok.mean(), abs=0.01)
+        assert row["dynamic_range_stops"] == pytest.approx(lf.dynamic_range_stops(), abs=1e-4)
+        # lfproc's warnings are kept in the row: the lamps clip in more than 10 % of some scenes
+        expected = ["SaturationWarning"] if row["saturated_fraction"] > 0.1 else []
+        assert [w.split(":")[0] for w in row["warnings"]] == expected
     with open(out / "manifest.csv", newline="") as fh:
         table = list(csv.DictReader(fh))
     assert [r["scene"] for r in table] == ["scene0", "scene1", "scene2"]
@@ -149,8 +162,6 @@ def test_cli_dataset_errors(tmp_path, capsys):
 
 
 def test_dataset_build_virtual_illum_brackets(tmp_path):
-    pytest.importorskip("lfproc.lytro.decode", reason="Lytro decoder not in this checkout")
-    pytest.importorskip("lfproc.cli.virtual_illum", reason="virtual Illum not in this checkout")
     lf = synthesize("lamps", size=(32, 32), views=5, random_state=2)
     write_lightfield(lf, tmp_path / "lf.exr")
     (tmp_path / "scenes").mkdir()
@@ -165,6 +176,14 @@ def test_dataset_build_virtual_illum_brackets(tmp_path):
     assert (out / row["preview"]).is_file() and (out / row["histogram"]).is_file()
     merged = read_lightfield(out / row["hdr"])
     assert merged.views == (5, 5) and merged.variance is not None
+    assert row["dynamic_range_stops"] == pytest.approx(merged.dynamic_range_stops(), abs=1e-4)
+    assert row["sha256"] == [hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in row["sources"]]
+    # radiometry: times the 0 EV exposure the merge is the 0 EV decode (truth.exr of virtual-illum)
+    info = json.loads((tmp_path / "scenes" / "v1" / "truth.json").read_text())
+    t0 = next(c["exposure_s"] for c in info["captures"] if c["exposure_ev"] == 0)
+    truth = read_lightfield(tmp_path / "scenes" / "v1" / "truth.exr").data
+    bright = truth > 0.1 * truth.max()
+    assert 0.8 < np.median(merged.data[bright] * t0 / truth[bright]) < 1.2
 
 
 def _virtual_illum_scenes(root, tmp_path, n):
@@ -186,8 +205,6 @@ def _scene_mtimes(out, names):
 
 
 def test_cli_dataset_build_virtual_illum_killed_then_resumed(tmp_path, capsys):
-    pytest.importorskip("lfproc.lytro.decode", reason="Lytro decoder not in this checkout")
-    pytest.importorskip("lfproc.cli.virtual_illum", reason="virtual Illum not in this checkout")
     names = ["v0", "v1", "v2"]
     scenes = _virtual_illum_scenes(tmp_path / "scenes", tmp_path, len(names))
     capsys.readouterr()
@@ -240,3 +257,58 @@ def test_cli_dataset_build_virtual_illum_killed_then_resumed(tmp_path, capsys):
         ratio = merged.data[bright] * t0 / truth.data[bright]
         assert bright.sum() > 1000
         assert 0.8 < np.median(ratio) < 1.2, (row["scene"], float(np.median(ratio)))
+
+
+def _png_bracket(folder, n=2):
+    """``n`` 8-bit PNGs without EXIF (a bracket whose exposure times only a file can give)."""
+    folder.mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    base = rng.random((20, 30, 3))
+    for k in range(n):
+        iio.imwrite(folder / f"img{k}.png", (np.clip(base * 2.0**k * 0.3, 0, 1) * 255).astype(np.uint8))
+
+
+def test_exposure_file_forms_and_errors(tmp_path):
+    from lfproc.dataset import read_exposure_file
+    from lfproc.errors import InputError
+
+    inputs = [tmp_path / "b.png", tmp_path / "a.png", tmp_path / "c.png"]
+    f = tmp_path / "exposures.txt"
+    f.write_text("# name seconds\na.png 1/8\nb.png 0.5\nc.png 2  # long\n")
+    assert read_exposure_file(f, inputs) == [0.5, 0.125, 2.0]
+    f.write_text("1/8\n0.5\n2\n")  # bare seconds: in the order of the sorted names a, b, c
+    assert read_exposure_file(f, inputs) == [0.5, 0.125, 2.0]
+    j = tmp_path / "exposures.json"
+    j.write_text(json.dumps({"a.png": 0.125, "b.png": "1/2", "c.png": 2}))
+    assert read_exposure_file(j, inputs) == [0.5, 0.125, 2.0]
+    j.write_text(json.dumps([0.125, 0.5, 2]))
+    assert read_exposure_file(j, inputs) == [0.5, 0.125, 2.0]
+    for text, match in (("a.png 1/8\nb.png 0.5\n", "no exposure time for c.png"),
+                        ("a.png 1\nb.png 1\nc.png 1\nd.png 1\n", "names not in the bracket: d.png"),
+                        ("1\n2\n", "2 exposure time\\(s\\) for 3 inputs"),
+                        ("a.png 1\n2\n3\n", "mixes"),
+                        ("a.png -1\nb.png 1\nc.png 1\n", "line 1: expected a positive exposure time"),
+                        ("a.png x\nb.png 1\nc.png 1\n", "line 1: expected seconds")):
+        f.write_text(text)
+        with pytest.raises(InputError, match=match):
+            read_exposure_file(f, inputs)
+
+
+def test_bracket_without_exif_points_to_the_exposure_file(tmp_path):
+    """No EXIF: the build says to write SCENE/exposures.txt (lfproc merge's --exposures-s does not exist
+    here) in one line, with no Dask traceback; with the file the scene is built with its times."""
+    _png_bracket(tmp_path / "scenes" / "s")
+    out = tmp_path / "ds"
+    cmd = [sys.executable, "-m", "lfproc.cli.main", "dataset", "build", str(tmp_path / "scenes"), "-o", str(out),
+           "--workers", "1"]  # a Dask local cluster in a process of its own, as a user runs it
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300,
+                         env=dict(os.environ, LFPROC_PROGRESS="0", PYTHONWARNINGS="ignore"))
+    assert res.returncode == 2
+    err = res.stderr
+    assert "exposures.txt" in err and "img0.png" in err and "--exposures-s" not in err
+    assert "Traceback" not in err and "distributed.worker" not in err
+    (tmp_path / "scenes" / "s" / "exposures.txt").write_text("img0.png 1/100\nimg1.png 1/50\n")
+    assert main(["dataset", "build", str(tmp_path / "scenes"), "-o", str(out), "--scheduler", "synchronous"]) == 0
+    (row,) = read_manifest(out)
+    assert row["exposures_s"] == pytest.approx([0.01, 0.02])
+    assert row["exposure_file"].endswith("exposures.txt")

@@ -34,7 +34,8 @@ def test_stage_figures_are_right(demo_dir):
     assert sanity["relative_noise_0.01"]["pu21_psnr_db"] > sanity["relative_noise_0.05"]["pu21_psnr_db"]
     assert stages["white images"]["max_spacing_error_px"] < 0.01
     assert stages["white images"]["max_rotation_error_rad"] < 1e-4
-    assert stages["decode"]["psnr_0ev_db"] >= 35
+    # lfproc.lytro.score: clipped truth left out, 99.9th-percentile peak (the sun does not inflate it)
+    assert stages["decode"]["psnr_0ev_db"]["psnr_all_views_db"] >= 24  # 26.6 dB measured (96 x 96 scene)
     merge = stages["merge"]
     assert merge["pu21_psnr_db"] > merge["pu21_psnr_db_0ev_capture_alone"]  # the bracket adds range
     cal = stages["calibrate"]["worst_error_percent"]
@@ -48,4 +49,27 @@ def test_stage_figures_are_right(demo_dir):
 
 def test_existing_output_needs_force(demo_dir, capsys):
     assert main(["demo", "-o", str(demo_dir)]) == 2
-    assert "--force" in capsys.readouterr().err
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"lfproc demo -o {demo_dir} --force" in err[0]  # the command to re-run
+
+
+def test_report_is_short_with_a_contact_sheet(demo_dir):
+    """The report lists the raw calibration frames as one folder and shows a contact sheet of them,
+    and every picture it embeds exists."""
+    import re
+
+    import cv2
+
+    markdown = (demo_dir / "report.md").read_text()
+    assert len(markdown) < 15000
+    pictures = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", markdown)
+    assert "calibration/frames_contact_sheet.png" in pictures
+    assert not any("/frames/" in p for p in pictures) and len(pictures) < 30
+    for p in pictures:
+        assert (demo_dir / p).is_file(), p
+    assert re.search(r"calibration/simulated/frames/ \(288 PNG files\)", markdown)
+    sheet = cv2.imread(str(demo_dir / "calibration/frames_contact_sheet.png"), cv2.IMREAD_GRAYSCALE)
+    assert sheet is not None and sheet.shape[0] > 4 * 96  # a row per ISO (4 ISOs)
+    report = json.loads((demo_dir / "report.json").read_text())
+    calib = next(row for row in report["stages"] if row["stage"] == "calibrate")
+    assert sum(f.startswith("calibration/simulated/frames/") for f in calib["files"]) == 288

@@ -421,3 +421,32 @@ def test_training_sources_files_view_folders_and_datasets(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputError, match="no light fields"):
         collect_lightfields([tmp_path / "empty"])
+
+
+# -- the shipped default ---------------------------------------------------------------------------
+
+def test_shipped_default_dictionary_is_described(capsys):
+    from lfproc.dictionary import PRESETS, shipped_path
+
+    path = shipped_path("default")
+    assert path.stat().st_size <= 25_000_000
+    code, out, err = _cli(["dictionary", "info", "default", "--json"], capsys)
+    assert code == 0, err
+    info = json.loads(out)
+    p = PRESETS["default"]
+    assert info["atoms"] == p.atoms and info["n"] == 4800 and info["patch"] == list(p.patch)
+    assert info["sparsity"] == p.sparsity and info["preset"] == "default" and info["training_patches"] == p.patches
+    assert info["command"] == "lfproc dictionary train --synthetic --preset default --seed 0"
+    assert 0 < info["final_relative_error"] < 0.2
+
+
+def test_shipped_default_beats_dct_on_unseen_hdr_photographs(shared_data):
+    """Light fields the dictionary never saw: lfproc synth scenes textured with real HDR photographs."""
+    photos = sorted((shared_data / "hdr").glob("ScanLines_*.exr"))[:2]
+    if not photos:
+        pytest.skip("no ScanLines_*.exr HDR photographs in the shared data")
+    lfs = [synthesize(kind, size=(64, 64), views=5, baseline_px=1.0, textures=[p], random_state=9100 + i)
+           for i, (kind, p) in enumerate(zip(("window", "layers"), photos))]
+    r = evaluate_dictionary("default", lfs, sparsity=10)
+    assert r["pu21_psnr_db"] >= r["dct_pu21_psnr_db"] + 1.0, r
+    assert r["relative_error"] < r["dct_relative_error"]

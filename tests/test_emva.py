@@ -14,7 +14,7 @@ from lfproc.calib.emva import (EmvaDescriptor, EmvaStep, evaluate_descriptor, fo
                                read_descriptor, saturation_index, write_descriptor)
 from lfproc.calib.simulate_frames import expected_figures, simulate_frames
 from lfproc.cli.main import main
-from lfproc.errors import CalibrationError, FileFormatError, OutputExistsError
+from lfproc.errors import CalibrationError, FileFormatError, InputError, OutputExistsError
 
 
 @pytest.fixture(scope="module")
@@ -93,9 +93,6 @@ def test_emva_evaluation_recovers_the_sensor(emva_set):
     assert fig["QE"] == pytest.approx(1.0, rel=0.02)  # lfproc's sensor has quantum efficiency 1
     assert fig["black_level_dn"] == pytest.approx(64, abs=0.05)
     assert fig["u_I_mean"] == pytest.approx(10.0, rel=0.1)
-    assert fig["SNR_max"] == pytest.approx(np.sqrt(fig["u_e_sat"]))
-    assert fig["DR"] == pytest.approx(fig["u_p_sat"] / fig["u_p_min"])
-    assert fig["u_p_min"] == pytest.approx((fig["sigma_y_dark"] / fig["K"] + 0.5) / fig["QE"])
     assert abs(fig["LE_min"]) < 0.5 and abs(fig["LE_max"]) < 0.5
     assert fig["DSNU1288"] is None or fig["DSNU1288"] < 0.3  # the sensor has no DSNU
 
@@ -118,14 +115,74 @@ def test_calibrate_emva_to_profile(emva_set, tmp_path, capsys):
     assert f["read_noise_e"] == pytest.approx(2.8, rel=0.02)
     assert res.profile.iso_values == [100] and "no ISO" in res.profile.unknown["iso"]
     assert res.profile.adc_bits == 12
-    assert res.profile.isos[100].full_well_e == pytest.approx(f["emva1288"]["u_e_sat"])
-    assert main(["calibrate", str(emva_set), "-o", str(tmp_path / "p.json"), "--json"]) == 0
+    # the profile's full well reaches the code where the over-exposed pairs pile up (the ADC
+    # clip, 4095 DN); the EMVA saturation capacity at the variance maximum lies below it
+    want = expected_figures(load_profile("paper-high"), 100)
+    assert res.profile.isos[100].full_well_e == pytest.approx(want["saturation_capacity_e"], rel=0.015)
+    assert f["saturation_capacity_emva_e"] == pytest.approx(f["emva1288"]["u_e_sat"])
+    assert f["saturation_capacity_emva_e"] < res.profile.isos[100].full_well_e
+    # the folder holding the descriptor is accepted as well
+    assert main(["calibrate", str(emva_set.parent), "-o", str(tmp_path / "p.json"), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     figs = doc["isos"]["default"]
     for key in ("gain_dn_per_e", "read_noise_dn", "read_noise_e", "black_level_dn", "full_well_e",
                 "dark_current_e_per_s"):
         assert isinstance(figs[key], float)
     assert load_profile(tmp_path / "p.json").isos[100].gain_dn_per_e == pytest.approx(figs["gain_dn_per_e"])
+
+
+def _designed_set(tmp_path):
+    """A 4 x 4 pixel EMVA set whose statistics are exact by construction.
+
+    Each pair is ``A = mu + delta s``, ``B = mu - delta s`` with ``s`` a +-1 checkerboard (zero
+    mean), so the pair mean is ``mu`` and the EMVA temporal variance
+    ``mean(((A - mu_A) - (B - mu_B))^2) / 2`` is exactly ``2 delta^2``. Designed sensor: dark
+    level 100 DN with variance 8 DN^2; gain K = 0.5 DN/e- and responsivity R = 0.4 DN/photon
+    (QE 0.8), i.e. ``2 delta^2 - 8 = 0.5 (mu - 100)`` and ``mu - 100 = 0.4 photons``; the
+    variance peaks at the fourth step and falls at the fifth (saturation).
+    """
+    s = np.where(np.indices((4, 4)).sum(0) % 2 == 0, 1, -1)
+    steps, k = [], 0
+
+    def pair(kind, mu, delta, photons):
+        nonlocal k
+        paths = []
+        for sign in (1, -1):
+            k += 1
+            p = tmp_path / f"{kind}{k}.png"
+            cv2.imwrite(str(p), (mu + sign * delta * s).astype(np.uint16))
+            paths.append(p)
+        steps.append(EmvaStep(kind, 1000.0, photons, tuple(paths)))
+
+    for mu, delta, photons in ((148, 4, 120), (228, 6, 320), (340, 8, 600), (484, 10, 960), (4000, 2, 2000)):
+        pair("bright", mu, delta, photons)
+        pair("dark", 100, 2, None)
+    path = tmp_path / "designed.txt"
+    path.write_text(format_descriptor(EmvaDescriptor("3.1", 12, 4, 4, tuple(steps)), base=tmp_path))
+    return path
+
+
+def test_photon_transfer_figures_of_a_designed_set_match_hand_computed_values(tmp_path):
+    """EMVA 1288 figures worked out by hand from the designed statistics (see _designed_set)."""
+    _, data, fig, unknown = evaluate_descriptor(_designed_set(tmp_path))
+    np.testing.assert_allclose(data.u_y, [148, 228, 340, 484, 4000])
+    np.testing.assert_allclose(data.s2_y, [32, 72, 128, 200, 8])
+    assert fig["index_u_ysat"] == 3 and fig["fit_range"] == [0, 2]  # 70 % of 384 DN: the first three steps
+    assert fig["K"] == pytest.approx(0.5, rel=1e-12)
+    assert fig["R"] == pytest.approx(0.4, rel=1e-12)
+    assert fig["QE"] == pytest.approx(0.8, rel=1e-12)
+    assert fig["black_level_dn"] == pytest.approx(100.0)
+    assert fig["sigma_y_dark"] == pytest.approx(2.8284271, rel=1e-7)  # sqrt(8)
+    assert fig["sigma_d"] == pytest.approx(5.6273143, rel=1e-7)  # sqrt(8 - 1/12) / 0.5
+    assert fig["u_p_sat"] == pytest.approx(960.0)
+    assert fig["u_e_sat"] == pytest.approx(768.0)  # 0.8 x 960
+    assert fig["u_e_min"] == pytest.approx(6.1568542, rel=1e-7)  # sqrt(8) / 0.5 + 1/2
+    assert fig["u_p_min"] == pytest.approx(7.6960678, rel=1e-7)  # / 0.8
+    assert fig["SNR_max"] == pytest.approx(27.712813, rel=1e-7)  # sqrt(768)
+    assert fig["DR"] == pytest.approx(124.739026, rel=1e-7)  # 768 / 6.1568542
+    assert fig["DR_dB"] == pytest.approx(41.920, abs=1e-3)
+    assert fig["LE_min"] == pytest.approx(0.0, abs=1e-9) and fig["LE_max"] == pytest.approx(0.0, abs=1e-9)
+    assert fig["u_I_mean"] is None and "1 exposure time" in unknown["u_I_mean"]
 
 
 def _tiny_set(tmp_path, images_per_step):
@@ -158,7 +215,9 @@ def test_single_images_where_pairs_are_needed(tmp_path, capsys):
 def test_unsaturated_data_record_unknown_saturation(tmp_path):
     _, data, fig, unknown = evaluate_descriptor(_tiny_set(tmp_path, 2))
     assert fig["u_e_sat"] is None and "do not reach saturation" in unknown["u_e_sat"]
-    assert fig["K"] > 0 and np.isfinite(fig["sigma_d"])
+    # Poisson counts in DN behave like a sensor of gain 1 DN/e-: K ~ 1, and the dark Poisson(100)
+    # noise gives sigma_d ~ sqrt(100 - 1/12) = 10 e- (8 x 8 pixels per pair: +-25 %)
+    assert fig["K"] == pytest.approx(1.0, rel=0.25) and fig["sigma_d"] == pytest.approx(10.0, rel=0.25)
     with pytest.raises(CalibrationError, match="no saturation level"):
         calibrate(tmp_path / "d.txt")
 
@@ -168,3 +227,61 @@ def test_wrong_frame_size_is_named(tmp_path):
     cv2.imwrite(str(tmp_path / "dark1_1.png"), np.zeros((4, 8), np.uint16))
     with pytest.raises(CalibrationError, match=r"dark1_1.png: frame is 4x8 pixels; the descriptor's 'n' line says 8x8"):
         evaluate_descriptor(path)
+
+
+def test_emva_figures_shown_and_consistent_everywhere(emva_set, tmp_path, capsys):
+    """QE, sigma_y.dark and the saturation capacity appear in the calibrate output, the report
+    summary and profile show, and the saturation code is the same number in all of them."""
+    prof = tmp_path / "p.json"
+    report = tmp_path / "report"
+    assert main(["calibrate", str(emva_set), "-o", str(prof), "--report", str(report), "--json"]) == 0
+    figs = json.loads(capsys.readouterr().out)["isos"]["default"]
+    assert figs["quantum_efficiency"] == pytest.approx(1.0, rel=0.02)  # lfproc's sensor has QE 1
+    assert figs["temporal_dark_noise_dn"] == pytest.approx(np.hypot(0.5733, np.sqrt(1 / 12)), rel=0.03)
+    assert figs["saturation_capacity_emva_e"] is not None
+    # the simulated set's brightest pairs clip at the 12-bit ADC code (test_simulated_emva_set_layout)
+    assert figs["saturation_dn"] == 4095
+    assert main(["profile", "show", str(prof), "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["saturation_dn"]["100"] == figs["saturation_dn"]
+    assert shown["source"]["emva1288"]["100"]["quantum_efficiency"] == pytest.approx(figs["quantum_efficiency"])
+    summary = (report / "summary.md").read_text()
+    qe_row = next(line for line in summary.splitlines() if line.startswith("| QE"))
+    assert f"{figs['quantum_efficiency']:.5g}" in qe_row
+    cap_row = next(line for line in summary.splitlines() if "mu_e.sat" in line)
+    assert "unknown" not in cap_row and f"{figs['saturation_capacity_emva_e']:.5g}" in cap_row
+    sat_row = next(line for line in summary.splitlines() if line.startswith("| saturation (DN)"))
+    assert "| 4095 |" in sat_row
+    # text outputs
+    assert main(["calibrate", str(emva_set), "-o", str(prof), "--force"]) == 0
+    text = capsys.readouterr().out
+    assert "quantum_efficiency" in text and "temporal_dark_noise_dn" in text and "monochrome" in text
+    assert main(["profile", "show", str(prof)]) == 0
+    text = capsys.readouterr().out
+    qe = next(line for line in text.splitlines() if line.startswith("quantum_efficiency"))
+    assert f"{figs['quantum_efficiency']:.5g}" in qe
+    sat = next(line for line in text.splitlines() if line.startswith("saturation_dn"))
+    assert sat.split()[1] == "4095"
+
+
+def test_emva_sensor_stays_monochrome(emva_set, tmp_path, capsys):
+    res = calibrate(emva_set)
+    assert res.profile.cfa_pattern == "mono" and res.profile.is_mono
+    assert "cfa_pattern" not in res.profile.unknown
+    from lfproc.calib import save_profile
+
+    save_profile(res.profile, tmp_path / "m.json")
+    assert load_profile(tmp_path / "m.json").cfa_pattern == "mono"
+    assert main(["profile", "show", str(tmp_path / "m.json")]) == 0
+    out = capsys.readouterr().out
+    assert "RGGB" not in out and "mono" in out
+    # a Bayer sensor measured per channel: --cfa says so
+    assert calibrate(emva_set, cfa_pattern="GRBG").profile.cfa_pattern == "GRBG"
+    # the coded-mask camera needs a Bayer sensor: one line naming the reason
+    from lfproc.synth import synthesize
+
+    lf = synthesize("layers", size=(16, 16), views=3, random_state=0)
+    with pytest.raises(InputError, match="monochrome"):
+        from lfproc.camera.simulate import simulate_capture
+
+        simulate_capture(lf, profile=res.profile, isos=[100], random_state=0)

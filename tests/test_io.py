@@ -131,6 +131,16 @@ def test_shared_png_views_decode_srgb(shared_data):
     assert np.all(lf.centre()[mid] < raw[mid])
 
 
+def _exr_first_part(path):
+    """The first part's colour channels read with OpenEXR directly (R, G, B; else Y; else the one
+    channel there is), float32, stacked on the last axis."""
+    import OpenEXR
+
+    ch = OpenEXR.File(str(path), separate_channels=True).parts[0].channels
+    names = ["R", "G", "B"] if "R" in ch else (["Y"] if "Y" in ch else list(ch))
+    return np.stack([ch[n].pixels.astype(np.float32) for n in names], axis=-1)
+
+
 @pytest.mark.parametrize(
     "name, channels",
     [
@@ -142,9 +152,11 @@ def test_shared_png_views_decode_srgb(shared_data):
     ],
 )
 def test_real_exr_samples_are_read(shared_data, name, channels):
-    lf = read_lightfield(shared_data / "hdr" / name)
+    path = shared_data / "hdr" / name
+    lf = read_lightfield(path)
     assert lf.views == (1, 1) and lf.channels == channels
-    assert np.isfinite(lf.data).all() and lf.data.min() >= 0
+    # the samples are the file's, channel for channel (negatives clipped to 0 by default)
+    np.testing.assert_array_equal(lf.data[0, 0], np.maximum(_exr_first_part(path), 0))
 
 
 def test_real_exr_structure_cases(shared_data):
@@ -170,7 +182,13 @@ def test_nan_inf_sample_refused_or_cleaned(shared_data):
     with pytest.raises(InputError, match="NaN .* Inf"):
         read_lightfield(path)
     lf = read_lightfield(path, nonfinite="zero")
-    assert np.isfinite(lf.data).all()
+    raw = _exr_first_part(path)
+    bad = ~np.isfinite(raw)
+    assert bad.sum() > 0 and (lf.data[0, 0][bad] == 0).all()  # NaN and Inf became 0, nothing else moved
+    np.testing.assert_array_equal(lf.data[0, 0][~bad], np.maximum(raw[~bad], 0))
+    clipped = read_lightfield(path, nonfinite="clip")  # +Inf -> the largest finite value instead
+    posinf = np.isposinf(raw)
+    assert posinf.any() and (clipped.data[0, 0][posinf] == raw[~bad].max()).all()
 
 
 def test_dwab_environment_maps_clip_tiny_negatives(shared_data):

@@ -68,7 +68,7 @@ def test_real_illum_desktop_metadata(lytro_dir):
     assert d["ccm"][0][0] == pytest.approx(2.2448263168334961)
     assert d["white_balance"] == pytest.approx({"r": 1.0875036716461182, "g": 1.0, "b": 1.6269161701202393})
     assert d["has_raw"] is False and (d["width"], d["height"]) == (7728, 5368)
-    with pytest.raises(LfpFormatError, match=r"illum_desktop_demo\.LFP: missing raw section"):
+    with pytest.raises(LfpFormatError, match=r"illum_desktop_demo\.LFP: no raw lenslet image to decode"):
         read_capture(lytro_dir / "illum_desktop_demo.LFP")
 
 
@@ -281,7 +281,8 @@ def test_missing_raw_section(tmp_path):
     toc = {"frames": [{"frame": {"metadataRef": sha1_ref(meta), "imageRef": sha1_ref(b"gone")}}]}
     bad = tmp_path / "noraw.lfr"
     bad.write_bytes(build_lfp(toc, [meta], toc_first=False))
-    with pytest.raises(LfpFormatError, match=r"noraw\.lfr: missing raw section"):
+    with pytest.raises(LfpFormatError, match=r"noraw\.lfr: no raw lenslet image to decode; the file holds frame "
+                                             r"metadata"):
         read_capture(bad)
 
 

@@ -15,11 +15,13 @@ from lfproc.io import write_lightfield
 from lfproc.lytro.decode import (UNUSABLE_VARIANCE, apply_colour, correct_hot_pixels, decode_capture, decode_lenslet,
                                  demosaic, hex_to_square)
 from lfproc.lytro.grid import LensletGrid
+from lfproc.lytro.score import clip_level, decode_psnr
 from lfproc.lytro.virtual import illum_grid, output_shape
 from lfproc.lytro.whites import INDEX_NAME, load_white_db, select_white
 from lfproc.synth import synthesize
 
 BORDER = 4
+PSNR_MIN_DB = 27.5  # measured 28.5 dB (all views), 25.9 dB the worst view; see README
 
 
 @pytest.fixture(scope="module")
@@ -40,34 +42,81 @@ def bench(tmp_path_factory):
             "truth": read_lightfield(cam / "truth.exr")}
 
 
-def _psnr(a, b, *, usable=None, border=BORDER):
-    """PSNR (dB) of ``a`` against ``b`` over the samples the decoder marks usable (saturated and
-    off-sensor samples carry no information), peak = the largest such truth value."""
+def _psnr(a, b, *, clip, border=BORDER):
+    """PSNR (dB) of ``a`` against ``b`` as ``lfproc.lytro.score`` defines it: truth values the capture
+    clipped left out, every other sample scored (also those the decoder flags), peak = the 99.9th
+    percentile of the scored truth."""
+    return decode_psnr(a, b, clip=clip, border=border)["psnr_db"]
+
+
+def _psnr_inflated(a, b, *, usable, border=BORDER):
+    """The old benchmark figure: decoder-flagged samples left out, peak = the largest truth value."""
     h, w = min(a.shape[2], b.shape[2]), min(a.shape[3], b.shape[3])
     sl = (slice(None), slice(None), slice(border, h - border), slice(border, w - border))
-    a, b = a[sl], b[sl]
-    ok = np.ones(a.shape, bool) if usable is None else usable[sl]
+    a, b, ok = a[sl], b[sl], usable[sl]
     return 10 * np.log10(float(b[ok].max()) ** 2 / float(np.mean((a[ok] - b[ok]) ** 2)))
 
 
 def test_decode_recovers_truth_views(bench):
     dec, truth = bench["decoded"], bench["truth"]
+    clip = clip_level(bench["info"])
+    assert 1.0 < clip < 1.2  # the ADC fills at 1.10 x the white image's level (illum profile)
     assert dec.views == (5, 5) and dec.channels == 3
     assert abs(dec.size[0] - truth.size[0]) <= 1 and abs(dec.size[1] - truth.size[1]) <= 1
     usable = dec.variance < UNUSABLE_VARIANCE
     inner = usable[:, :, BORDER:-BORDER, BORDER:-BORDER]
     assert inner.mean() > 0.97  # only the few clipped highlights (sun, glints) are lost
-    psnr = _psnr(dec.data, truth.data, usable=usable)
-    assert psnr >= 35.0, f"PSNR {psnr:.2f} dB"
+    psnr = _psnr(dec.data, truth.data, clip=clip)
+    assert psnr >= PSNR_MIN_DB, f"PSNR {psnr:.2f} dB"
+    # the truth's maximum (the sun) as peak inflates the figure by many dB
+    assert _psnr_inflated(dec.data, truth.data, usable=usable) > psnr + 3
     # every view, not only the average
     for v in range(5):
         for u in range(5):
-            assert _psnr(dec.data[v:v + 1, u:u + 1], truth.data[v:v + 1, u:u + 1],
-                         usable=usable[v:v + 1, u:u + 1]) >= 33.0
+            assert _psnr(dec.data[v:v + 1, u:u + 1], truth.data[v:v + 1, u:u + 1], clip=clip) >= PSNR_MIN_DB - 2.5
     # no hexagonal row artefact: even and odd output rows are as good as each other
-    even = _psnr(dec.data[:, :, 0::2], truth.data[:, :, 0::2], usable=usable[:, :, 0::2], border=2)
-    odd = _psnr(dec.data[:, :, 1::2], truth.data[:, :, 1::2], usable=usable[:, :, 1::2], border=2)
+    even = _psnr(dec.data[:, :, 0::2], truth.data[:, :, 0::2], clip=clip, border=2)
+    odd = _psnr(dec.data[:, :, 1::2], truth.data[:, :, 1::2], clip=clip, border=2)
     assert abs(even - odd) < 1.5
+
+
+def test_unusable_samples_are_inpainted(bench):
+    """Samples next to the clipped sun carry no measurement: filled from their usable neighbours
+    they score better than as holes (0); samples on the clipped sun itself stay bright."""
+    dec, truth = bench["decoded"], bench["truth"]
+    clip = clip_level(bench["info"])
+    bad = dec.variance[..., 0] >= UNUSABLE_VARIANCE
+    assert bad.any()
+    holes = dec.data.copy()
+    holes[bad] = 0
+    assert _psnr(dec.data, truth.data, clip=clip) > _psnr(holes, truth.data, clip=clip) + 1
+    h, w = min(dec.size[0], truth.size[0]), min(dec.size[1], truth.size[1])
+    sun = (truth.data[:, :, :h, :w] >= 2 * clip).all(axis=-1) & bad[:, :, :h, :w]  # well inside the sun
+    assert sun.sum() > 10
+    assert float(np.median(dec.data[:, :, :h, :w][sun])) >= 0.9  # the saturation level, not sky or 0
+
+
+def test_fill_unusable_known_answers():
+    from lfproc.lytro.decode import fill_unusable
+
+    yy, xx = np.mgrid[0:32, 0:40].astype(np.float32)
+    ramp = (0.2 + 0.01 * xx + 0.005 * yy)[None, None, :, :, None].repeat(2, axis=-1)
+    bad = np.zeros((1, 1, 32, 40), bool)
+    bad[0, 0, 10:14, 15:19] = True
+    data = ramp.copy()
+    data[bad] = 50.0  # a clipped highlight's value: must not leak
+    out = fill_unusable(data, bad)
+    np.testing.assert_allclose(out[~bad], ramp[~bad])
+    assert np.abs(out[bad] - ramp[bad]).max() < 0.02  # a smooth ramp is continued
+    keep = np.zeros_like(bad)
+    keep[0, 0, 11:13, 16:18] = True
+    out = fill_unusable(data, bad, keep=keep)
+    assert np.all(out[keep] == 50.0)
+    assert np.abs(out[bad & ~keep] - ramp[bad & ~keep]).max() < 0.05  # the kept values do not bleed
+    assert np.all(fill_unusable(data, np.ones_like(bad)) == 0)
+    with pytest.raises(ShapeError, match="does not match"):
+        fill_unusable(data, bad[:, :, 1:])
+    assert np.all(data[bad] == 50.0)  # input not mutated
 
 
 def test_decode_used_the_estimated_grid_and_metadata(bench):
@@ -222,3 +271,16 @@ def test_hex_to_square_preserves_smooth_signals():
     np.testing.assert_allclose(out[0, 0, :, 4:-4, 0], (0.1 + 0.01 * kk + 0.02 * rr)[:, 4:-4], atol=1e-4)
     with pytest.raises(ShapeError, match="lenslets"):
         hex_to_square(ramp[:, :, :-1], g)
+
+
+def test_decode_killed_then_rerun_leaves_no_temporaries(bench, tmp_path, run_lfproc):
+    """decode killed with its output complete in the temporary (not yet renamed): the re-run as it
+    was removes the dead run's temporary and writes the output (issue 13)."""
+    cam, info = bench["cam"], bench["info"]
+    args = ["decode", cam / info["truth_capture"], "--white-db", bench["db"], "-o", tmp_path / "d.exr"]
+    run_lfproc(*args, kill_at="file-written")
+    assert [p.name.startswith(".lfproc-tmp-") for p in tmp_path.iterdir()] == [True]
+    rerun = run_lfproc(*args)
+    assert rerun.returncode == 0, rerun.stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["d.exr"]
+    np.testing.assert_array_equal(read_lightfield(tmp_path / "d.exr").data, bench["decoded"].data)

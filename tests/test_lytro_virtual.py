@@ -48,6 +48,11 @@ def test_outputs_and_truth(virtual):
     assert truth.exposure_s == pytest.approx(0.01) and truth.iso == 100
     assert truth.attrs["virtual_illum"]["serial"] == info["serial"]
     assert info["lfproc_version"]
+    # what a perfect decoder returns: the input views (already at the decoder's 48 x 64 output
+    # size, so not resampled) times the 0 EV capture's signal over the white image's
+    lf = read_lightfield(out.parent / "lf.exr")
+    assert truth.size == lf.size
+    np.testing.assert_allclose(truth.data, lf.data * np.float32(f[1]), rtol=1e-6)
 
 
 def test_captures_read_back_with_realistic_metadata(virtual):
@@ -94,7 +99,15 @@ def test_forward_model_is_consistent():
     vig = vignetting(g)
     # a uniform light field gives 0.5 * scale * transmission on every pixel
     np.testing.assert_allclose(irr, 500.0 * vig, rtol=1e-5, atol=1e-3)
-    assert vig.max() <= 1.0 and vig.min() == 0.0
+    # each micro image is a disk of radius 0.46 x pitch with a 1.5-px soft edge: light reaches
+    # the share pi (0.46 s + 0.75)^2 / (s * s sqrt(3)/2) of a hexagonal cell (95 %), nothing
+    # between the disks, and about all of it at the centre of the central lenslets
+    s = g.spacing_x_px
+    assert g.spacing_y_px == pytest.approx(s * np.sqrt(3) / 2, rel=1e-3)
+    assert (vig > 0).mean() == pytest.approx(np.pi * (0.46 * s + 0.75) ** 2 / (s * g.spacing_y_px), rel=0.03)
+    assert vig.min() == 0.0
+    h, w = vig.shape
+    assert vig[h // 2 - 10:h // 2 + 10, w // 2 - 10:w // 2 + 10].max() > 0.99
     # the zoom step spreads the micro images
     assert illum_grid((240, 320), random_state=1, zoom_step=300).spacing_x_px > g.spacing_x_px
 

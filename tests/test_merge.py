@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lfproc.cli.main import main
-from lfproc.errors import InputError, ShapeError
+from lfproc.errors import ConvergenceWarning, InputError, SaturationWarning, ShapeError
 from lfproc.io import read_lightfield, write_lightfield
 from lfproc.lightfield import LightField
 from lfproc.merge import merge_debevec, merge_lightfields, merge_ml, recover_response
@@ -70,19 +70,24 @@ def test_ml_saturated_everywhere_filled_with_shortest_saturation(bracket):
 
 def test_ml_lookup_path_equals_float_path_and_any_shape():
     truth, dn = _bracket(size=(16, 20), views=3, seed=3)
-    x16, v16, _ = merge_ml(dn, exposures_s=TIMES, isos=100, profile="illum", chunk_size=1000)
-    xf, vf, _ = merge_ml(dn.astype(np.float64), exposures_s=TIMES, isos=100, profile="illum", n_threads=2)
+    # a small crop where the lamps cover 20 % of the samples, saturated in every exposure
+    with pytest.warns(SaturationWarning, match=r"exposure bracket: 20.0 % of the samples \(in every exposure\)"):
+        x16, v16, _ = merge_ml(dn, exposures_s=TIMES, isos=100, profile="illum", chunk_size=1000)
+    with pytest.warns(SaturationWarning):
+        xf, vf, _ = merge_ml(dn.astype(np.float64), exposures_s=TIMES, isos=100, profile="illum", n_threads=2)
     np.testing.assert_allclose(x16, xf, rtol=1e-5, atol=1e-3)
     np.testing.assert_allclose(v16, vf, rtol=1e-5)
     # 2-D sample shape: the same numbers per pixel (the merge is per sample)
-    x2, _, _ = merge_ml(list(dn.reshape(5, -1, 3)), exposures_s=TIMES, isos=100, profile="illum")
+    with pytest.warns(SaturationWarning):
+        x2, _, _ = merge_ml(list(dn.reshape(5, -1, 3)), exposures_s=TIMES, isos=100, profile="illum")
     np.testing.assert_allclose(x2.reshape(x16.shape), x16, rtol=1e-6)
 
 
 def test_ml_single_exposure_weights_match_sensor_model():
     # one usable exposure per pixel: the merge returns that exposure's calibrated value and variance
     dn = np.array([[500, 1023], [1023, 1023]], dtype=np.uint16)[:, None, :]  # (2 exposures, 1, 2)
-    x, var, info = merge_ml(dn, exposures_s=[0.01, 0.02], isos=100, profile="illum", n_iter=3)
+    with pytest.warns(SaturationWarning, match="50.0 %"):  # one of the two samples
+        x, var, info = merge_ml(dn, exposures_s=[0.01, 0.02], isos=100, profile="illum", n_iter=3)
     obs = calibrated_observation(np.array([[500.0]]), exposure_s=0.01, iso=100, profile="illum",
                                  variance_from="estimate", radiance_estimate=np.array([[x[0, 0]]]))
     assert x[0, 0] == pytest.approx(float(obs.radiance[0, 0]), rel=1e-5)
@@ -156,13 +161,30 @@ def test_frobisher_exif_and_response_recovery(frobisher):
     g = recover_response(images, exposures_s=[0.125, 1.0, 8.0], random_state=0)
     assert g.shape == (256, 3) and np.all(g[128] == 0)
     assert np.all(np.diff(g, axis=0) > 0)  # strictly monotonic in every channel
-    # OpenCV's CalibrateDebevec on the same (8-bit) data gives the same curve shape
+    # OpenCV's CalibrateDebevec on the same (8-bit) data gives a curve of the same shape...
     ref = cv2.createCalibrateDebevec().process([np.ascontiguousarray(i[..., ::-1]) for i in images],
                                                np.array([0.125, 1.0, 8.0], np.float32))
     ref = np.log(ref[:, 0, ::-1])
     ref -= ref[128]
     for c in range(3):
-        assert np.corrcoef(ref[10:246, c], g[10:246, c])[0, 1] > 0.99
+        assert np.corrcoef(ref[10:246, c], g[10:246, c])[0, 1] > 0.97
+    # ...but lfproc's explains the real bracket better: a pixel well exposed (codes 10..245) in two
+    # exposures gives the same radiance g(z_i) - ln t_i from both; RMS of the log disagreement over
+    # every such pixel (not only the few hundred the recovery used), lfproc against OpenCV
+    t = np.array([0.125, 1.0, 8.0])
+
+    def disagreement(resp):
+        c = np.arange(3)
+        out = []
+        for a, b in ((0, 1), (1, 2)):
+            za, zb = images[a].astype(int), images[b].astype(int)
+            ok = (za >= 10) & (za <= 245) & (zb >= 10) & (zb <= 245)
+            d = (resp[za, c] - np.log(t[a])) - (resp[zb, c] - np.log(t[b]))
+            out.append(float(np.sqrt(np.mean(d[ok] ** 2))))
+        return np.array(out)
+
+    ours, theirs = disagreement(g), disagreement(ref)
+    assert (ours < 0.9 * theirs).all(), (ours, theirs)  # measured: [0.078 0.096] against [0.107 0.127]
 
 
 def test_frobisher_merge_radiance_ratios(frobisher):
@@ -183,7 +205,7 @@ def test_frobisher_merge_radiance_ratios(frobisher):
 
 
 def test_cli_merge_frobisher_json(frobisher, tmp_path, capsys):
-    paths, _ = frobisher
+    paths, images = frobisher
     out = tmp_path / "frobisher.exr"
     assert main(["merge", *map(str, paths), "-o", str(out), "--json", "--mask", str(tmp_path / "mask.exr")]) == 0
     doc = json.loads(capsys.readouterr().out)
@@ -196,8 +218,15 @@ def test_cli_merge_frobisher_json(frobisher, tmp_path, capsys):
     assert int(mask.data.sum()) <= doc["saturated_everywhere_count"]
     assert main(["merge", *map(str, paths), "-o", str(out)]) == 2  # exists, no --force
     assert "output exists" in capsys.readouterr().err
-    assert main(["merge", *map(str, paths), "-o", str(out), "--method", "ml", "--profile", "illum", "--force"]) == 2
-    assert "use method debevec" in capsys.readouterr().err
+    # the noise-aware estimator takes 8-bit JPEGs too (recovered response, no profile, no ISO)
+    assert main(["merge", *map(str, paths), "-o", str(out), "--method", "ml", "--force", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["method"] == "ml" and doc["has_variance"] and doc["units"] == "relative"
+    ml = read_lightfield(out)
+    assert ml.variance is not None and (ml.variance > 0).all()
+    # the same recovered response (same seed): both estimators agree where the 1 s shot is mid-grey
+    mid = ((images[1] > 60) & (images[1] < 200)).all(axis=-1)
+    assert np.median(ml.data[0, 0][mid] / lf.data[0, 0][mid]) == pytest.approx(1, abs=0.03)
 
 
 # -- files and the CLI ------------------------------------------------------------------------------
@@ -277,7 +306,12 @@ def test_cli_merge_ml_light_field_files(tmp_path, capsys):
         paths.append(str(p))
     out = tmp_path / "hdr.exr"
     assert main(["merge", *paths, "-o", str(out), "--profile", "illum", "--json"]) == 0
-    doc = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    doc = json.loads(captured.out)
+    # the lamps clip in every exposure on 14 % of the samples: one warning line, exit 0
+    assert captured.err == ("lfproc merge: warning: exposure bracket: 14.4 % of the samples (in every exposure) are "
+                            "saturated (more than 10 %); their merged values are lower bounds (the saturation "
+                            "level of the shortest exposure); add a shorter exposure\n")
     assert doc["method"] == "ml" and doc["has_variance"] and doc["units"] == "e-/s"
     lf = read_lightfield(out)
     assert lf.variance is not None and lf.shape == truth.shape
@@ -317,3 +351,80 @@ def test_merge_with_variances_decoded_style_inputs():
     clipped = np.maximum(vals, 0)  # light fields hold non-negative data
     expected_lf = (w * clipped / times[:, None]).sum(0) / np.maximum(w.sum(0), 1e-30)
     np.testing.assert_allclose(merged.data.ravel()[12:], expected_lf[12:], rtol=1e-4)
+
+
+# -- 8-bit brackets against OpenCV, with a known answer -------------------------------------------------
+
+@pytest.mark.parametrize("name", ["hdr/ScanLines_Desk.exr", "hdr_cc0/courtyard.exr"])
+def test_synthetic_8bit_bracket_lower_log_error_than_opencv(shared_data, name):
+    """A real HDR photograph through a camera-like response, photon and read noise, 8-bit codes and
+    JPEG (lfproc.bracket.simulate_ldr_bracket); the photograph is the reference. Independent
+    comparison: OpenCV's CalibrateDebevec + MergeDebevec on the same codes and times."""
+    import cv2
+
+    from lfproc.bracket import simulate_ldr_bracket
+    from lfproc.merge import merge_ml_codes8
+    from lfproc.metrics import log_luminance_error
+
+    path = shared_data / name
+    if not path.exists():
+        pytest.skip(f"{path} not found")
+    hdr = read_lightfield(path, negative="clip").data[0, 0]
+    hdr = hdr[::2, ::2][:256, :384]  # 256 x 384 keeps the test fast
+    times = [2.0 ** (k - 3) for k in range(7)]
+    codes, sim = simulate_ldr_bracket(hdr, times, random_state=1)
+    mask = sim["well_exposed"]
+    assert 0.5 < mask.mean() <= 1
+    bgr = [np.ascontiguousarray(c[..., ::-1]) for c in codes]
+    tt = np.array(times, np.float32)
+    opencv = cv2.createMergeDebevec().process(bgr, tt, cv2.createCalibrateDebevec().process(bgr, tt))[..., ::-1]
+    err_cv = log_luminance_error(opencv, hdr, mask=mask)
+    deb, info = merge_debevec(codes, exposures_s=times, random_state=0)
+    err_deb = log_luminance_error(deb, hdr, mask=mask)
+    ml, var, _ = merge_ml_codes8(codes, exposures_s=times, random_state=0)
+    err_ml = log_luminance_error(ml, hdr, mask=mask)
+    assert err_deb < 0.95 * err_cv, (err_deb, err_cv)  # measured ratio 0.91 (courtyard), 0.73 (Desk)
+    assert err_ml < err_cv, (err_ml, err_cv)
+    # the recovered response is close to the true one over the codes that carry data
+    g_true = sim["response_g"]
+    g = info["response"]
+    assert np.sqrt(np.mean((g[10:246] - g_true[10:246, None]) ** 2)) < 0.1
+    assert (var > 0).all() and np.isfinite(var).all()
+
+
+def test_cli_merge_ml_8bit_without_iso(tmp_path, capsys):
+    """8-bit PNGs without EXIF: --method ml with --exposures-s only (no ISO, no profile)."""
+    pngs = _write_png_bracket(tmp_path)
+    out = tmp_path / "ml.exr"
+    assert main(["merge", *map(str, pngs), "-o", str(out), "--method", "ml", "--exposures-s", "0.25,0.5,1",
+                 "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["method"] == "ml" and doc["has_variance"]
+    lf = read_lightfield(out)
+    assert lf.attrs["input_mapping"] == "codes8" and lf.variance is not None
+
+
+def test_exposure_times_contradicting_the_images_are_refused(tmp_path, capsys):
+    """1/t passed for t: the longest 'time' is the darkest image; main merged it silently."""
+    from lfproc.merge import check_exposure_order
+
+    pngs = _write_png_bracket(tmp_path)  # written at 0.25, 0.5, 1 s (brighter with time)
+    out = tmp_path / "o.exr"
+    assert main(["merge", *map(str, pngs), "-o", str(out), "--exposures-s", "4,2,1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "exposure times contradict the images" in err
+    assert f"{pngs[1]} (2 s) is darker than {pngs[2]} (1 s)" in err
+    assert not out.exists()
+    # listing the files against their times is the same mistake
+    assert main(["merge", str(pngs[2]), str(pngs[1]), str(pngs[0]), "-o", str(out), "--exposures-s",
+                 "0.25,0.5,1"]) == 2
+    assert "contradict" in capsys.readouterr().err
+    # the right order passes, for every estimator and linear data
+    assert main(["merge", *map(str, pngs), "-o", str(out), "--exposures-s", "0.25,0.5,1"]) == 0
+    truth, dn = _bracket(size=(16, 20), views=1, seed=2)
+    check_exposure_order(dn, TIMES)
+    with pytest.raises(InputError, match=r"input 4 \(0.02 s\) is darker than input 5 \(0.01 s\)"):
+        check_exposure_order(dn, TIMES[::-1])
+    with pytest.raises(InputError, match="darker"):
+        merge_lightfields([LightField(data=d.astype(np.float32), units="dn", exposure_s=t, iso=100)
+                           for d, t in zip(dn, TIMES[::-1])], method="ml", profile="illum")

@@ -128,15 +128,46 @@ def test_epi_layout_and_slopes():
         assert np.argmax(vertical[:, v * s + s // 2]) == 20 + d * (v - 2)
 
 
-def test_histogram_preview(lf):
-    img = render_preview(lf, "histogram")
+def _grey_levels(levels, counts, zeros=0):
+    """A 1 x 1 light field of grey pixels (luminance = value) at ``levels``, ``counts`` of each."""
+    values = np.concatenate([np.repeat(np.float32(v), n) for v, n in zip(levels, counts)] + [np.zeros(zeros, np.float32)])
+    return LightField(data=np.repeat(values.reshape(1, 1, 1, -1, 1), 3, axis=-1))
+
+
+def test_histogram_figures_known_answer():
+    from lfproc.preview import _histogram_data
+
+    data = _histogram_data(_grey_levels([1.0, 16.0], [30, 10], zeros=10))  # 0 and 4 stops
+    np.testing.assert_allclose(data["edges"], np.linspace(0, 4, 33))  # whole stops, 8 bins a stop
+    expected = np.zeros(32)
+    expected[0], expected[-1] = 30 / 50, 10 / 50  # fractions of all samples, zeros included
+    np.testing.assert_allclose(data["fractions"], expected)
+    assert (data["p_lo"], data["p_hi"]) == (0.0, 4.0) and data["dynamic_range_stops"] == 4.0
+    assert data["zero_fraction"] == pytest.approx(0.2) and data["saturated"] is None
+    black = _histogram_data(LightField(data=np.zeros((1, 1, 8, 8, 3))))
+    assert black["edges"] is None and black["zero_fraction"] == 1.0 and black["dynamic_range_stops"] == 0.0
+
+
+def _bars(img):
+    """Columns of the histogram's bars (its fill colour #4c72b0), grouped, and each group's height."""
+    blue = np.abs(img.astype(int) - [76, 114, 176]).sum(-1) < 30
+    cols = np.nonzero(blue.any(axis=0))[0]
+    groups = np.split(cols, np.nonzero(np.diff(cols) > 1)[0] + 1) if cols.size else []
+    return [(int(g.min()), int(blue[:, g].sum(axis=0).max())) for g in groups]
+
+
+def test_histogram_preview_draws_the_bars_where_the_stops_are():
+    # three levels 0, 2 and 4 stops: the middle bar is halfway (2 / 3.875 of the way from the
+    # first bin's left edge at 0 to the last bin's at 3.875 stops) and, with twice the pixels,
+    # taller than the two equal outer bars
+    img = render_preview(_grey_levels([1.0, 4.0, 16.0], [10, 20, 10]), "histogram")
     assert img.shape == (500, 800, 3) and img.dtype == np.uint8
-    assert img.std() > 10  # a drawn plot, not a blank canvas
-
-
-def test_histogram_of_black_light_field_draws():
-    img = render_preview(LightField(data=np.zeros((1, 1, 8, 8, 3))), "histogram")
-    assert img.shape == (500, 800, 3)
+    (x0, h0), (x1, h1), (x2, h2) = _bars(img)
+    assert abs(x1 - (x0 + (x2 - x0) * 2 / 3.875)) <= 1
+    assert h0 == h2 and h1 > h0
+    # a light field with no positive luminance still gives a picture, without bars
+    black = render_preview(LightField(data=np.zeros((1, 1, 8, 8, 3))), "histogram")
+    assert black.shape == (500, 800, 3) and _bars(black) == []
 
 
 def test_render_preview_errors(lf):
@@ -217,12 +248,14 @@ def test_cli_preview(lf, tmp_path, capsys):
 
 @pytest.mark.parametrize("kind", ["centre", "sheet", "epi", "histogram"])
 def test_previews_of_real_light_field(shared_data, tmp_path, kind):
+    """The command on a real folder of 8-bit views writes exactly what the renderer draws."""
+    from lfproc.cli.main import main
+    from lfproc.io import read_lightfield
+
     folder = shared_data / "lightfields" / "lowres_5x5" / "hci_bedroom"
     if not folder.is_dir():
         pytest.skip(f"{folder} not found")
-    from lfproc.cli.main import main
-
     out = tmp_path / f"{kind}.png"
     assert main(["preview", str(folder), "-o", str(out), "--kind", kind]) == 0
     with Image.open(out) as im:
-        assert im.size[0] >= 128 and im.size[1] >= 128
+        np.testing.assert_array_equal(np.asarray(im), render_preview(read_lightfield(folder), kind))

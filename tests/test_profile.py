@@ -111,3 +111,22 @@ def test_cli_profile_show_errors(tmp_path, capsys):
     doc["isos"]["200"]["full_well_e"] = "big"
     assert main(["profile", "show", str(_write(tmp_path, doc))]) == 2
     assert "isos.200.full_well_e" in capsys.readouterr().err
+
+
+def test_cli_info_describes_a_profile(tmp_path, capsys):
+    """`lfproc info PROFILE.json` (info --help names profiles) prints what `profile show` prints."""
+    from lfproc.calib import save_profile
+
+    path = save_profile(load_profile("paper-high"), tmp_path / "p.json")
+    assert main(["info", str(path), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["kind"] == "camera_profile" and doc["name"] == "paper-high"
+    assert doc["saturation_dn"]["100"] == 4095 and doc["isos"]["100"]["gain_dn_per_e"] == pytest.approx(0.20475)
+    assert main(["info", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert "camera_profile" in text and "gain_dn_per_e" in text and "0.20475" in text
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"schema": "something.else"}))
+    assert main(["info", str(other)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "other.json" in err[0] and "camera profiles" in err[0]

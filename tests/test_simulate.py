@@ -116,6 +116,43 @@ def test_auto_radiance_scale_saturates_the_lowest_iso():
         auto_radiance_scale(np.zeros((5, 5, 4, 4, 3)), profile=profile, iso=100, exposure_s=0.004)
 
 
+def test_exposure_time_acts_as_in_a_camera(tmp_path, capsys):
+    """The automatic scale belongs to the scene (reference exposure 4 ms), not to the shot: on main it was
+    recomputed from --exposure-s, so 0.1 ms and 1 s saturated the same share of pixels."""
+    import json
+
+    from lfproc.cli.main import main
+    from lfproc.io import write_lightfield
+    from lfproc.lightfield import LightField
+
+    lf = _lf()
+    profile = load_profile("paper-low")
+    caps = {t: simulate_capture(lf, profile=profile, iso_pattern_kind="row", isos=[100], exposure_s=t, noise=False,
+                                random_state=0) for t in (0.001, 0.004, 0.016)}
+    scales = {cap.radiance_scale for cap in caps.values()}
+    assert len(scales) == 1  # one scene, one scale
+    assert all(cap.parameters["reference_exposure_s"] == 0.004 for cap in caps.values())
+    sat = {t: float(observations(cap).saturated.mean()) for t, cap in caps.items()}
+    assert sat[0.001] < sat[0.004] < sat[0.016]
+    assert sat[0.016] > 4 * sat[0.004] and sat[0.001] < 0.5 * sat[0.004]
+    # proportionally more signal: codes above black scale with time where nothing clips
+    black = profile.black_level_dn
+    a = caps[0.001].dn.astype(np.float64) - black
+    b = caps[0.004].dn.astype(np.float64) - black
+    ok = (caps[0.004].dn < profile.saturation_dn(100) - 1) & (a > 20)
+    assert ok.sum() > 100
+    assert np.median(b[ok] / a[ok]) == pytest.approx(4.0, rel=0.02)
+    # the command line: --exposure-s changes the saturated share
+    path = tmp_path / "lf.exr"
+    write_lightfield(LightField(data=lf), path)
+    fractions = []
+    for t in ("0.0001", "1"):
+        out = tmp_path / f"c{t}.capture.npz"
+        assert main(["simulate", str(path), "-o", str(out), "--exposure-s", t, "--seed", "1", "--json"]) == 0
+        fractions.append(json.loads(capsys.readouterr().out)["saturated_fraction"])
+    assert fractions[0] < 0.01 and fractions[1] > 0.9
+
+
 # -- statistics ---------------------------------------------------------------------------------
 
 def _light(kind: str) -> np.ndarray:
@@ -222,6 +259,25 @@ def test_cli_simulate_prints_the_sampling_rate(tmp_path, capsys, lf_file):
     assert main(["simulate", str(lf_file), "-o", str(tmp_path / "k.capture.npz"), "--radiance-scale", "1000",
                  "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["radiance_scale"] == 1000
+
+
+def test_same_seed_gives_byte_identical_capture_files(tmp_path, capsys, lf_file, monkeypatch):
+    import time
+    import zipfile
+
+    from lfproc._util import file_sha256
+
+    args = ["simulate", str(lf_file), "--seed", "7", "--shots", "2", "--iso-pattern", "random"]
+    assert main([*args, "-o", str(tmp_path / "a.capture.npz")]) == 0
+    real = time.time
+    monkeypatch.setattr(time, "time", lambda: real() + 86400 + 3)  # a later day: ZIP stamps would differ
+    assert main([*args, "-o", str(tmp_path / "b.capture.npz")]) == 0
+    assert main([*args[:3], "8", *args[4:], "-o", str(tmp_path / "c.capture.npz")]) == 0
+    capsys.readouterr()
+    sha = {name: file_sha256(tmp_path / f"{name}.capture.npz") for name in "abc"}
+    assert sha["a"] == sha["b"] and sha["a"] != sha["c"]
+    with zipfile.ZipFile(tmp_path / "b.capture.npz") as zf:
+        assert {info.date_time for info in zf.infolist()} == {(1980, 1, 1, 0, 0, 0)}
 
 
 def _nan_image(tmp_path, value):

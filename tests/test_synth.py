@@ -9,7 +9,7 @@ import pytest
 
 from lfproc.errors import InputError, MissingFileError, ShapeError
 from lfproc.io import read_lightfield
-from lfproc.lightfield import REC709_LUMA
+from lfproc.lightfield import LightField
 from lfproc.synth import SCENES, Layer, render_layers, scene_layers, synthesize
 
 KINDS = list(SCENES)
@@ -204,21 +204,42 @@ def test_texture_from_array_known_answer():
     assert not np.allclose(procedural.centre()[0, 0], expected, rtol=1e-3)
 
 
-def test_texture_grey_array_is_accepted():
+def test_texture_grey_array_is_grey_rgb():
+    """A 2-D texture is taken as grey: the same light field as its three-channel copy, and the
+    textured surface follows the texture (a ramp, not the procedural pattern)."""
     grey = np.linspace(0.1, 1, 30 * 40, dtype=np.float32).reshape(30, 40)
     lf = synthesize("layers", size=(32, 32), views=3, textures=[grey], random_state=0)
+    rgb = synthesize("layers", size=(32, 32), views=3, textures=[np.repeat(grey[..., None], 3, 2)], random_state=0)
+    np.testing.assert_array_equal(lf.data, rgb.data)
+    procedural = synthesize("layers", size=(32, 32), views=3, random_state=0)
+    assert not np.allclose(lf.data, procedural.data)
     assert lf.dynamic_range_stops() >= 16
 
 
-def test_texture_from_file(shared_data, tmp_path):
-    path = shared_data / "hdr" / "ScanLines_StillLife.exr"
-    lf = synthesize("window", size=(48, 64), views=3, textures=[path], random_state=0)
+@pytest.fixture(params=["written", "real"])
+def texture_file(request, tmp_path):
+    """A texture file: a constant image lfproc writes here, or a real HDR image (shared data)."""
+    if request.param == "written":
+        from lfproc.io import write_image
+
+        return write_image(tmp_path / "flat.exr", np.full((10, 12, 3), 3.0, np.float32))
+    return request.getfixturevalue("shared_data") / "hdr" / "ScanLines_StillLife.exr"
+
+
+def test_texture_from_file(texture_file):
+    lf = synthesize("window", size=(48, 64), views=3, textures=[texture_file], random_state=0)
     procedural = synthesize("window", size=(48, 64), views=3, random_state=0)
-    assert lf.attrs["synth_textures"] == ["ScanLines_StillLife.exr"]
+    assert lf.attrs["synth_textures"] == [texture_file.name]
     assert not np.allclose(lf.data, procedural.data)
     assert lf.dynamic_range_stops() >= 16
     # the sky and sun (never textured) are the same
     assert np.array_equal(lf.disparity, procedural.disparity)
+    if texture_file.name == "flat.exr":  # a file gives what the same array gives
+        from lfproc.io import read_image
+
+        same = synthesize("window", size=(48, 64), views=3, textures=[read_image(texture_file)[0]],
+                          random_state=0)
+        np.testing.assert_array_equal(lf.data, same.data)
 
 
 @pytest.mark.parametrize(
@@ -254,10 +275,12 @@ def test_render_layers_errors():
         render_layers([], size=(16, 16), views=5)
 
 
-def test_colour_is_linear_srgb_with_positive_luminance():
+def test_luminance_uses_the_published_rec709_weights():
+    """ITU-R BT.709 luminance of the linear primaries (constants written out here, not imported)."""
+    primaries = LightField(np.eye(3, dtype=np.float32)[None, None, None])
+    np.testing.assert_allclose(primaries.luminance()[0, 0, 0], [0.2126, 0.7152, 0.0722], rtol=1e-6)
     lf = synthesize("lamps", size=(32, 32), views=1, random_state=0)
-    lum = np.tensordot(lf.data.astype(np.float64), REC709_LUMA, axes=([-1], [0]))
-    np.testing.assert_allclose(lf.luminance(), lum, rtol=1e-5)
+    assert lf.colour_space == "linear-srgb" and (lf.luminance() > 0).all()
 
 
 def test_cli_writes_readable_file(tmp_path, capsys):

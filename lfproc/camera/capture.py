@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from .._util import file_sha256, to_jsonable
+from .._util import ReadOnlyState, file_sha256, freeze, frozen_array, to_jsonable
 from .._version import __version__
 from ..calib import load_profile
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
@@ -79,7 +79,7 @@ _ARRAYS = ("dn", "iso", "mask", "bias")
 
 
 @dataclass(frozen=True, eq=False)
-class Capture:
+class Capture(ReadOnlyState):
     """A coded multi-ISO capture (see the module documentation).
 
     Parameters
@@ -132,18 +132,36 @@ class Capture:
             dn = dn[None]
         if dn.ndim != 3:
             raise ShapeError(f"capture dn: expected sensor images of shape (S, H, W), got {dn.shape}")
+        if dn.size == 0:
+            raise ShapeError(f"capture dn: every axis needs at least one element, got shape {dn.shape}")
         if dn.dtype != np.uint16:
-            if not np.issubdtype(dn.dtype, np.integer) or dn.min(initial=0) < 0 or dn.max(initial=0) > 65535:
+            if np.issubdtype(dn.dtype, np.floating):
+                bad = int(np.count_nonzero(~np.isfinite(dn)))
+                frac = int(np.count_nonzero(np.isfinite(dn) & (dn != np.round(dn))))
+                if bad or frac:
+                    raise InputError(
+                        f"capture dn: expected integer sensor codes, found {bad} NaN or Inf and {frac} fractional values"
+                    )
+            elif not np.issubdtype(dn.dtype, np.integer):
                 raise InputError(f"capture dn: expected uint16 sensor codes, got {dn.dtype}")
-            dn = dn.astype(np.uint16)
+            if dn.min() < 0 or dn.max() > 65535:
+                raise InputError(
+                    f"capture dn: expected codes in [0, 65535], found range [{dn.min():g}, {dn.max():g}]"
+                )
+        dn = frozen_array(self.dn, dtype=np.uint16)
+        if dn.ndim == 2:
+            dn = dn[None]
         s, h, w = dn.shape
         iso = np.asarray(self.iso, dtype=np.float32)
         try:
-            iso = np.broadcast_to(iso, dn.shape).copy() if iso.ndim < 3 else iso
+            iso = np.broadcast_to(iso, dn.shape) if iso.ndim < 3 else iso
         except ValueError:
             raise ShapeError(f"capture iso: expected a scalar, (H, W) or (S, H, W) = {dn.shape} map, got {iso.shape}") from None
         if iso.shape != dn.shape:
             raise ShapeError(f"capture iso: expected shape {dn.shape}, got {iso.shape}")
+        if not np.isfinite(iso).all():
+            raise InputError("capture iso: expected finite ISO values, found NaN or Inf")
+        iso = frozen_array(iso)  # broadcast views and caller arrays are copied once, fresh conversions kept
         for value in np.unique(iso):
             profile.iso_figures(float(value))  # ProfileError naming the available ISOs
         exposures = np.atleast_1d(np.asarray(self.exposures_s, dtype=np.float64))
@@ -168,9 +186,12 @@ class Capture:
         if self.bias_dn is not None:
             bias = np.asarray(self.bias_dn, dtype=np.float32)
             try:
-                bias = np.broadcast_to(bias, dn.shape).copy()
+                bias = np.broadcast_to(bias, dn.shape)
             except ValueError:
                 raise ShapeError(f"capture bias_dn: expected a map broadcastable to {dn.shape}, got {bias.shape}") from None
+            if not np.isfinite(bias).all():
+                raise InputError("capture bias_dn: expected finite bias codes, found NaN or Inf")
+            bias = frozen_array(bias)
         if self.radiance_scale is not None and not (math.isfinite(self.radiance_scale) and self.radiance_scale > 0):
             raise InputError(f"capture radiance_scale: expected a positive number, got {self.radiance_scale}")
         object.__setattr__(self, "dn", dn)
@@ -201,6 +222,28 @@ class Capture:
     def sampling_rate(self) -> float:
         """``S / (3 V U)``, a fraction."""
         return sampling_rate(shots=self.shots, views=self.views, channels=3)
+
+    def saturated_fraction(self, *, pixels: str = "all", saturation_margin_dn: float = 0.5) -> float:
+        """Share of saturated pixels: at or above their ISO's saturation code minus the margin (the
+        ``saturated`` mask of :func:`observations`, without computing the rest).
+
+        ``pixels="all"`` counts every pixel of every shot; ``"least-sensitive"`` only the pixels
+        of the lowest ISO x exposure of the capture, where highlights must come from: a
+        saturated one there has lost its radiance for good (this is what
+        :class:`lfproc.errors.SaturationWarning` tests).
+        """
+        from .._util import check_choice
+
+        check_choice("pixels", pixels, ("all", "least-sensitive"))
+        codes = np.zeros(self.iso.shape, np.float64)
+        for value in self.isos:
+            codes[self.iso == value] = self.profile.saturation_dn(value)
+        saturated = self.dn >= codes - saturation_margin_dn
+        if pixels == "all":
+            return float(saturated.mean())
+        sensitivity = self.iso * np.asarray(self.exposures_s, np.float32)[:, None, None]
+        least = sensitivity <= sensitivity.min() * (1 + 1e-6)
+        return float(saturated[least].mean())
 
     def operator(self, *, dtype=np.float32) -> ProjectionOperator:
         """The projection operator ``Phi`` of this capture (:mod:`lfproc.camera.projection`)."""
@@ -250,12 +293,25 @@ class Capture:
         header = json.dumps(to_jsonable(self.header()), indent=1).encode()
         with atomic_file(path, force=force) as tmp:
             with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=6) as zf:
-                zf.writestr(HEADER_NAME, header)
+                zf.writestr(_member(HEADER_NAME), header, compresslevel=6)
                 for name, array in self._arrays().items():
                     buf = io.BytesIO()
                     np.lib.format.write_array(buf, np.ascontiguousarray(array), allow_pickle=False)
-                    zf.writestr(f"{name}.npy", buf.getvalue())
+                    zf.writestr(_member(f"{name}.npy"), buf.getvalue(), compresslevel=6)
         return path
+
+
+#: Timestamp of every member of a capture file: fixed, so that the same capture always gives
+#: the same bytes (files can be compared by hash); 1980-01-01 is the earliest a ZIP can hold.
+_ZIP_DATE_TIME = (1980, 1, 1, 0, 0, 0)
+
+
+def _member(name: str) -> zipfile.ZipInfo:
+    info = zipfile.ZipInfo(name, date_time=_ZIP_DATE_TIME)
+    info.compress_type = zipfile.ZIP_DEFLATED
+    info.external_attr = 0o644 << 16  # a regular file, rw-r--r--
+    info.create_system = 3  # Unix, whatever the writing machine
+    return info
 
 
 def _num(v: float):
@@ -381,12 +437,15 @@ def load_capture(path: str | os.PathLike) -> Capture:
 
 # -- calibrated observations --------------------------------------------------------------
 
-def observations(capture: Capture, **options) -> Observation:
+def observations(capture: Capture, *, warn_saturation: bool = True, **options) -> Observation:
     """Radiance estimates ``T`` (e-/s), their variance and weights for every shot (method.md section 3).
 
     Parameters
     ----------
     capture : Capture
+    warn_saturation : bool
+        Emit :class:`lfproc.errors.SaturationWarning` when more than
+        :data:`lfproc.errors.SATURATION_WARNING_FRACTION` of the pixels are saturated.
     **options
         Passed to :func:`lfproc.camera.sensor.calibrated_observation` (``saturation_margin_dn``,
         ``variance_from``, ``radiance_estimate`` of shape (S, H, W)...).
@@ -414,14 +473,29 @@ def observations(capture: Capture, **options) -> Observation:
             bias_dn=None if capture.bias_dn is None else capture.bias_dn[s],
             **kw,
         ))
-    return Observation(*(np.stack([getattr(o, f) for o in per_shot]) for f in
-                         ("radiance", "variance", "weight", "saturated", "black_clipped")))
+    obs = Observation(*(freeze(np.stack([getattr(o, f) for o in per_shot])) for f in
+                        ("radiance", "variance", "weight", "saturated", "black_clipped")))
+    if warn_saturation:
+        _warn_saturation(capture, stacklevel=4)
+    return obs
+
+
+def _warn_saturation(capture: Capture, *, stacklevel: int) -> None:
+    """SaturationWarning when too many of the least sensitive pixels (lowest ISO x exposure) saturate."""
+    from .._util import warn_saturation
+
+    sens = capture.iso * np.asarray(capture.exposures_s, np.float32)[:, None, None]
+    at = np.unravel_index(int(np.argmin(sens)), sens.shape)
+    where = f"ISO {_num(capture.iso[at])} at {capture.exposures_s[at[0]]:g} s"
+    warn_saturation(capture.saturated_fraction(pixels="least-sensitive"), "capture",
+                    samples=f"least sensitive pixels ({where})", stacklevel=stacklevel + 1,
+                    consequence="their radiance is lost for good; use a shorter exposure or a smaller radiance scale")
 
 
 def describe_capture(path: str | os.PathLike) -> dict[str, Any]:
     """Figures of a capture file for ``lfproc info`` (first key ``kind = "capture"``)."""
     capture = load_capture(path)
-    obs = observations(capture)
+    obs = observations(capture, warn_saturation=False)  # the figures below report it
     per_iso = {}
     for value in capture.isos:
         sel = capture.iso == value

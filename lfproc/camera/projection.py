@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._util import check_choice, check_random_state
+from .._util import ReadOnlyState, check_choice, check_random_state, freeze, frozen_array
 from ..errors import InputError, ShapeError
 
 __all__ = [
@@ -87,6 +87,9 @@ def cfa_index_map(pattern: str, size: tuple[int, int], *, offset: tuple[int, int
     -------
     ndarray of shape (H, W), int8
     """
+    if str(pattern).lower() == "mono":
+        raise InputError("cfa_pattern: the camera profile is monochrome ('mono'); the coded-mask camera simulates a "
+                         f"Bayer colour sensor: use a colour profile or give one of {', '.join(CFA_PATTERNS)}")
     pattern = check_choice("cfa_pattern", str(pattern).upper(), CFA_PATTERNS)
     tile = np.array([_COLOUR_INDEX[ch] for ch in pattern], dtype=np.int8).reshape(2, 2)
     rows = (np.arange(size[0]) + offset[0]) % 2
@@ -94,8 +97,40 @@ def cfa_index_map(pattern: str, size: tuple[int, int], *, offset: tuple[int, int
     return tile[rows[:, None], cols[None, :]]
 
 
+def _as_int(value, name: str, *, low: int) -> int:
+    """An integer option (integral floats such as 4.0 accepted) >= ``low``, else InputError."""
+    ok = not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+    if ok and np.isfinite(value) and int(value) == value and int(value) >= low:
+        return int(value)
+    raise InputError(f"{name}: expected an integer >= {low}, got {value!r}")
+
+
+def _pair(value, name: str) -> tuple[int, int]:
+    """Two positive integers (views or a size), else InputError: a zero-sized view has no pixels."""
+    try:
+        a, b = value
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected two integers >= 1, got {value!r}") from None
+    try:
+        return _as_int(a, name, low=1), _as_int(b, name, low=1)
+    except InputError:
+        raise InputError(f"{name}: expected two integers >= 1, got {tuple(value)!r}") from None
+
+
+def check_transmittances(values: np.ndarray, name: str) -> None:
+    """Raise :class:`InputError` unless every value is a finite transmittance in [0, 1]."""
+    values = np.asarray(values)
+    bad_nan = int(np.count_nonzero(~np.isfinite(values)))
+    if bad_nan:
+        raise InputError(f"{name}: expected finite transmittances in [0, 1], found {bad_nan} NaN or Inf values")
+    lo, hi = float(values.min(initial=0)), float(values.max(initial=0))
+    if lo < 0 or hi > 1:
+        n = int(np.count_nonzero((values < 0) | (values > 1)))
+        raise InputError(f"{name}: expected transmittances in [0, 1], found {n} values outside (range [{lo:.4g}, {hi:.4g}])")
+
+
 @dataclass(frozen=True, eq=False)
-class MaskCode:
+class MaskCode(ReadOnlyState):
     """The mask codes of all shots (see the module documentation for the layouts).
 
     Parameters
@@ -117,20 +152,23 @@ class MaskCode:
 
     def __post_init__(self):
         check_choice("mask kind", self.kind, MASK_KINDS)
-        codes = np.asarray(self.codes, dtype=np.float32)
+        codes = np.asarray(self.codes)
+        if not (np.issubdtype(codes.dtype, np.floating) or np.issubdtype(codes.dtype, np.integer)
+                or codes.dtype == bool):
+            raise ShapeError(f"mask codes: expected numeric transmittances, got dtype {codes.dtype}")
+        codes = frozen_array(self.codes, dtype=np.float32)
         want = 6 if self.kind == "random" else 4
         if codes.ndim != want:
             raise ShapeError(f"mask codes ({self.kind}): expected {want} dimensions, got shape {codes.shape}")
-        if not np.isfinite(codes).all() or codes.min(initial=0) < 0 or codes.max(initial=0) > 1:
-            raise InputError("mask codes: expected finite transmittances in [0, 1]")
+        if codes.size == 0:
+            raise ShapeError(f"mask codes ({self.kind}): every axis needs at least one element, got shape {codes.shape}")
+        check_transmittances(codes, "mask codes")
         if self.period is not None:
-            p = int(self.period)
-            if p < 1 or p != self.period:
-                raise InputError(f"mask period: expected a positive integer, got {self.period!r}")
+            p = _as_int(self.period, "mask period", low=1)
             if codes.shape[-3:-1] != (p, p):
                 raise ShapeError(f"mask codes: a period of {p} needs {p} x {p} tiles, got {codes.shape[-3:-1]}")
-        if int(self.shift) < 0:
-            raise InputError(f"mask shift: expected a non-negative integer, got {self.shift}")
+            object.__setattr__(self, "period", p)
+        object.__setattr__(self, "shift", _as_int(self.shift, "mask shift", low=0))
         object.__setattr__(self, "codes", codes)
 
     @property
@@ -229,12 +267,13 @@ def make_mask(
     MaskCode
     """
     check_choice("mask", kind, MASK_KINDS)
-    if int(shots) < 1 or int(shots) != shots:
-        raise InputError(f"shots: expected an integer >= 1, got {shots!r}")
-    if period is not None and (int(period) != period or int(period) < 1):
-        raise InputError(f"mask period: expected a positive integer, got {period!r}")
+    shots = _as_int(shots, "shots", low=1)
+    nv, nu = _pair(views, "mask views (V, U)")
+    size = _pair(size, "mask size (H, W)")
+    channels = _as_int(channels, "mask channels", low=1)
+    period = None if period is None else _as_int(period, "mask period", low=1)
+    shift = _as_int(shift, "mask shift", low=0)
     rng = check_random_state(random_state)
-    nv, nu = views
     if kind == "random":
         tile = (period, period) if period is not None else tuple(size)
         codes = decode_levels(rng.integers(0, MASK_LEVELS, (shots, nv, nu, *tile, channels), dtype=np.uint8))
@@ -244,7 +283,7 @@ def make_mask(
         else:
             base = (size[0] + shift * (nv - 1), size[1] + shift * (nu - 1))
         codes = decode_levels(rng.integers(0, MASK_LEVELS, (shots, *base, channels), dtype=np.uint8))
-    return MaskCode(kind=kind, codes=codes, period=None if period is None else int(period), shift=int(shift))
+    return MaskCode(kind=kind, codes=freeze(codes), period=period, shift=shift)
 
 
 def decode_levels(levels: np.ndarray) -> np.ndarray:
@@ -278,25 +317,46 @@ class ProjectionOperator:
     Notes
     -----
     Use :func:`build_operator` to make one from a :class:`MaskCode` and a CFA pattern.
+    The operator is immutable and its arrays are read-only (weights are checked to be
+    finite transmittances in [0, 1]); :meth:`restrict` shares memory with its parent.
     """
 
     def __init__(self, weights, cfa_index, *, channels: int = 3, period=None, offset=(0, 0)):
         weights = np.asarray(weights)
-        if weights.dtype not in (np.float32, np.float64):
-            weights = weights.astype(np.float32)
-        cfa_index = np.asarray(cfa_index)
+        if not (np.issubdtype(weights.dtype, np.floating) or np.issubdtype(weights.dtype, np.integer)
+                or weights.dtype == bool):
+            raise ShapeError(f"projection weights: expected numeric transmittances, got dtype {weights.dtype}")
         if weights.ndim != 5:
             raise ShapeError(f"projection weights: expected shape (S, V, U, H, W), got {weights.shape}")
+        if weights.size == 0:
+            raise ShapeError(f"projection weights: every axis needs at least one element, got shape {weights.shape}")
+        weights = frozen_array(weights, dtype=weights.dtype if weights.dtype in (np.float32, np.float64) else np.float32)
+        check_transmittances(weights, "projection weights")
+        channels = _as_int(channels, "channels", low=1)
+        cfa_index = np.asarray(cfa_index)
         if cfa_index.shape != weights.shape[3:]:
             raise ShapeError(f"cfa_index: expected shape {weights.shape[3:]}, got {cfa_index.shape}")
-        if cfa_index.size and (cfa_index.min() < 0 or cfa_index.max() >= channels):
+        if not np.issubdtype(cfa_index.dtype, np.integer):
+            raise InputError(f"cfa_index: expected integer colour indices, got dtype {cfa_index.dtype}")
+        if cfa_index.min() < 0 or cfa_index.max() >= channels:
             raise InputError(f"cfa_index: expected colour indices in 0..{channels - 1}")
-        self.weights = weights
-        self.cfa_index = cfa_index.astype(np.intp)
-        self.channels = int(channels)
-        self.period = None if period is None else (int(period[0]), int(period[1]))
-        self.offset = (int(offset[0]), int(offset[1]))
-        self._onehot = None
+        init = object.__setattr__
+        init(self, "weights", weights)
+        init(self, "cfa_index", frozen_array(cfa_index, dtype=np.intp))
+        init(self, "channels", channels)
+        init(self, "period", None if period is None else (_as_int(period[0], "period", low=1),
+                                                          _as_int(period[1], "period", low=1)))
+        init(self, "offset", (int(offset[0]), int(offset[1])))
+        init(self, "_onehot", None)
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"ProjectionOperator is immutable (cannot set {name!r}); build a new operator")
+
+    def __delattr__(self, name):
+        raise AttributeError(f"ProjectionOperator is immutable (cannot delete {name!r})")
+
+    def __setstate__(self, state):
+        ReadOnlyState.__setstate__(self, state)
 
     # -- shapes ------------------------------------------------------------------------
     @property
@@ -335,8 +395,8 @@ class ProjectionOperator:
 
     # -- application -------------------------------------------------------------------
     def _onehot_map(self, dtype) -> np.ndarray:
-        if self._onehot is None:
-            self._onehot = np.eye(self.channels, dtype=np.float32)[self.cfa_index]  # (H, W, C)
+        if self._onehot is None:  # a cache, not state: (H, W, C)
+            object.__setattr__(self, "_onehot", freeze(np.eye(self.channels, dtype=np.float32)[self.cfa_index]))
         return self._onehot.astype(dtype, copy=False)
 
     def forward(self, lf: np.ndarray) -> np.ndarray:
@@ -394,8 +454,7 @@ class ProjectionOperator:
     # -- patches -----------------------------------------------------------------------
     def _check_window(self, top: int, left: int, size: int) -> None:
         h, w = self.size
-        if int(size) < 1:
-            raise InputError(f"patch size: expected a positive integer, got {size}")
+        size = _as_int(size, "patch size", low=1)
         if not (0 <= top and 0 <= left and top + size <= h and left + size <= w):
             raise InputError(f"patch at ({top}, {left}) of size {size} does not fit in the sensor of {h} x {w}")
 
@@ -428,7 +487,7 @@ class ProjectionOperator:
         if tops.shape != lefts.shape or tops.ndim != 1:
             raise ShapeError(f"patch_sparse: tops and lefts must be 1-D of equal length, got {tops.shape}, {lefts.shape}")
         h, w = self.size
-        size = int(size)
+        size = _as_int(size, "patch size", low=1)
         if tops.size and (tops.min() < 0 or lefts.min() < 0 or tops.max() + size > h or lefts.max() + size > w):
             raise InputError(f"patch_sparse: patches of size {size} must lie inside the sensor of {h} x {w}")
         s_n, (nv, nu), c_n = self.shots, self.views, self.channels
@@ -514,7 +573,7 @@ def build_operator(mask: MaskCode, *, views: tuple[int, int], size: tuple[int, i
     if mask.period is not None:
         p = math.lcm(int(mask.period), 2)
         period = (p, p)
-    return ProjectionOperator(np.ascontiguousarray(weights, dtype=dtype), cfa, channels=3, period=period)
+    return ProjectionOperator(freeze(np.ascontiguousarray(weights, dtype=dtype)), freeze(cfa), channels=3, period=period)
 
 
 # -- per-phase patch operators (the reconstruction's view of Phi) ------------------------------

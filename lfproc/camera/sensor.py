@@ -40,7 +40,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import numpy as np
 
-from .._util import check_positive, check_random_state
+from .._util import ReadOnlyState, check_positive, check_random_state, freeze, frozen_array
 from ..calib import load_profile
 from ..errors import InputError, ShapeError
 
@@ -249,12 +249,14 @@ def expose(
     return dn.astype(np.uint16)
 
 
-@dataclass(frozen=True)
-class Observation:
-    """Calibrated observations of a sensor image (all arrays ``(H, W)``).
+@dataclass(frozen=True, eq=False)
+class Observation(ReadOnlyState):
+    """Calibrated observations of a sensor image (all arrays ``(H, W)``, or ``(S, H, W)`` for
+    the shots of a capture).
 
     ``radiance`` (T, e-/s), ``variance`` (of T, (e-/s)^2), ``weight`` (1/std(T), 0 where
-    unusable), ``saturated`` and ``black_clipped`` masks.
+    unusable), ``saturated`` and ``black_clipped`` masks. The arrays are read-only
+    (float32 and bool; see :func:`lfproc._util.frozen_array`).
     """
 
     radiance: np.ndarray
@@ -262,6 +264,17 @@ class Observation:
     weight: np.ndarray
     saturated: np.ndarray
     black_clipped: np.ndarray
+
+    def __post_init__(self):
+        shape = np.shape(self.radiance)
+        for name, dtype in (("radiance", np.float32), ("variance", np.float32), ("weight", np.float32),
+                            ("saturated", bool), ("black_clipped", bool)):
+            value = getattr(self, name)
+            if np.shape(value) != shape:
+                raise ShapeError(f"observation {name}: expected shape {shape} (that of radiance), got {np.shape(value)}")
+            if dtype is bool and np.asarray(value).dtype != bool:
+                raise InputError(f"observation {name}: expected a boolean mask, got dtype {np.asarray(value).dtype}")
+            object.__setattr__(self, name, frozen_array(value, dtype=dtype))
 
     @property
     def saturated_fraction(self) -> float:
@@ -314,16 +327,30 @@ def calibrated_observation(
     """
     profile = load_profile(profile)
     t = check_positive("exposure_s", exposure_s)
-    dn = np.asarray(dn, dtype=np.float64)
+    dn = np.asarray(dn)
+    if not (np.issubdtype(dn.dtype, np.integer) or np.issubdtype(dn.dtype, np.floating)):
+        raise InputError(f"sensor image: expected DN codes (integers or floats), got dtype {dn.dtype}")
+    dn = dn.astype(np.float64, copy=False)
     if dn.ndim != 2:
         raise ShapeError(f"sensor image: expected shape (H, W), got {dn.shape}")
-    gamma = profile.gamma if gamma is None else float(gamma)
+    n_bad = int(np.count_nonzero(~np.isfinite(dn)))
+    if n_bad:
+        raise InputError(f"sensor image: expected finite DN codes, found {n_bad} NaN or Inf values")
+    gamma = profile.gamma if gamma is None else check_positive("gamma", gamma)
+    if gamma < 1:
+        # the response I = I_max (h e / I_max)^(1/gamma) of expose() needs gamma >= 1 (as the profile does)
+        raise InputError(f"gamma: expected a value >= 1, got {gamma}")
     m = iso_maps(profile, iso, dn.shape)
     h = m["gain_dn_per_e"]
     if bias_dn is None:
         bias = m["black_level_dn"] + h * t * m["dark_current_e_per_s"]
     else:
-        bias = np.broadcast_to(np.asarray(bias_dn, dtype=np.float64), dn.shape)
+        try:
+            bias = np.broadcast_to(np.asarray(bias_dn, dtype=np.float64), dn.shape)
+        except (TypeError, ValueError):
+            raise ShapeError(f"bias_dn: expected a number or a map of shape {dn.shape}, got {np.shape(bias_dn)}") from None
+        if not np.isfinite(bias).all():
+            raise InputError("bias_dn: expected finite DN values, found NaN or Inf")
     if isinstance(correct_fixed_pattern, FixedPattern):
         fp = correct_fixed_pattern
         if fp.shape != dn.shape:
@@ -346,7 +373,15 @@ def calibrated_observation(
     if variance_from == "estimate":
         if radiance_estimate is None:
             raise InputError("variance_from='estimate' needs radiance_estimate")
-        signal = np.maximum(np.broadcast_to(radiance_estimate, dn.shape), 0)
+        try:
+            signal = np.broadcast_to(np.asarray(radiance_estimate, dtype=np.float64), dn.shape)
+        except (TypeError, ValueError):
+            raise ShapeError(
+                f"radiance_estimate: expected a map of shape {dn.shape}, got {np.shape(radiance_estimate)}"
+            ) from None
+        if not np.isfinite(signal).all():
+            raise InputError("radiance_estimate: expected finite values, found NaN or Inf")
+        signal = np.maximum(signal, 0)
     elif variance_from == "measurement":
         signal = np.maximum(T, 0)
     else:
@@ -370,10 +405,10 @@ def calibrated_observation(
     usable = ~(saturated | black_clipped)
     weight = np.where(usable, 1.0 / np.sqrt(variance), 0.0)
     return Observation(
-        radiance=T.astype(np.float32),
-        variance=variance.astype(np.float32),
-        weight=weight.astype(np.float32),
-        saturated=saturated,
-        black_clipped=black_clipped,
+        radiance=freeze(T.astype(np.float32)),
+        variance=freeze(variance.astype(np.float32)),
+        weight=freeze(weight.astype(np.float32)),
+        saturated=freeze(saturated),
+        black_clipped=freeze(black_clipped),
     )
 

@@ -9,15 +9,21 @@ full well and ADC saturation, power-law response, quantisation, black level). Th
 Radiance scale (lfproc's rule). Light fields are usually in relative units; the sensor
 needs electrons per second. ``L_e = K * L``, with ``K = radiance_scale`` given explicitly, or
 by default chosen so that the brightest *expected* sensor signal just reaches saturation at
-the lowest ISO in use and the reference exposure ``exposure_s``::
+the lowest ISO in use and the *reference* exposure ``reference_exposure_s`` (a constant,
+:data:`REFERENCE_EXPOSURE_S` = 4 ms, the default shot)::
 
-    K = e_sat(ISO_min) / (exposure_s * mean_transmittance * max_{p, c} sum_{v, u} L(v, u, p, c))
+    K = e_sat(ISO_min) / (reference_exposure_s * mean_transmittance * max_{p, c} sum_{v, u} L(v, u, p, c))
+
+The scale belongs to the scene, not to the shot: a shot of ``exposure_s`` longer than the
+reference saturates more pixels and collects proportionally more signal, as in a camera
+(before, ``K`` was recomputed from ``exposure_s`` and cancelled it).
 
 where ``e_sat`` is the electron count at which a pixel of that ISO saturates (full well or
 ADC, whichever first) and ``mean_transmittance = 0.5`` (masks are uniform in [0, 1]). The
 scale does not depend on the mask draw, so acquisitions of one scene with the same
-``exposure_s`` and ISO set (joint, individual-ISO, bracketing) see the same electrons per
-second. ``K`` is recorded in the capture (``radiance_scale``).
+ISO set (joint, individual-ISO, bracketing, any exposure) see the same electrons per
+second. ``K`` is recorded in the capture (``radiance_scale``) with the reference exposure
+(``parameters["reference_exposure_s"]``).
 
 ISO patterns (:func:`iso_pattern`): ``random`` (i.i.d. per pixel), ``row`` (rows alternate ISO
 in 2-row units, so a Bayer quad shares one ISO, as in Magic Lantern's dual ISO), ``block``
@@ -43,10 +49,10 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_choice, check_positive, check_random_state
+from .._util import check_choice, check_positive, check_random_state, freeze
 from .._version import __version__
 from .iso import DEFAULT_ISOS, ISO_PATTERNS, iso_pattern
-from .capture import Capture, _num, file_sha256, observations
+from .capture import Capture, _num, _warn_saturation, file_sha256, observations
 from ..calib import load_profile
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 from ..lightfield import LightField, clean_nonfinite
@@ -61,6 +67,7 @@ __all__ = [
     "NOISE_PROFILES",
     "iso_pattern",
     "auto_radiance_scale",
+    "REFERENCE_EXPOSURE_S",
     "simulate_capture",
     "simulate_file",
     "capture_summary",
@@ -93,6 +100,10 @@ def _saturation_electrons(profile, iso: float) -> float:
     return min(figs["full_well_e"], linear_dn / figs["gain_dn_per_e"])
 
 
+#: Exposure (s) at which the automatic radiance scale makes the brightest expected signal saturate.
+REFERENCE_EXPOSURE_S = 0.004
+
+
 def auto_radiance_scale(
     lf: np.ndarray,
     *,
@@ -110,7 +121,8 @@ def auto_radiance_scale(
     iso : float
         The lowest ISO in use.
     exposure_s : float
-        Reference exposure time (s).
+        Reference exposure time (s): :data:`REFERENCE_EXPOSURE_S` in :func:`simulate_capture`,
+        whatever the shots' exposure.
     mean_transmittance : float
         Expected mask transmittance.
     """
@@ -137,6 +149,7 @@ def simulate_capture(
     baseline: str | None = None,
     relative_exposures: Sequence[float] | None = None,
     radiance_scale: float | None = None,
+    reference_exposure_s: float = REFERENCE_EXPOSURE_S,
     noise: bool = True,
     random_state=None,
     ground_truth: dict | None = None,
@@ -172,6 +185,9 @@ def simulate_capture(
         Exposure of each shot relative to ``exposure_s`` (default 1, or the bracketing table).
     radiance_scale : float, optional
         Electrons per second per light-field unit; default: automatic (module documentation).
+    reference_exposure_s : float
+        Exposure at which the automatic scale saturates the brightest expected signal (default
+        4 ms); independent of ``exposure_s``, so that exposure time acts as in a camera.
     noise : bool
         False: noiseless expected codes (still quantised and clipped).
     random_state : int, Generator or None
@@ -249,9 +265,11 @@ def simulate_capture(
     exposures = [check_positive("exposure_s", exposure_s * r) for r in rel]
 
     # -- radiance scale, mask, projection, exposure -------------------------------------------
+    reference_exposure_s = check_positive("reference_exposure_s", reference_exposure_s)
     if radiance_scale is None:
-        scale = auto_radiance_scale(data, profile=profile, iso=float(iso_maps.min()), exposure_s=exposure_s)
-        scale_rule = "auto: brightest expected signal (mean transmittance 0.5) saturates the lowest ISO at exposure_s"
+        scale = auto_radiance_scale(data, profile=profile, iso=float(iso_maps.min()), exposure_s=reference_exposure_s)
+        scale_rule = ("auto: brightest expected signal (mean transmittance 0.5) saturates the lowest ISO at "
+                      "reference_exposure_s")
     else:
         scale = check_positive("radiance_scale", radiance_scale)
         scale_rule = "given"
@@ -282,12 +300,13 @@ def simulate_capture(
         "baseline": baseline,
         "noise": bool(noise),
         "radiance_scale_rule": scale_rule,
+        "reference_exposure_s": reference_exposure_s if radiance_scale is None else None,
         "light_field_source": lf.source if isinstance(lf, LightField) else None,
         "light_field_units": lf.units if isinstance(lf, LightField) else None,
     }
-    return Capture(
-        dn=dn,
-        iso=iso_maps,
+    capture = Capture(
+        dn=freeze(dn),
+        iso=freeze(iso_maps),
         exposures_s=exposures,
         mask=code,
         profile=profile,
@@ -299,11 +318,13 @@ def simulate_capture(
         iso_pattern=iso_info,
         parameters=parameters,
     )
+    _warn_saturation(capture, stacklevel=4)
+    return capture
 
 
 def capture_summary(capture: Capture, *, path: str | os.PathLike | None = None) -> dict[str, Any]:
     """Figures of a capture: shots, size, sampling rate, saturated and black-clipped fractions."""
-    obs = observations(capture)
+    obs = observations(capture, warn_saturation=False)  # reported in the figures
     per_iso = {}
     for value in capture.isos:
         sel = capture.iso == value

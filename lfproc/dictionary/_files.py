@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from .._util import to_jsonable
+from .._util import ReadOnlyState, frozen_array, to_jsonable
 from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 from ..io import atomic_file
@@ -54,14 +54,8 @@ _NORM_TOLERANCE = {np.dtype(np.float16): 5e-3, np.dtype(np.float32): 1e-4}
 _FIXED_ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 
 
-def _readonly(array: np.ndarray) -> np.ndarray:
-    array = np.array(array, copy=True) if array.flags.writeable or not array.flags.owndata else array
-    array.flags.writeable = False
-    return array
-
-
 @dataclass(frozen=True, eq=False)
-class Dictionary:
+class Dictionary(ReadOnlyState):
     """A learned (or analytic) dictionary of light-field patches.
 
     Parameters
@@ -130,8 +124,8 @@ class Dictionary:
             usage = np.asarray(self.usage)
             if usage.shape != (atoms.shape[1],) or not np.issubdtype(usage.dtype, np.integer) or (usage < 0).any():
                 raise ShapeError(f"dictionary usage: expected {atoms.shape[1]} non-negative integers, got {usage.shape}")
-            usage = _readonly(usage.astype(np.int64))
-        object.__setattr__(self, "atoms", _readonly(atoms32) if atoms32 is not atoms else _readonly(atoms))
+            usage = frozen_array(usage, dtype=np.int64)
+        object.__setattr__(self, "atoms", frozen_array(atoms32 if atoms32 is not atoms else atoms))
         object.__setattr__(self, "patch", patch)
         object.__setattr__(self, "sparsity", sparsity)
         object.__setattr__(self, "usage", usage)

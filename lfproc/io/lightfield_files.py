@@ -10,8 +10,12 @@ Layouts lfproc reads and writes:
   and free attributes) and ``lfproc_version``.
 * **A folder of views** ``view_RR_CC.<ext>`` with ext ``exr``, ``png``, ``tif``/``tiff``
   or ``hdr`` (the layout of ``shared/data/lightfields``). 8/16-bit views are sRGB
-  decoded to linear. lfproc also writes ``lightfield.json`` (the same metadata) next to
-  them; folders without it get defaults.
+  decoded to linear. lfproc also writes ``lightfield.json`` (the same metadata) and, when the
+  light field has one, the centre view's disparity ``disparity.pfm`` next to them; folders
+  without them get defaults. Any name that is not ``.exr`` or an image suffix is a folder
+  (``out``, ``out.views``). Writing 8/16-bit views clips values above 1 and warns
+  (:class:`~lfproc.errors.SaturationWarning`).
+* **A single image file** as output (``.hdr``, ``.png``, ``.tif``...): a 1 x 1 light field.
 * **A single image** (any format of :func:`lfproc.io.read_image`): a 1 x 1 light field.
 """
 
@@ -25,6 +29,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from .._util import freeze
 from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 from ..lightfield import LightField, clean_nonfinite
@@ -34,6 +39,8 @@ from .images import IMAGE_SUFFIXES, read_image, write_image
 __all__ = ["read_lightfield", "write_lightfield", "view_name", "parse_view_name", "lightfield_metadata", "SIDECAR"]
 
 SIDECAR = "lightfield.json"
+#: The centre view's disparity in a folder of views (greyscale PFM, pixels per view step).
+DISPARITY_FILE = "disparity.pfm"
 _VIEW_RE = re.compile(r"^view_(\d{2,})_(\d{2,})$")
 
 
@@ -117,7 +124,8 @@ def _read_exr_lightfield(path: Path, nonfinite: str, negative: str) -> LightFiel
     centre = views[(nv // 2, nu // 2)]
     disparity = centre.channels["disparity"].pixels if "disparity" in centre.channels else None
     data, _ = clean_nonfinite(data, policy=nonfinite, negative=negative, name=str(path))
-    return LightField(data=data, variance=variance, disparity=disparity, **_meta_kwargs(meta))
+    return LightField(data=freeze(data), variance=None if variance is None else freeze(variance), disparity=disparity,
+                      **_meta_kwargs(meta))
 
 
 def _view_files(folder: Path) -> dict[tuple[int, int], Path]:
@@ -170,7 +178,13 @@ def _read_folder(folder: Path, nonfinite: str, negative: str, transfer: str) -> 
     kwargs = _meta_kwargs(meta)
     kwargs.setdefault("saturation_level", sat)
     kwargs.setdefault("source", str(folder))
-    return LightField(data=data, **kwargs)
+    disparity = None
+    if (folder / DISPARITY_FILE).exists():
+        disparity = _read_pfm(folder / DISPARITY_FILE)
+        if disparity.shape != data.shape[2:4]:
+            raise ShapeError(f"{folder / DISPARITY_FILE}: disparity size {disparity.shape} differs from the views "
+                             f"{data.shape[2:4]}")
+    return LightField(data=freeze(data), disparity=disparity, **kwargs)
 
 
 def read_lightfield(
@@ -211,7 +225,7 @@ def read_lightfield(
     image, meta = read_image(path, part=part, nonfinite=nonfinite, negative=negative, transfer=transfer)
     attrs = {k: meta[k] for k in ("format", "part_name", "view") if meta.get(k) is not None}
     return LightField(
-        data=image[None, None],
+        data=freeze(image)[None, None],
         saturation_level=meta.get("saturation_level"),
         source=str(path),
         attrs=attrs,
@@ -275,22 +289,37 @@ def write_lightfield(
     if not isinstance(lf, LightField):
         raise InputError(f"write_lightfield: expected a LightField, got {type(lf).__name__}")
     path = Path(path)
-    if path.suffix.lower() == ".exr":
+    suffix_in = path.suffix.lower()
+    if suffix_in == ".exr":
         import OpenEXR
 
         parts = _exr_parts(lf, dtype)
         with atomic_file(path, force=force) as tmp:
             OpenEXR.File(parts).write(str(tmp))
         return path
-    if path.suffix:
-        raise InputError(f"{path}: expected a path ending in .exr (one file) or a folder name without a suffix")
     if folder_format not in _FOLDER_SUFFIX:
         raise InputError(f"format: expected one of {', '.join(_FOLDER_SUFFIX)}; got {folder_format!r}")
+    if suffix_in in IMAGE_SUFFIXES:  # one image file: a 1 x 1 light field
+        if lf.views != (1, 1):
+            raise InputError(
+                f"{path}: a single image holds one view, this light field has {lf.views[0]}x{lf.views[1]}; write a "
+                ".exr file or a folder (a name without an image suffix, e.g. out or out.views)"
+            )
+        depth = None if suffix_in in (".hdr", ".pic") else (
+            16 if suffix_in in (".tif", ".tiff") or folder_format in ("png16", "tiff") else 8)
+        if depth:
+            _warn_clipping(lf, path)
+        write_image(path, lf.data[0, 0], force=force, dtype=dtype, bit_depth=depth, transfer=transfer)
+        return path
     suffix, depth = _FOLDER_SUFFIX[folder_format]
     check_output(path, force=force)
+    if depth:
+        _warn_clipping(lf, path)
     meta = lightfield_metadata(lf) | {"folder_format": folder_format, "transfer": transfer if depth else "linear"}
     if depth:  # values are clipped to [0, 1] by the 8/16-bit encoding
         meta["saturation_level"] = 1.0
+    if lf.disparity is not None:
+        meta["disparity_file"] = DISPARITY_FILE
     with atomic_dir(path, force=force) as tmp:
         nv, nu = lf.views
         for v in range(nv):
@@ -298,5 +327,44 @@ def write_lightfield(
                 attrs = {"lfproc": json.dumps(meta | {"view": [v, u]}), "lfproc_version": __version__}
                 write_image(tmp / f"{view_name(v, u)}{suffix}", lf.data[v, u], dtype=dtype, bit_depth=depth,
                             transfer=transfer, attributes=attrs if suffix == ".exr" else None)
+        if lf.disparity is not None:
+            _write_pfm(tmp / DISPARITY_FILE, lf.disparity)
         (tmp / SIDECAR).write_text(json.dumps(meta, indent=2))
     return path
+
+
+def _warn_clipping(lf: LightField, path: Path) -> None:
+    import warnings
+
+    from ..errors import SaturationWarning
+
+    frac = float(np.mean(lf.data > 1.0))
+    if frac > 0:
+        warnings.warn(SaturationWarning(
+            f"{path}: {frac:.1%} of the samples exceed 1 and are clipped by the 8/16-bit encoding "
+            "(lower the exposure or tone map: --exposure-ev, --tonemap)"), stacklevel=3)
+
+
+def _write_pfm(path: Path, disparity: np.ndarray) -> None:
+    """Little-endian greyscale PFM (bottom row first, as the format says; the HCI benchmark's layout)."""
+    d = np.ascontiguousarray(np.flipud(np.asarray(disparity, dtype="<f4")))
+    with open(path, "wb") as fh:
+        fh.write(f"Pf\n{d.shape[1]} {d.shape[0]}\n-1.0\n".encode("ascii"))
+        fh.write(d.tobytes())
+
+
+def _read_pfm(path: Path) -> np.ndarray:
+    """Greyscale PFM to a (H, W) float32 array, top row first."""
+    raw = path.read_bytes()
+    try:
+        head, rest = raw.split(b"\n", 1)
+        dims, rest = rest.split(b"\n", 1)
+        scale, body = rest.split(b"\n", 1)
+        w, h = (int(x) for x in dims.split())
+        endian = "<" if float(scale) < 0 else ">"
+        if head.strip() != b"Pf":
+            raise ValueError("not greyscale")
+        d = np.frombuffer(body, dtype=f"{endian}f4", count=w * h).reshape(h, w)
+    except ValueError as exc:
+        raise FileFormatError(f"{path}: not a greyscale PFM file ({exc})") from None
+    return np.flipud(d).astype(np.float32)

@@ -322,7 +322,10 @@ def _read_raw_pair(path: Path) -> LytroCapture:
 
 
 def _capture_from_container(c: LfpContainer) -> LytroCapture:
+    from .extract import require_raw_image
+
     path = c.path
+    require_raw_image(c)  # a processed file: say what it holds before anything else
     meta = c.json("metadataRef") if (c.ref("metadataRef") or c.frame().get("metadata")) else None
     if meta is None:
         raise LfpFormatError(f"{path}: missing metadata: the table of contents has no frame metadataRef")

@@ -20,8 +20,15 @@ Pipeline of :func:`decode_lenslet`, each step vectorised over the whole sensor:
    the alternating-row ("hex") artefacts of linear row interpolation away.
 7. **Confidence**: the devignetted samples get a variance from the sensor noise model
    (Poisson + read noise + quantisation, divided by the white image squared); samples that
-   are saturated, off the sensor or under a dark part of the white image get
-   :data:`UNUSABLE_VARIANCE`.
+   are saturated (or next to saturated pixels), off the sensor or under a dark part of the
+   white image get :data:`UNUSABLE_VARIANCE`.
+8. **Unusable samples** get values interpolated from the usable samples of their view
+   (OpenCV's Navier-Stokes inpainting, per view and colour; :func:`fill_unusable`), except
+   those lying wholly on saturated pixels, which keep their saturation level (a lower bound:
+   a clipped highlight stays bright). All keep :data:`UNUSABLE_VARIANCE`, so merges ignore
+   them, but a viewer or a metric sees a plausible value instead of a hole. (The raw values
+   of the others are no estimate: a sample beside a clipped highlight reads the highlight's
+   saturation level through the pixels and views it shares with it.)
 
 The output is linear camera RGB scaled so that 1.0 is as bright as the white image (the
 decoder divides by it); ``colour="srgb"`` applies white balance, the colour matrix and the
@@ -36,7 +43,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .._util import check_choice
+from .._util import check_choice, freeze
 from .._version import __version__
 from ..errors import InputError, ShapeError
 from ..lightfield import LightField
@@ -49,6 +56,7 @@ __all__ = [
     "demosaic",
     "hex_to_square",
     "apply_colour",
+    "fill_unusable",
     "decode_capture",
     "UNUSABLE_VARIANCE",
     "DEMOSAIC_METHODS",
@@ -232,11 +240,58 @@ def _sample_views(image: np.ndarray, grid: LensletGrid, n_views: int, step: floa
     return out
 
 
+def fill_unusable(data: np.ndarray, unusable: np.ndarray, *, keep: np.ndarray | None = None,
+                  radius_px: float = 2.0) -> np.ndarray:
+    """Values for the samples a decode could not measure, from the usable samples of each view.
+
+    Parameters
+    ----------
+    data : ndarray of shape (V, U, H, W, C), float32
+    unusable : ndarray of shape (V, U, H, W), bool
+    keep : ndarray of shape (V, U, H, W), bool, optional
+        Unusable samples that keep their own value (the decoder's: samples lying wholly on
+        saturated pixels, whose value is the saturation level, a lower bound). They are not
+        used to inpaint the others, so a clipped highlight does not bleed into its surround.
+    radius_px : float
+        Neighbourhood of OpenCV's Navier-Stokes inpainting (``cv2.INPAINT_NS``).
+
+    Returns
+    -------
+    A new array; a view without any usable sample is all zero (except ``keep``).
+    """
+    import cv2
+
+    data = np.asarray(data, dtype=np.float32)
+    bad = np.asarray(unusable, dtype=bool)
+    if bad.shape != data.shape[:4]:
+        raise ShapeError(f"fill_unusable: mask {bad.shape} does not match the samples {data.shape[:4]}")
+    out = data.copy()
+    for v in range(data.shape[0]):
+        for u in range(data.shape[1]):
+            m = bad[v, u]
+            if not m.any():
+                continue
+            if m.all():
+                out[v, u] = 0.0
+                continue
+            mask = m.astype(np.uint8)
+            for c in range(data.shape[4]):
+                out[v, u, ..., c] = cv2.inpaint(np.ascontiguousarray(data[v, u, ..., c]), mask, radius_px,
+                                                cv2.INPAINT_NS)
+    if keep is not None:
+        keep = np.asarray(keep, dtype=bool)
+        if keep.shape != bad.shape:
+            raise ShapeError(f"fill_unusable: keep mask {keep.shape} does not match the samples {bad.shape}")
+        out[keep] = data[keep]
+    return np.maximum(out, 0.0, out=out)
+
+
 def decode_lenslet(raw: np.ndarray, white: np.ndarray, grid: LensletGrid, *, black_level: float,
                    white_level: float, cfa_pattern: str = "GRBG", white_responses=(1.0, 1.0, 1.0),
                    n_views: int = 5, hot_pixels: np.ndarray | None = None, demosaic_method: str = "opencv-ea",
                    hex_method: Literal["spline", "linear"] = "spline", gain_dn_per_e: float | None = None,
-                   read_noise_dn: float = 0.0, white_threshold: float = 0.05) -> dict[str, Any]:
+                   read_noise_dn: float = 0.0, white_threshold: float = 0.05,
+                   fill: bool = True) -> dict[str, Any]:
     """Decode a raw lenslet image with its white image and lenslet grid.
 
     Parameters
@@ -264,6 +319,9 @@ def decode_lenslet(raw: np.ndarray, white: np.ndarray, grid: LensletGrid, *, bla
         white image only, as if the sensor had unit gain).
     white_threshold : float
         Samples where the (neutralised) white image is below this are unusable.
+    fill : bool
+        Give unusable samples values interpolated from the usable ones (:func:`fill_unusable`);
+        False sets them to 0.
 
     Returns
     -------
@@ -318,7 +376,15 @@ def decode_lenslet(raw: np.ndarray, white: np.ndarray, grid: LensletGrid, *, bla
                          method="linear")[0, 0, ..., 0]
     unusable = (badsq > 0) | (wsq < white_threshold) | (insq < 0.999)[None, None]
     np.maximum(data, 0.0, out=data)
-    data[unusable] = 0.0
+    if fill:
+        # samples lying wholly on saturated pixels keep their saturation level (a clipped highlight
+        # stays bright); the others are inpainted from the usable samples only
+        satsamp = _sample_views(saturated.astype(np.float32), grid, n_views, step)
+        on_saturated = hex_to_square(satsamp[..., None], grid, method="linear")[..., 0] >= 1.0 - 1e-6
+        del satsamp
+        data = fill_unusable(data, unusable, keep=on_saturated & unusable)
+    else:
+        data[unusable] = 0.0
     g = 1.0 if gain_dn_per_e is None else float(gain_dn_per_e)
     # variance of (raw - black) / span in DN^2 / span^2, divided by the white image squared
     signal_dn = data * wsq[..., None] * span
@@ -365,7 +431,8 @@ def _noise_figures(camera_model: str, iso: float | None) -> tuple[float | None, 
 def decode_capture(capture: str | os.PathLike, *, white_db: str | os.PathLike | None = None,
                    white: str | os.PathLike | None = None, n_views: int = 5,
                    colour: Literal["linear", "srgb"] = "linear", demosaic_method: str = "opencv-ea",
-                   hex_method: Literal["spline", "linear"] = "spline", verify: bool = True) -> LightField:
+                   hex_method: Literal["spline", "linear"] = "spline", verify: bool = True,
+                   fill: bool = True) -> LightField:
     """Decode a Lytro raw capture into its central ``n_views x n_views`` sub-aperture views.
 
     Parameters
@@ -387,6 +454,9 @@ def decode_capture(capture: str | os.PathLike, *, white_db: str | os.PathLike | 
         See :func:`demosaic` and :func:`hex_to_square`.
     verify : bool
         Verify container SHA-1s.
+    fill : bool
+        Unusable samples get values interpolated from the usable ones (default) or 0
+        (see :func:`decode_lenslet`); either way their variance is :data:`UNUSABLE_VARIANCE`.
 
     Returns
     -------
@@ -398,6 +468,9 @@ def decode_capture(capture: str | os.PathLike, *, white_db: str | os.PathLike | 
 
     Raises
     ------
+    LfpFormatError
+        The file holds no raw lenslet image (a processed focal stack or depth map: the message
+        says what it holds; :func:`lfproc.lytro.extract.extract_lfp` writes it out).
     InputError
         Neither ``white_db`` nor ``white`` given, or a bad option.
     NoWhiteImageError
@@ -410,9 +483,9 @@ def decode_capture(capture: str | os.PathLike, *, white_db: str | os.PathLike | 
 
     check_choice("colour", colour, ("linear", "srgb"))
     check_choice("demosaic method", demosaic_method, DEMOSAIC_METHODS)
+    cap = read_capture(capture, verify=verify)  # first: a file without a raw image is named as such
     if white_db is None and white is None:
         raise InputError("decode: give a white-image database (--white-db DB_DIR) or a white image (--white FILE)")
-    cap = read_capture(capture, verify=verify)
     if white is not None:
         wraw, entry = read_white_file(white)
         how = "explicit file"
@@ -429,7 +502,7 @@ def decode_capture(capture: str | os.PathLike, *, white_db: str | os.PathLike | 
     res = decode_lenslet(cap.raw, wraw, entry.grid, black_level=black, white_level=float(cap.white_level),
                          cfa_pattern=cap.cfa_pattern, white_responses=entry.responses, n_views=n_views,
                          demosaic_method=demosaic_method, hex_method=hex_method, gain_dn_per_e=gain,
-                         read_noise_dn=read_dn)
+                         read_noise_dn=read_dn, fill=fill)
     data, var = res["data"], res["variance"]
     colour_space = "camera-rgb"
     wb = (1.0, 1.0, 1.0)
@@ -461,7 +534,8 @@ def decode_capture(capture: str | os.PathLike, *, white_db: str | os.PathLike | 
         "decode": {"views": n_views, "colour": colour, "demosaic": demosaic_method, "hex_resampling": hex_method,
                    "view_step_px": entry.grid.spacing_x_px / VIEW_STEP_DIVISOR,
                    "unusable_variance": UNUSABLE_VARIANCE, "hot_pixels_replaced": res["hot_pixels"],
+                   "unusable_values": "inpainted from usable samples (OpenCV Navier-Stokes)" if fill else "0",
                    "usable_fraction": float((w > 0).mean()), "mean_weight": float(w.mean())},
     }
-    return LightField(data=data, variance=var, units="relative", colour_space=colour_space,
+    return LightField(data=freeze(data), variance=freeze(var), units="relative", colour_space=colour_space,
                       exposure_s=cap.exposure_s, iso=cap.iso, source=str(capture), attrs=attrs)

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from .._util import warn_convergence
 from ..errors import CalibrationError, InputError, ShapeError
 
 __all__ = ["LensletGrid", "estimate_grid", "ILLUM_SPACING_PX", "F01_SPACING_PX"]
@@ -316,16 +317,25 @@ def _demodulate(image: np.ndarray, freq: np.ndarray, *, step: int, sigma_px: flo
     return z, gx, gy
 
 
-def _refine_frequency(image: np.ndarray, freq: np.ndarray, *, spacing: float) -> tuple[np.ndarray, float, float]:
+_REFINE_ITERATIONS = 6
+#: The frequency refinement has converged when its last step changes the phase by less than
+#: this across the image (cycles); else estimate_grid emits a ConvergenceWarning.
+_REFINE_TOLERANCE_CYCLES = 0.05
+
+
+def _refine_frequency(image: np.ndarray, freq: np.ndarray, *,
+                      spacing: float) -> tuple[np.ndarray, float, float, float | None]:
     """Refine one lattice frequency by fitting a plane to the demodulated phase.
 
-    Returns the refined frequency, the phase at pixel (0, 0) and the mean modulation amplitude.
+    Returns the refined frequency, the phase at pixel (0, 0), the mean modulation amplitude,
+    and ``None`` when the iterations converged, else the last step (cycles across the image).
     """
     step = max(2, int(round(spacing / 2)))
     sigma = 1.5 * spacing
     margin = int(math.ceil(3 * sigma))
     f = np.asarray(freq, dtype=np.float64).copy()
-    for _ in range(6):
+    not_converged = None
+    for _ in range(_REFINE_ITERATIONS):
         z, gx, gy = _demodulate(image, f, step=step, sigma_px=sigma, margin=margin)
         if z.shape[0] < 2 or z.shape[1] < 2:
             raise CalibrationError(f"white image of {image.shape[0]} x {image.shape[1]} px is too small "
@@ -334,8 +344,11 @@ def _refine_frequency(image: np.ndarray, freq: np.ndarray, *, spacing: float) ->
         dfx = np.angle(np.sum(z[:, 1:] * np.conj(z[:, :-1]))) / (2 * np.pi * step)
         dfy = np.angle(np.sum(z[1:, :] * np.conj(z[:-1, :]))) / (2 * np.pi * step)
         f = f + [dfx, dfy]
-        if math.hypot(dfx, dfy) * max(image.shape) < 0.05:
+        last_step = math.hypot(dfx, dfy) * max(image.shape)  # phase change across the image, cycles
+        if last_step < _REFINE_TOLERANCE_CYCLES:
             break
+    else:
+        not_converged = last_step
     z, gx, gy = _demodulate(image, f, step=step, sigma_px=sigma, margin=margin)
     amp = np.abs(z)
     ref = np.sum(z)
@@ -346,7 +359,7 @@ def _refine_frequency(image: np.ndarray, freq: np.ndarray, *, spacing: float) ->
     coef, *_ = np.linalg.lstsq(a * sw[:, None], phase.ravel() * sw, rcond=None)
     f = f + coef[:2] / (2 * np.pi)
     phase0 = float(np.angle(ref) + coef[2])
-    return f, phase0, float(amp.mean())
+    return f, phase0, float(amp.mean()), not_converged
 
 
 def estimate_grid(white_image: np.ndarray, *, approx_spacing_px: float | None = ILLUM_SPACING_PX,
@@ -376,6 +389,11 @@ def estimate_grid(white_image: np.ndarray, *, approx_spacing_px: float | None = 
     CalibrationError
         No hexagonal lattice can be found (too small, flat or not hexagonal).
 
+    Warns
+    -----
+    ConvergenceWarning
+        The iterative refinement of a lattice frequency did not settle in 6 iterations.
+
     Notes
     -----
     On synthetic white images with a known grid the spacing is recovered to better than
@@ -397,12 +415,21 @@ def estimate_grid(white_image: np.ndarray, *, approx_spacing_px: float | None = 
     img = img - np.float32(img.mean())
     coarse = _coarse_frequencies(img, approx_spacing_px)
     spacing = 1.0 / (np.hypot(*coarse[0]) * _SQRT3_2)
-    refined, phases, amps = [], [], []
+    refined, phases, amps, unconverged = [], [], [], []
     for fq in coarse:
-        f, ph, amp = _refine_frequency(img, fq, spacing=spacing)
+        f, ph, amp, step_cycles = _refine_frequency(img, fq, spacing=spacing)
         refined.append(f)
         phases.append(ph)
         amps.append(amp)
+        if step_cycles is not None:
+            unconverged.append(step_cycles)
+    if unconverged:
+        warn_convergence(
+            f"lenslet grid: the frequency refinement of {len(unconverged)} of 3 lattice directions did not converge "
+            f"in {_REFINE_ITERATIONS} iterations (last step {max(unconverged):.3g} cycles across the image, "
+            f"tolerance {_REFINE_TOLERANCE_CYCLES}); the grid may be off (is this a white image of a regular "
+            "lenslet pattern?)"
+        )
     b1, b2, b3 = refined
     # reciprocal basis (beta1, beta2) with b1 = beta1, b2 = beta2, b3 = beta2 - beta1
     design = np.array([[1, 0], [0, 1], [-1, 1]], dtype=np.float64)
