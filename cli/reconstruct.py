@@ -21,12 +21,14 @@ def register(sub, common) -> None:
     p.add_argument("--dictionary", default="default", metavar="default|FILE",
                    help="dictionary: the shipped 'default' or a dictionary .npz file")
     p.add_argument("--solver", default="admm", metavar="admm|fista|omp",
-                   help="admm (default; Woodbury, batched), fista, or omp (fast greedy mode)")
+                   help="admm (default; batched, one factor per operator phase), fista, or omp (fast greedy mode)")
     p.add_argument("--stride", type=int, default=4, help="patch spacing in pixels, 1..patch size (default 4)")
     p.add_argument("--mu", type=float, default=1e-4,
                    help="l1 weight relative to a unit-norm patch (default 1e-4, the paper's)")
-    p.add_argument("--max-iter", type=int, default=None, help="iteration limit (default 300 ADMM, 1000 FISTA)")
-    p.add_argument("--tol", type=float, default=2.0**-15, help="relative change that stops a patch (default 2^-15)")
+    p.add_argument("--max-iter", type=int, default=None, help="iteration limit (default 50 ADMM, 1000 FISTA)")
+    p.add_argument("--tol", type=float, default=None,
+                   help="relative change that stops a patch (default 1e-2 ADMM, 2^-15 = 3.0517578125e-05 FISTA; "
+                        "the paper's: --tol 3.0517578125e-05 --max-iter 300)")
     p.add_argument("--sparsity", type=int, default=None, help="atoms per patch for omp (default: the dictionary's)")
     p.add_argument("--scale", default="patch", metavar="patch|global",
                    help="per-patch scale normalisation (default) or one scale for the capture")
