@@ -23,7 +23,21 @@ smooth noisy scene is best (tests/test_reconstruct.py; README), whereas ``1e-4``
 summed data term (100x less regularisation) overfits the noise. ``scale="global"`` uses one ``c`` and one weight scale for
 the whole capture instead (the 99.9th percentile of the usable ``T`` over the mean row
 transmittance, and the rms of all usable weights): what normalising the capture to its peak
-would do. The README gives the measured difference.
+would do. ``scale="noise"`` (the default) keeps the per-patch units of ``"patch"`` for the
+code but not its per-patch weighting of the data term: each patch solves
+``1/(2m) ||W (Phi_p D a - T_p)||^2 + (mu / c_p) ||a||_1`` with the raw weights ``W = 1/std(T)``:
+the data term is the chi-square of the patch (its residuals in units of their noise), the l1
+weight is relative to the patch's norm (a scale-free prior), and ``mu`` is a pure number (in
+``"patch"`` units: ``mu_p = mu m / (c_p omega_p)^2``). Bright, high-SNR patches then fit their
+data and dark, noisy ones are regularised more, in any capture. With ``"patch"`` a patch with a
+bright light on a dark background has a tiny data term (its ``c_p`` is the light's level, its
+weight rms the dark pixels'), and the lasso shrinks the light away (measured: street lamps
+lost, 15 dB PU21; README).
+
+Overlapping estimates are averaged (``overlap="mean"``, the paper's) or weighted per pixel
+(``"scale"``: by ``1 / c_p^2``, the inverse of a patch's error variance when its error is
+relative to its norm, so a dark pixel is taken from the patches without a bright light in them;
+``"window"``: by a centre-weighted ``sin^2`` window; ``"scale-window"``, the default: both).
 """
 
 from __future__ import annotations
@@ -43,16 +57,19 @@ from ..errors import InputError, ShapeError
 from ..lightfield import LightField
 from ._solvers import SOLVERS, BatchOperator, SharedOperator, admm, fista, omp
 
-__all__ = ["reconstruct", "DEFAULTS", "SCALES", "patch_count"]
+__all__ = ["reconstruct", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "patch_count"]
 
-SCALES = ("patch", "global")
+SCALES = ("patch", "global", "noise")
+OVERLAPS = ("mean", "scale", "window", "scale-window")
 #: Defaults of :func:`reconstruct` (the paper's settings where it gives them: method.md section 4).
-#: ADMM stops early by default (tolerance 1e-2, at most 50 iterations): on noisy captures the PU21-PSNR is within
-#: 0.1 dB of the converged lasso's by then and the PU21-SSIM is better (the later iterations fit the noise; README,
-#: measured with benchmarks/reconstruct_quality.py); the paper's tolerance is ``tol=2**-15`` with ``max_iter=300``.
-DEFAULTS = {"stride": 4, "mu": 1e-4, "tol": {"admm": 1e-2, "fista": 2.0**-15, "omp": None},
+#: Defaults of :func:`reconstruct`, measured on HDR-photo-textured light fields (README, benchmarks/
+#: reconstruct_quality.py): the chi-square data term with ``mu = 1`` (``scale="noise"``), overlaps weighted by scale and a centre
+#: window, ADMM stopped at a tolerance of 1e-2 or 50 iterations. The paper's settings are :data:`PAPER`.
+DEFAULTS = {"stride": 4, "mu": 1.0, "tol": {"admm": 1e-2, "fista": 2.0**-15, "omp": None},
             "max_iter": {"admm": 50, "fista": 1000, "omp": None},
-            "block_patches": 512, "scale": "patch"}
+            "block_patches": 512, "scale": "noise", "overlap": "scale-window"}
+#: The paper's settings (method.md section 4: mu 1e-4 on patches of unit norm, tolerance 2^-15, plain averages).
+PAPER = {"stride": 4, "mu": 1e-4, "tol": 2.0**-15, "max_iter": 300, "scale": "patch", "overlap": "mean"}
 #: Bytes of per-patch operators ``A_p`` materialised at once for non-periodic masks.
 _BATCH_OPERATOR_BYTES = 256 * 2**20
 
@@ -65,8 +82,10 @@ class _Settings:
     tol: float
     sparsity: int
     scale: str
+    overlap: str
     c_global: float
     w_global: float
+    c_median: float = 1.0
 
 
 def patch_count(size: tuple[int, int], patch: int, stride: int) -> int:
@@ -119,7 +138,9 @@ def _solve_group(op, y, w, rowsum, settings: _Settings, n: int) -> tuple[np.ndar
     yn = (y[rows] / cp[:, None]).astype(np.float32)
     wn = (w[rows] / om[:, None]).astype(np.float32)
     m = y.shape[1]  # mu weighs the data term's mean over the measurements (module notes)
-    if settings.scale == "patch":
+    if settings.scale == "noise":  # the raw chi-square data term (module notes)
+        mu = settings.mu * m / (cp * om) ** 2
+    elif settings.scale == "patch":
         mu = np.full(len(rows), settings.mu * m)
     else:  # one mu for the raw problem of every patch (module notes)
         mu = settings.mu * m * (settings.c_global / cp) * (settings.w_global / om) ** 2
@@ -188,11 +209,40 @@ def _solve_block_here(task: dict, shared: dict) -> dict:
     rows = int(tops.max() - row0 + size)
     width = task["width"]
     acc = np.zeros((v_n, u_n, rows, width, c_n), dtype=np.float32)
+    weight = _overlap_weights(settings.overlap, codes_scale / settings.c_median, size)  # (B, P, P) or None
+    wacc = None if weight is None else np.zeros((rows, width), dtype=np.float32)
     patches = estimates.reshape(b_n, v_n, u_n, size, size, c_n)
     for b in range(b_n):  # fixed order: the block's patches as listed
         t, l = int(tops[b] - row0), int(lefts[b])
-        acc[:, :, t:t + size, l:l + size, :] += patches[b]
-    return {"row0": row0, "acc": acc, "empty": int((codes_scale == 0).sum()), "iterations": iters}
+        if weight is None:
+            acc[:, :, t:t + size, l:l + size, :] += patches[b]
+        else:
+            acc[:, :, t:t + size, l:l + size, :] += patches[b] * weight[b][:, :, None]
+            wacc[t:t + size, l:l + size] += weight[b]
+    return {"row0": row0, "acc": acc, "weight": wacc, "empty": int((codes_scale == 0).sum()), "iterations": iters}
+
+
+def _overlap_weights(overlap: str, scale: np.ndarray, size: int) -> np.ndarray | None:
+    """Per-pixel weights of every patch's estimate when overlaps are averaged (None: plain mean).
+
+    ``scale``: the patches' ``c_p`` over one constant of the capture (the same in every block).
+    """
+    if overlap == "mean":
+        return None
+    b_n = len(scale)
+    w = np.ones((b_n, size, size), dtype=np.float32)
+    if overlap in ("scale", "scale-window"):
+        # a patch's error is about relative to its own l2 norm c_p (the dictionary's coding error and the
+        # lasso's): inverse-variance weights 1 / c_p^2 let the patches whose scale matches a pixel win
+        good = scale > 0
+        inv = np.full(b_n, 1e-12)  # an empty patch (no usable measurement) counts only where nothing else does
+        inv[good] = np.minimum(1.0 / scale[good] ** 2, 1e12)
+        w *= inv.astype(np.float32)[:, None, None]
+    if overlap in ("window", "scale-window"):
+        x = (np.arange(size) + 0.5) / size
+        win = np.sin(np.pi * x) ** 2 + 1e-3  # centre-weighted: a patch's border pixels have the fewest measurements around them
+        w *= np.outer(win, win).astype(np.float32)[None]
+    return w
 
 
 def _load_inputs(capture, dictionary):
@@ -224,6 +274,7 @@ def reconstruct(
     scheduler: str | None = None,
     progress_bar: bool | None = None,
     threads: int | None = None,
+    overlap: str = DEFAULTS["overlap"],
 ) -> LightField:
     """Reconstruct the HDR light field of a coded multi-ISO capture (method.md section 4).
 
@@ -243,8 +294,10 @@ def reconstruct(
         Patch spacing in pixels (1 .. patch size; 4 as the paper). Any stride works with the
         Bayer CFA: patch operators carry their CFA phase.
     mu : float
-        l1 weight, relative to a light-field patch of unit l2 norm with weights of mean
-        square one (module notes); the paper's 1e-4 by default. Ignored by ``omp``.
+        l1 weight (module notes): with ``scale="noise"`` (default 1, measured) ``mu / c_p``
+        against the chi-square data term averaged over the measurements; with
+        ``scale="patch"`` relative to a patch of unit norm with weights of mean square one
+        (the paper's 1e-4: :data:`PAPER`). Ignored by ``omp``.
     max_iter : int, optional
         Iteration limit (default 50 for ADMM, 1000 for FISTA). Ignored by ``omp``.
     tol : float, optional
@@ -252,8 +305,10 @@ def reconstruct(
         is at most ``tol`` (default 1e-2 for ADMM, 2^-15 for FISTA; the paper's: 2^-15).
     sparsity : int, optional
         Atoms per patch for ``omp`` (default: the dictionary's training sparsity).
-    scale : {"patch", "global"}
-        Per-patch scale normalisation (default) or one scale for the capture (module notes).
+    scale : {"noise", "patch", "global"}
+        How HDR scale is handled (module notes): per-patch codes with the chi-square data term
+        (``"noise"``, default), per-patch codes and data term (``"patch"``, the first
+        implementation's), or one scale for the capture.
     block_patches : int
         About this many patches per block, the unit of work (memory is bounded by a block).
         The output depends on it only through float rounding in the batched products.
@@ -267,6 +322,8 @@ def reconstruct(
     threads : int, optional
         In this process: blocks solved at once, each on one BLAS thread (default: the
         number of CPUs available). The output does not depend on it.
+    overlap : {"scale-window", "scale", "window", "mean"}
+        How overlapping patch estimates are combined (module notes); ``"mean"`` is the paper's.
 
     Returns
     -------
@@ -292,6 +349,7 @@ def reconstruct(
     started = time.perf_counter()
     check_choice("solver", solver, SOLVERS)
     check_choice("scale", scale, SCALES)
+    check_choice("overlap", overlap, OVERLAPS)
     if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)):
         raise InputError(f"stride: expected a positive integer, got {stride!r}")
     if tol is None:
@@ -341,8 +399,10 @@ def reconstruct(
     mean_rowsum = float(np.mean(capture.mask.codes)) * v_n * u_n
     c_global = math.sqrt(n) * float(np.percentile(np.abs(T[usable]), 99.9)) / max(mean_rowsum, 1e-12)
     w_global = float(np.sqrt(np.mean(W[usable].astype(np.float64) ** 2)))
-    settings = _Settings(solver=solver, mu=mu, max_iter=max_iter, tol=tol, sparsity=sparsity, scale=scale,
-                         c_global=max(c_global, 1e-30), w_global=max(w_global, 1e-30))
+    c_median = math.sqrt(n) * float(np.median(np.abs(T[usable]))) / max(mean_rowsum, 1e-12)
+    settings = _Settings(solver=solver, mu=mu, max_iter=max_iter, tol=tol, sparsity=sparsity, scale=scale, overlap=overlap,
+                         c_global=max(c_global, 1e-30), w_global=max(w_global, 1e-30),
+                         c_median=max(c_median, 1e-30))
 
     tops, lefts = patch_grid((h, w), size, stride)
     rows_per_block = max(1, block_patches // len(lefts))
@@ -382,6 +442,7 @@ def reconstruct(
 
     total = acc = None
     acc = np.zeros((v_n, u_n, h, w, c_n), dtype=np.float32)
+    wsum = np.zeros((h, w), dtype=np.float32) if overlap != "mean" else None
     empty = 0
     iterations: list[np.ndarray] = []
     bar = progress(total=len(grid_t), desc="reconstruct", unit="patch",
@@ -392,6 +453,8 @@ def reconstruct(
         r0 = result["row0"]
         part = result["acc"]
         acc[:, :, r0:r0 + part.shape[2]] += part
+        if wsum is not None:
+            wsum[r0:r0 + part.shape[2]] += result["weight"]
         empty += result["empty"]
         iterations.append(result["iterations"])
 
@@ -404,7 +467,10 @@ def reconstruct(
     finally:
         bar.close()
 
-    count = _coverage(h, tops, size)[:, None] * _coverage(w, lefts, size)[None, :]
+    if wsum is None:
+        count = _coverage(h, tops, size)[:, None] * _coverage(w, lefts, size)[None, :]
+    else:
+        count = np.maximum(wsum, np.float32(1e-30))
     data = acc / count[None, None, :, :, None].astype(np.float32)
     negative = float((data < 0).mean())
     np.maximum(data, 0, out=data)
@@ -423,12 +489,16 @@ def reconstruct(
                        "atoms": dictionary.n_atoms, "sparsity": dictionary.sparsity},
         "stride": stride,
         "mu": mu,
-        "mu_meaning": "1/(2m)||W(Phi D b - T)||^2 + mu||b||_1 per patch, T scaled to a unit-l2 patch, W to mean "
-                      "square one" if scale == "patch" else "as 'patch' but with one scale for the whole capture",
+        "mu_meaning": {"patch": "1/(2m)||W(Phi D b - T)||^2 + mu||b||_1 per patch, T scaled to a unit-l2 patch, W to "
+                                "mean square one",
+                       "noise": "1/(2m)||W(Phi D a - T)||^2 + (mu/c_p)||a||_1 per patch, W = 1/std(T) (chi-square), "
+                                "c_p the patch's l2 norm",
+                       "global": "as 'patch' but with one scale for the whole capture"}[scale],
         "tol": tol,
         "max_iter": max_iter if solver != "omp" else None,
         "sparsity": sparsity if solver == "omp" else None,
         "scale": scale,
+        "overlap": overlap,
         "block_patches": block_patches,
         "patches": int(len(grid_t)),
         "operators": n_operators if n_operators is not None else int(len(grid_t)),
