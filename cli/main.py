@@ -29,6 +29,7 @@ COMMANDS = (
     "simulate",
     "capture",
     "reconstruct",
+    "bench",
     "merge",
     "dataset",
     "virtual-illum",

@@ -40,6 +40,10 @@ def register(sub, common) -> None:
                    help="the paper's settings: --scale patch --overlap mean --mu 1e-4 --tol 2^-15 --max-iter 300 "
                         "(options given explicitly win)")
     p.add_argument("--threads", type=int, default=None, help="blocks solved at once in this process (default: CPUs)")
+    p.add_argument("--per-shot", default=None, metavar="debevec|ml", dest="per_shot",
+                   help="the paper's baselines (captures of global-ISO shots: simulate --baseline individual-iso|"
+                        "bracketing): reconstruct every shot alone and merge them view by view with Debevec hat "
+                        "weights or the noise-aware ML merge (lfproc.bench.reconstruct_per_shot)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=None,
                        help="solve blocks of patches on a local Dask cluster of N processes")
@@ -69,9 +73,14 @@ def run(args) -> int:
         overlap = args.overlap if args.overlap != "scale-window" else PAPER["overlap"]
     else:
         scale, overlap = args.scale, args.overlap
-    lf = reconstruct(capture, dictionary, solver=args.solver, stride=args.stride, sparsity=args.sparsity,
-                     scale=scale, overlap=overlap, workers=args.workers, scheduler=args.scheduler,
-                     threads=args.threads, **options)
+    options.update(solver=args.solver, stride=args.stride, sparsity=args.sparsity, scale=scale, overlap=overlap,
+                   workers=args.workers, scheduler=args.scheduler, threads=args.threads)
+    if args.per_shot is not None:
+        from lfproc.bench import reconstruct_per_shot
+
+        lf = reconstruct_per_shot(capture, dictionary, merges=[args.per_shot], **options)[args.per_shot]
+    else:
+        lf = reconstruct(capture, dictionary, **options)
     lf = lf.replace(source=str(args.capture))
     write_lightfield(lf, args.output, force=args.force)
     rec = lf.attrs["reconstruction"]

@@ -1,0 +1,419 @@
+"""Running the bench: scenes, cached cells, Dask.
+
+Every cell is simulated with its recorded seed, reconstructed (jointly, or per shot and
+merged), scored with :func:`lfproc.metrics.evaluate` against the scene, and written to
+``BENCH_DIR/cells/<id>.npz`` (its results.csv row as JSON and the reconstructed centre view)
+through :func:`lfproc.io.atomic_file`, so a killed bench leaves only whole cell files and a
+new run computes just the missing ones. The cell id hashes the cell, the scene's SHA-256, the
+crop, the dictionary, the reconstruction options and the simulation settings: changing any
+of them makes new cells instead of reusing stale ones.
+
+Jobs run on Dask like the project's other batch commands (:mod:`lfproc.dataset`): a
+``LocalCluster`` of ``workers`` processes with one thread each (``processes=True``,
+``dashboard_address=":0"``), or a running scheduler (``scheduler="tcp://..."``), or this
+process (``scheduler="synchronous"``). Each job's reconstruction runs single-threaded inside
+its worker; the results do not depend on where a job ran.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._util import file_sha256, progress, to_jsonable
+from .._version import __version__
+from ..errors import InputError, OutputExistsError, SaturationWarning, ShapeError
+from .grid import Cell, Job, Preset, cell_id, cell_seed, get_preset, grid_cells, group_jobs
+
+__all__ = ["run_bench", "load_scene", "run_job", "read_cells", "COLUMNS", "BenchScene"]
+
+#: Columns of results.csv, in order (the first ones are what other checks rely on).
+COLUMNS = (
+    "scene", "method", "iso_pattern", "shots", "isos", "noise", "pu21_psnr_db", "pu21_ssim", "seconds",
+    "saturated_fraction", "cpu_seconds", "merge", "exposure", "relative_exposures", "isos_used", "pu2_psnr_db",
+    "log_psnr_db", "mean_relative_error", "black_clipped_fraction", "sampling_rate_percent", "seed",
+    "simulate_seconds", "iterations_mean", "empty_patches", "size", "views", "profile", "mask_period", "dictionary",
+    "solver", "mu", "max_iter", "lfproc_version", "cell_id",
+)
+_SCENE_CACHE: dict[tuple, Any] = {}
+
+
+@dataclass(frozen=True)
+class BenchScene:
+    """A scene of the bench: its name (file stem), path, SHA-256 and the crop used."""
+
+    name: str
+    path: str
+    sha256: str
+    crop: tuple[int, int, int, int] | None  # top, left, height, width
+    views: tuple[int, int]
+    size: tuple[int, int]
+
+
+def load_scene(scene: BenchScene):
+    """The scene's light field, cropped (cached per process: workers read each scene once)."""
+    from ..io import read_lightfield
+
+    key = (scene.path, scene.sha256, scene.crop)
+    if key not in _SCENE_CACHE:
+        lf = read_lightfield(scene.path, nonfinite="raise", negative="raise")
+        if scene.crop is not None:
+            lf = lf.crop(*scene.crop)
+        _SCENE_CACHE.clear()  # one scene per worker at a time bounds the memory
+        _SCENE_CACHE[key] = lf
+    return _SCENE_CACHE[key]
+
+
+def _scenes(paths, preset: Preset, dictionary) -> list[BenchScene]:
+    from ..io import read_lightfield
+
+    paths = [Path(p) for p in paths]
+    if not paths:
+        raise InputError("scenes: expected at least one light field (LF...), got none")
+    v_n, u_n, size, _, c_n = dictionary.patch
+    out, names = [], set()
+    for path in paths:
+        lf = read_lightfield(path, nonfinite="raise", negative="raise")
+        if lf.views != (v_n, u_n):
+            raise ShapeError(f"{path}: {lf.views[0]} x {lf.views[1]} views; the dictionary "
+                             f"({dictionary.name or dictionary.preset}) needs {v_n} x {u_n}, like every scene of a "
+                             "bench")
+        if lf.channels != 3:
+            raise ShapeError(f"{path}: {lf.channels} colour channels; the coded camera needs RGB light fields")
+        h, w = lf.size
+        crop = None
+        if preset.crop is not None and (h > preset.crop[0] or w > preset.crop[1]):
+            ch, cw = min(h, preset.crop[0]), min(w, preset.crop[1])
+            crop = ((h - ch) // 2, (w - cw) // 2, ch, cw)
+            h, w = ch, cw
+        if min(h, w) < max(size, 11):
+            raise ShapeError(f"{path}: views of {h} x {w} pixels; the bench needs at least {max(size, 11)} x "
+                             f"{max(size, 11)} (the dictionary's patch and the SSIM window)")
+        name = path.stem if path.suffix else path.name
+        base, i = name, 2
+        while name in names:
+            name, i = f"{base}-{i}", i + 1
+        names.add(name)
+        out.append(BenchScene(name=name, path=str(path.resolve()), sha256=file_sha256(path) if path.is_file() else
+                              _folder_sha(path), crop=crop, views=lf.views, size=(h, w)))
+    return out
+
+
+def _folder_sha(path: Path) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    for f in sorted(p for p in path.iterdir() if p.is_file()):
+        h.update(f.name.encode())
+        h.update(file_sha256(f).encode())
+    return h.hexdigest()
+
+
+def _dictionary_id(dictionary, source) -> str:
+    import hashlib
+
+    if isinstance(source, (str, os.PathLike)):
+        from ..dictionary import shipped_path
+
+        path = Path(source)
+        if not path.exists() and str(source) in ("default",):
+            path = shipped_path(str(source))
+        if path.is_file():
+            return f"{dictionary.name or dictionary.preset}:{file_sha256(path)[:16]}"
+    digest = hashlib.sha256(np.ascontiguousarray(dictionary.atoms, dtype=np.float32).tobytes()).hexdigest()
+    return f"{dictionary.name or dictionary.preset}:{digest[:16]}"
+
+
+def _cell_path(cells_dir: Path, cid: str) -> Path:
+    return cells_dir / f"{cid}.npz"
+
+
+def _simulate(lf, cell: Cell, preset: Preset, seed: int):
+    from ..camera.simulate import NOISE_PROFILES, simulate_capture
+
+    common = dict(profile=NOISE_PROFILES[cell.noise], isos=cell.isos, exposure_s=preset.exposure_s,
+                  mask="random", mask_period=preset.mask_period, random_state=seed)
+    if cell.method in ("joint", "dual-iso"):
+        return simulate_capture(lf, iso_pattern_kind=cell.iso_pattern, shots=cell.shots,
+                                relative_exposures=[cell.exposure] * cell.shots, **common)
+    if cell.method == "individual-iso":
+        return simulate_capture(lf, baseline="individual-iso", **common)
+    return simulate_capture(lf, baseline="bracketing", shots=cell.shots, **common)
+
+
+def run_job(spec: dict[str, Any], dictionary) -> list[dict[str, Any]]:
+    """Simulate, reconstruct, score and write the cells of one job; returns their rows."""
+    from ..camera.capture import observations
+    from ..metrics import evaluate
+    from ..recon import reconstruct
+    from .baselines import reconstruct_per_shot
+    from ..io import atomic_file
+
+    scene: BenchScene = spec["scene"]
+    preset: Preset = spec["preset"]
+    cells: list[Cell] = spec["cells"]
+    ids: list[str] = spec["ids"]
+    lf = load_scene(scene)
+    first = cells[0]
+    seed = cell_seed(spec["seed"], first)
+    with warnings.catch_warnings():
+        # the grid saturates some cells on purpose (wide ISO sets, the exposure sweep): their
+        # saturated fraction is a column of results.csv instead of a warning per cell
+        warnings.simplefilter("ignore", SaturationWarning)
+        t0 = time.perf_counter()
+        capture = _simulate(lf, first, preset, seed)
+        simulate_seconds = time.perf_counter() - t0
+        obs = observations(capture)
+        options = dict(spec["recon"])
+        t0, c0 = time.perf_counter(), time.process_time()
+        if first.method in ("individual-iso", "bracketing"):
+            recs = reconstruct_per_shot(capture, dictionary, merges=[c.merge for c in cells], **options)
+            results = [recs[c.merge] for c in cells]
+        else:
+            results = [reconstruct(capture, dictionary, **options)]
+        seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
+    rows = []
+    for cell, cid, rec in zip(cells, ids, results):
+        scores = evaluate(rec, lf, scale_tolerance_stops=None)
+        rec_info = rec.attrs["reconstruction"]
+        per = rec_info.get("per_shot", [rec_info])
+        row = {
+            **cell.describe(),
+            "relative_exposures": ";".join(f"{e / preset.exposure_s:g}" for e in capture.exposures_s),
+            "isos_used": ",".join(str(int(v)) for v in capture.isos),
+            "pu21_psnr_db": scores["pu21_psnr_db"], "pu21_ssim": scores["pu21_ssim"],
+            "pu2_psnr_db": scores["pu2_psnr_db"], "log_psnr_db": scores["log_psnr_db"],
+            "mean_relative_error": scores["mean_relative_error"],
+            "seconds": seconds, "cpu_seconds": cpu_seconds, "simulate_seconds": simulate_seconds,
+            "saturated_fraction": obs.saturated_fraction, "black_clipped_fraction": obs.black_clipped_fraction,
+            "sampling_rate_percent": 100.0 * capture.sampling_rate, "seed": seed,
+            "iterations_mean": float(np.mean([p["iterations_mean"] for p in per])),
+            "empty_patches": int(sum(p["empty_patches"] for p in per)),
+            "size": f"{lf.size[0]}x{lf.size[1]}", "views": f"{lf.views[0]}x{lf.views[1]}",
+            "profile": capture.profile.name, "mask_period": preset.mask_period if preset.mask_period else "",
+            "dictionary": spec["dictionary_id"], "solver": per[0]["solver"], "mu": per[0]["mu"],
+            "max_iter": per[0]["max_iter"], "lfproc_version": __version__, "cell_id": cid,
+        }
+        path = _cell_path(Path(spec["cells_dir"]), cid)
+        with atomic_file(path, force=True) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(fh, row=np.array(json.dumps(to_jsonable(row))),
+                                    centre=np.asarray(rec.centre(), dtype=np.float32))
+        rows.append(row)
+    return rows
+
+
+def read_cells(paths: list[Path]) -> list[dict[str, Any]]:
+    """The rows of cell files (skipping any that cannot be read: they are recomputed)."""
+    rows = []
+    for path in paths:
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                rows.append(json.loads(str(z["row"])))
+        except (OSError, ValueError, KeyError):
+            continue
+    return rows
+
+
+def read_centre(bench_dir: str | os.PathLike, cid: str) -> np.ndarray:
+    """The reconstructed centre view stored with a cell."""
+    with np.load(_cell_path(Path(bench_dir) / "cells", cid), allow_pickle=False) as z:
+        return np.array(z["centre"])
+
+
+def _is_done(path: Path) -> bool:
+    if not path.is_file():
+        return False
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            json.loads(str(z["row"]))
+        return True
+    except (OSError, ValueError, KeyError):
+        return False
+
+
+def run_bench(
+    scenes,
+    out_dir: str | os.PathLike,
+    *,
+    preset: str | Preset = "quick",
+    dictionary="default",
+    workers: int | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    seed: int = 0,
+    recon_options: dict[str, Any] | None = None,
+    report: bool = True,
+    progress_bar: bool | None = None,
+) -> dict[str, Any]:
+    """Run the bench grid on light fields and write results.csv, report.md and plots (module notes).
+
+    Parameters
+    ----------
+    scenes : sequence of paths
+        HDR light fields (files or view folders), all with the dictionary's views.
+    out_dir : path
+        Bench folder (created; a folder lfproc did not make as a bench is refused without
+        ``force``). Finished cells in it are reused; ``force`` recomputes every cell.
+    preset : {"quick", "paper"} or Preset
+    dictionary : ``"default"``, a dictionary file, or a Dictionary
+    workers : int, optional
+        Processes of the local Dask cluster (default: the CPU count, at most the number of jobs).
+    scheduler : str, optional
+        Address of a running Dask scheduler, or ``"synchronous"`` (this process).
+    seed : int
+        Bench seed (every cell's seed derives from it; recorded per cell).
+    recon_options : dict, optional
+        Options of :func:`lfproc.recon.reconstruct` over the preset's (solver, mu, max_iter...).
+    report : bool
+        Write report.md and the plots (results.csv is always written).
+
+    Returns
+    -------
+    dict
+        ``cells``, ``computed``, ``cached``, ``failed`` (cell label -> error), ``seconds``,
+        ``results`` (path), ``report`` (path or None), ``rows``.
+    """
+    from ..dictionary import Dictionary, load_dictionary
+    from ..io import atomic_file, atomic_outputs, clean_stale
+    from .report import REPORT_FILES, write_report
+
+    started = time.perf_counter()
+    preset = get_preset(preset)
+    if workers is not None and (isinstance(workers, bool) or int(workers) != workers or workers < 1):
+        raise InputError(f"workers: expected a positive integer, got {workers!r}")
+    if isinstance(seed, bool) or int(seed) != seed or seed < 0:
+        raise InputError(f"seed: expected a non-negative integer, got {seed!r}")
+    scenes = list(scenes)
+    if not scenes:
+        raise InputError("scenes: expected at least one light field (LF...), got none")
+    source = dictionary
+    dictionary = load_dictionary(dictionary) if not isinstance(dictionary, Dictionary) else dictionary
+    bench_scenes = _scenes(scenes, preset, dictionary)
+    out = Path(out_dir)
+    marker = out / "bench.json"
+    if out.exists() and not out.is_dir():
+        raise OutputExistsError(f"{out}: exists and is not a folder; expected a bench folder")
+    if out.is_dir() and any(out.iterdir()) and not marker.is_file() and not force:
+        raise OutputExistsError(f"{out}: a folder that is not a bench folder (no bench.json); pass --force to use it")
+    cells_dir = out / "cells"
+    if force and cells_dir.is_dir():
+        shutil.rmtree(cells_dir)
+    cells_dir.mkdir(parents=True, exist_ok=True)
+    clean_stale(cells_dir)  # temporaries of killed runs (entries of live processes are left alone)
+
+    recon = {**preset.recon, **(recon_options or {})}
+    dict_id = _dictionary_id(dictionary, source)
+    by_name = {s.name: s for s in bench_scenes}
+    cells = grid_cells(preset, [s.name for s in bench_scenes])
+    ids: dict[Cell, str] = {}
+    for c in cells:
+        s = by_name[c.scene]
+        context = {"scene_sha256": s.sha256, "crop": s.crop, "dictionary": dict_id, "recon": recon,
+                   "mask_period": preset.mask_period, "exposure_s": preset.exposure_s, "seed": int(seed)}
+        ids[c] = cell_id(c, context)
+    jobs = group_jobs(cells)
+    # a job whose cells are partly done (killed between its cells) computes only the missing ones
+    todo = [Job(key=j.key, cells=missing) for j in jobs
+            if (missing := [c for c in j.cells if not _is_done(_cell_path(cells_dir, ids[c]))])]
+    todo.sort(key=lambda j: -j.cost)  # longest first packs the workers better
+    meta = {
+        "kind": "lfproc-bench", "lfproc_version": __version__, "preset": preset.name,
+        "preset_description": preset.description, "crop": preset.crop, "mask_period": preset.mask_period,
+        "exposure_s": preset.exposure_s, "recon": recon, "seed": int(seed), "dictionary": dict_id,
+        "dictionary_patch": list(dictionary.patch), "dictionary_atoms": dictionary.n_atoms,
+        "scenes": [{"name": s.name, "path": s.path, "given": str(g), "sha256": s.sha256, "crop": s.crop,
+                    "size": list(s.size)} for s, g in zip(bench_scenes, scenes)],
+    }
+    with atomic_file(marker, force=True) as tmp:
+        tmp.write_text(json.dumps(to_jsonable(meta), indent=1))
+
+    failed: dict[str, str] = {}
+    computed = 0
+    specs = [{"scene": by_name[j.cell.scene], "preset": preset, "cells": j.cells, "ids": [ids[c] for c in j.cells],
+              "seed": int(seed), "recon": recon, "cells_dir": str(cells_dir), "dictionary_id": dict_id} for j in todo]
+    if specs:
+        bar = progress(total=sum(len(s["cells"]) for s in specs), desc="bench", unit="cell",
+                       disable=None if progress_bar is None else not progress_bar)
+        try:
+            if scheduler == "synchronous":
+                for spec in specs:
+                    try:
+                        computed += len(run_job(spec, dictionary))
+                    except Exception as exc:  # noqa: BLE001 - one failed cell must not stop the others
+                        failed[spec["cells"][0].label()] = f"{type(exc).__name__}: {exc}"
+                    bar.update(len(spec["cells"]))
+            else:
+                computed = _run_dask(specs, dictionary, workers, scheduler, bar, failed)
+        finally:
+            bar.close()
+
+    rows = read_cells([_cell_path(cells_dir, ids[c]) for c in cells])
+    results = out / "results.csv"
+    report_path = None
+    files = ["results.csv"] + (list(REPORT_FILES) if report and rows else [])
+    # results.csv, report.md and the plots are published together: all from this run, or none
+    with atomic_outputs([out / f for f in files], force=True) as staged:
+        staged = dict(zip(files, staged))
+        with open(staged["results.csv"], "w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=list(COLUMNS), extrasaction="ignore")
+            writer.writeheader()
+            for row in rows:
+                writer.writerow({k: _csv_value(row.get(k)) for k in COLUMNS})
+        if len(files) > 1:
+            write_report(out, rows, meta=meta, paths=staged)
+            report_path = out / "report.md"
+    seconds = time.perf_counter() - started
+    return {"bench": str(out), "preset": preset.name, "scenes": len(bench_scenes), "cells": len(cells),
+            "computed": computed, "cached": len(cells) - sum(len(s["cells"]) for s in specs),
+            "failed": failed, "seconds": seconds, "results": str(results),
+            "report": None if report_path is None else str(report_path), "rows": rows}
+
+
+def _csv_value(value):
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return "" if value is None else value
+
+
+def _run_dask(specs, dictionary, workers, scheduler, bar, failed) -> int:
+    import logging
+
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        n = workers or min(len(specs), os.cpu_count() or 1)
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                               silence_logs=logging.ERROR)
+        client = Client(cluster)
+    computed = 0
+    try:
+        dict_future = client.scatter(dictionary, broadcast=True)
+        futures = {client.submit(run_job, spec, dict_future, key=f"bench-{spec['ids'][0]}", pure=False): spec
+                   for spec in specs}
+        for future in as_completed(futures):
+            spec = futures[future]
+            exc = future.exception()
+            if exc is None:
+                computed += len(future.result())
+            else:
+                failed[spec["cells"][0].label()] = f"{type(exc).__name__}: {exc}"
+            bar.update(len(spec["cells"]))
+            future.release()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return computed
