@@ -97,6 +97,37 @@ def run_plenopticam(capture: Path, caldata: Path, out: Path, *, env: dict, blur_
     return rep
 
 
+def _regions(data, holes, truth, clip: float, near_px: float = 5.0) -> dict:
+    """PSNR [centre view, all views] within ``near_px`` of a clipped truth sample and farther away
+    (on the peak of all scored samples), and with borders of 0 and 12 px; for the decode and for
+    the decode with its unusable samples set to 0."""
+    import numpy as np
+    from scipy import ndimage
+
+    from lfproc.lytro.score import decode_psnr, score_decode
+
+    h, w = min(data.shape[2], truth.shape[2]), min(data.shape[3], truth.shape[3])
+    clipped = (truth[:, :, :h, :w] >= clip).any(axis=(0, 1, 4))
+    near = ndimage.distance_transform_edt(~clipped) <= near_px
+    out = {"near_fraction": float(near.mean())}
+    for name, d in (("decode", data), ("unusable_as_0", holes)):
+        row = {}
+        for region, m in (("near", near), ("away", ~near)):
+            vals = []
+            for sel in ((slice(2, 3), slice(2, 3)), (slice(None), slice(None))):
+                a, b = d[sel], truth[sel]
+                peak = decode_psnr(a, b, clip=clip)["peak"]
+                mask = np.broadcast_to(m[4:h - 4, 4:w - 4][None, None, :, :, None],
+                                       a[:, :, 4:h - 4, 4:w - 4].shape)
+                vals.append(round(decode_psnr(a, b, clip=clip, mask=mask, peak=peak)["psnr_db"], 2))
+            row[region] = vals
+        for border in (0, 12):
+            sc = score_decode(d, truth, clip=clip, border=border)
+            row[f"border_{border}"] = [round(sc["psnr_centre_db"], 2), round(sc["psnr_all_views_db"], 2)]
+        out[name] = row
+    return out
+
+
 def _old_psnr(data, var, truth, border: int = 4) -> float:
     """The figure this benchmark used to print: decoder-flagged samples left out, peak = largest truth
     value (the sun). Kept to show how much it inflated the result."""
@@ -225,6 +256,7 @@ def main(argv=None) -> int:
     report["psnr_unusable_as_0_db"] = {k: round(v, 2) for k, v in score_decode(holes, truth, clip=clip).items()
                                        if k in ("psnr_centre_db", "psnr_all_views_db")}
     report["psnr_old_scoring_db"] = _old_psnr(data, var, truth)
+    report["regions"] = _regions(data, holes, truth, clip)
     report["target"] = {"decode_s": 20, "peak_rss_mb": 4096}
     if args.no_plenopticam:
         report["plenopticam"] = "skipped (--no-plenopticam)"

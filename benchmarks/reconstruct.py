@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/reconstruct.py [--case lytro|paper|both] [--rows N] [--solver admm|fista|omp]
-                                     [--nonperiodic] [--max-iter N]
+                                     [--nonperiodic] [--max-iter N] [--tol T] [--threads N]
 
 Cases (both from 2 shots, random ISO (100, 400, 800, 1600), medium noise, of a synthetic HDR
 scene, ``lfproc.synth`` ``layers``, 5 x 5 x 434 x 625 x 3):
@@ -94,7 +94,8 @@ def run_case(case: str, args, rate: float) -> None:
                                       bias_dn=None if capture.bias_dn is None else capture.bias_dn[:, :r])
     tracemalloc.start()
     t0 = time.perf_counter()
-    lf = reconstruct(capture, dictionary, solver=args.solver, max_iter=args.max_iter, progress_bar=True)
+    lf = reconstruct(capture, dictionary, solver=args.solver, max_iter=args.max_iter, tol=args.tol,
+                     threads=args.threads, progress_bar=True)
     seconds = time.perf_counter() - t0
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
@@ -110,7 +111,9 @@ def run_case(case: str, args, rate: float) -> None:
     print(f"[{case}] dictionary: {label}; mask: {'non-periodic' if args.nonperiodic else 'period 4'}; "
           f"solver {args.solver}; sensor rows {capture.size[0]} of {size[0]}")
     print(f"  patches {rec['patches']}, operators {rec['operators']}, iterations mean {rec['iterations_mean']:.1f} "
-          f"(max {rec['iterations_max']})")
+          f"(max {rec['iterations_max']}), tol {rec['tol']:.3g}, {rec['scheduler']}")
+    if args.solver != "omp":
+        print(f"  {1e6 * seconds / max(its, 1):.1f} us per patch-iteration (wall time, all threads)")
     print(f"  wall time {seconds:.1f} s ({rec['patches'] / seconds:.1f} patches/s)")
     if full_patches:
         print(f"  extrapolated to the full sensor ({full_patches} patches): {seconds * full_patches / rec['patches']:.0f} s")
@@ -128,6 +131,8 @@ def main() -> None:
     parser.add_argument("--rows", type=int, default=None, help="reconstruct only the top N sensor rows")
     parser.add_argument("--solver", default="admm")
     parser.add_argument("--max-iter", type=int, default=None)
+    parser.add_argument("--tol", type=float, default=None, help="paper: 3.0517578125e-05 (2^-15)")
+    parser.add_argument("--threads", type=int, default=None, help="blocks solved at once (default: the CPUs)")
     parser.add_argument("--nonperiodic", action="store_true", help="the paper's non-periodic random mask")
     args = parser.parse_args()
     os.environ.setdefault("LFPROC_PROGRESS", "1")

@@ -628,6 +628,7 @@ def calibrate(
     cfa_pattern: str | None = None,
     iso: int | None = None,
     hot_pixel_sigma: float = 6.0,
+    frames_root: str | os.PathLike | None = None,
 ) -> CalibrationResult:
     """Measure a camera profile from calibration frames.
 
@@ -650,6 +651,9 @@ def calibrate(
         default 100, recorded in ``unknown``). ``figures`` use the key ``"default"``.
     hot_pixel_sigma : float
         Hot-pixel threshold in robust standard deviations of the longest master dark.
+    frames_root : str or Path, optional
+        A folder the frames of a manifest/descriptor may lie in; by default they must lie in
+        the manifest's (descriptor's) folder.
 
     Returns
     -------
@@ -671,9 +675,9 @@ def calibrate(
     if isinstance(frames_or_manifest, (str, os.PathLike)):
         source_path = find_calibration_input(frames_or_manifest)
         if source_path.is_file() and source_path.suffix.lower() not in (".csv", ".json") and is_descriptor(source_path):
-            return _calibrate_emva(read_descriptor(source_path), name=name, adc_bits=adc_bits,
+            return _calibrate_emva(read_descriptor(source_path, root=frames_root), name=name, adc_bits=adc_bits,
                                    cfa_pattern=cfa_pattern, iso=iso)
-        records, options = read_manifest(source_path)
+        records, options = read_manifest(source_path, root=frames_root)
     else:
         records = list(frames_or_manifest)
         if not records or not all(isinstance(r, FrameRecord) for r in records):

@@ -50,6 +50,7 @@ from typing import Any
 
 import numpy as np
 
+from lfproc import _untrusted as ut
 from lfproc._util import progress
 from lfproc.errors import CalibrationError, FileFormatError, MissingFileError
 from lfproc.io._atomic import atomic_file
@@ -117,8 +118,15 @@ def is_descriptor(path: str | os.PathLike) -> bool:
     return False
 
 
-def read_descriptor(path: str | os.PathLike) -> EmvaDescriptor:
+#: Most lines / images one descriptor may hold.
+MAX_DESCRIPTOR_LINES = 200000
+
+
+def read_descriptor(path: str | os.PathLike, *, root: str | os.PathLike | None = None) -> EmvaDescriptor:
     """Parse an EMVA 1288 descriptor.
+
+    Image paths are relative to the descriptor and must lie inside its folder (or inside
+    ``root``, a folder the caller names, where absolute paths are then allowed).
 
     Raises
     ------
@@ -127,14 +135,15 @@ def read_descriptor(path: str | os.PathLike) -> EmvaDescriptor:
     FileFormatError
         A malformed line (the line number and text are named), no ``n`` line, an image
         before any step.
+    UnsafeFileError
+        An image path leads outside the descriptor's folder (or ``root``).
     """
     path = Path(path)
     if not path.is_file():
         raise MissingFileError(f"{path}: no such EMVA 1288 descriptor file")
-    try:
-        lines = path.read_text(encoding="utf-8-sig").splitlines()
-    except UnicodeDecodeError:
-        raise FileFormatError(f"{path}: not a text EMVA 1288 descriptor") from None
+    lines = ut.read_text(path, what="text EMVA 1288 descriptor", encoding="utf-8-sig").splitlines()
+    if len(lines) > MAX_DESCRIPTOR_LINES:
+        raise FileFormatError(f"{path}: {len(lines)} lines, above the limit of {MAX_DESCRIPTOR_LINES}")
     release = ""
     bits = width = height = None
     steps: list[dict[str, Any]] = []
@@ -144,14 +153,14 @@ def read_descriptor(path: str | os.PathLike) -> EmvaDescriptor:
             continue
         tag, _, rest = line.partition(" ")
         rest = rest.strip()
-        where = f"{path}: line {number} ({raw.strip()!r})"
+        where = f"{path}: line {number} ({ut.show(raw.strip(), 80)})"
         try:
             if tag == "v":
                 release = rest
             elif tag == "n":
                 b, w, h = rest.split()
                 bits, width, height = int(b), int(w), int(h)
-                if not (1 <= bits <= 32 and width > 0 and height > 0):
+                if not (1 <= bits <= 32 and 0 < width <= ut.MAX_DIMENSION and 0 < height <= ut.MAX_DIMENSION):
                     raise ValueError
             elif tag == "b":
                 t, p = rest.split()
@@ -166,8 +175,7 @@ def read_descriptor(path: str | os.PathLike) -> EmvaDescriptor:
                     raise FileFormatError(f"{where}: an image line before any 'b' or 'd' step")
                 if not rest:
                     raise ValueError
-                p = Path(rest.replace("\\", "/"))
-                steps[-1]["images"].append(p if p.is_absolute() else path.parent / p)
+                steps[-1]["images"].append(ut.resolve_inside(path.parent, rest, source=where, field="i", root=root))
             else:
                 raise FileFormatError(f"{where}: unknown item {tag!r}; expected v, n, b, d or i")
         except FileFormatError:
@@ -178,6 +186,8 @@ def read_descriptor(path: str | os.PathLike) -> EmvaDescriptor:
             raise FileFormatError(f"{where}: expected '{expected}'") from None
         if tag in ("b", "d") and not (math.isfinite(steps[-1]["exposure_ns"]) and steps[-1]["exposure_ns"] >= 0):
             raise FileFormatError(f"{where}: exposure must be a finite number of ns >= 0")
+        if tag == "b" and not (math.isfinite(steps[-1]["photons"]) and steps[-1]["photons"] >= 0):
+            raise FileFormatError(f"{where}: photons must be a finite number >= 0")
     if bits is None:
         raise FileFormatError(f"{path}: no 'n <bits> <width> <height>' line; not an EMVA 1288 descriptor")
     if not steps:

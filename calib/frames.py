@@ -3,7 +3,9 @@
 A *manifest* lists bias, dark and flat frames with their ISO and exposure time, as CSV
 (header ``path,kind,iso,exposure_s[,temperature_c][,group][,cfa_pattern]``) or JSON (a
 list of such objects, or ``{"frames": [...], "cfa_pattern": ..., "adc_bits": ...}``).
-Relative paths are resolved against the manifest's folder.
+Relative paths are resolved against the manifest's folder, and every frame must lie inside
+that folder (or inside a folder the caller names, ``root=`` / ``--frames-root``): a path that
+leads elsewhere (``../..``, an absolute path, a symlink out) is refused.
 
 Frames are read as 2-D ``uint16`` counts (DN) with what the file says about its levels:
 
@@ -28,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from lfproc import _untrusted as ut
 from lfproc.errors import CalibrationError, FileFormatError, InputError, MissingFileError
 
 __all__ = [
@@ -129,21 +132,33 @@ def _number(value: Any, *, name: str, where: str, required: bool, low: float | N
         if required:
             raise InputError(f"{where}: missing {name}; every frame needs its {name}")
         return None
+    if isinstance(value, bool):
+        raise InputError(f"{where}: {name}: expected a number, found {value!r}")
     try:
         number = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{where}: {name}: expected a number, found {value!r}") from None
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"{where}: {name}: expected a number, found {ut.show(value)}") from None
     if not math.isfinite(number) or (low is not None and number < low):
-        raise InputError(f"{where}: {name}: expected a finite number >= {low:g}, found {value!r}")
+        what = "a finite number" + (f" >= {low:g}" if low is not None else "")
+        raise InputError(f"{where}: {name}: expected {what}, found {ut.show(value)}")
     return number
 
 
-def _record(row: dict[str, Any], *, base: Path, where: str, defaults: dict[str, Any]) -> FrameRecord:
+def _text(value: Any, *, name: str, where: str, max_len: int = 4096) -> str:
+    if value is None:
+        return ""
+    if not isinstance(value, (str, int, float)) or isinstance(value, bool) or len(str(value)) > max_len:
+        raise InputError(f"{where}: {name}: expected text of at most {max_len} characters, found {ut.show(value)}")
+    return str(value)
+
+
+def _record(row: dict[str, Any], *, base: Path, where: str, defaults: dict[str, Any],
+            root: Path | None = None) -> FrameRecord:
     row = {str(k).strip().lower(): v for k, v in row.items() if k is not None}
     path = row.get("path")
-    if path is None or not str(path).strip():
+    if path is None or not _text(path, name="path", where=where).strip():
         raise InputError(f"{where}: missing path")
-    kind = str(row.get("kind") or "").strip().lower()
+    kind = _text(row.get("kind"), name="kind", where=where).strip().lower()
     if kind not in FRAME_KINDS:
         raise InputError(f"{where}: kind: expected one of {', '.join(FRAME_KINDS)}, found {row.get('kind')!r}")
     iso = _number(row.get("iso"), name="ISO", where=where, required=True, low=1e-9)
@@ -151,25 +166,32 @@ def _record(row: dict[str, Any], *, base: Path, where: str, defaults: dict[str, 
     temperature = _number(row.get("temperature_c"), name="temperature_c", where=where, required=False, low=None)
     cfa = row.get("cfa_pattern") or defaults.get("cfa_pattern")
     if cfa is not None:
-        cfa = str(cfa).strip().upper() or None
+        cfa = _text(cfa, name="cfa_pattern", where=where).strip().upper() or None
         if cfa == _MONO.upper():
             cfa = _MONO
         if cfa is not None and cfa not in _CFA + (_MONO,):
             raise InputError(f"{where}: cfa_pattern: expected one of {', '.join(_CFA + (_MONO,))}, found {cfa!r}")
-    p = Path(str(path).strip().replace("\\", "/"))
-    if not p.is_absolute():
-        p = base / p
+    p = ut.resolve_inside(base, str(path), source=where, field="path", root=root)
     return FrameRecord(path=p, kind=kind, iso=iso, exposure_s=exposure_s, temperature_c=temperature,
-                       group=str(row.get("group") or "").strip(), cfa_pattern=cfa, where=where)
+                       group=_text(row.get("group"), name="group", where=where, max_len=256).strip(),
+                       cfa_pattern=cfa, where=where)
 
 
-def read_manifest(path: str | os.PathLike) -> tuple[list[FrameRecord], dict[str, Any]]:
+#: Most frames one manifest may list.
+MAX_MANIFEST_FRAMES = 100000
+
+
+def read_manifest(path: str | os.PathLike, *, root: str | os.PathLike | None = None
+                  ) -> tuple[list[FrameRecord], dict[str, Any]]:
     """Read a frame manifest (CSV or JSON).
 
     Parameters
     ----------
     path : str or Path
         ``.csv`` or ``.json`` manifest.
+    root : str or Path, optional
+        A folder the frames may lie in (absolute paths allowed inside it); by default every
+        frame must lie inside the manifest's folder.
 
     Returns
     -------
@@ -186,38 +208,57 @@ def read_manifest(path: str | os.PathLike) -> tuple[list[FrameRecord], dict[str,
         Not a readable CSV/JSON manifest.
     InputError
         A row lacks its path, kind, ISO or exposure time (the row is named).
+    UnsafeFileError
+        A frame path leads outside the manifest's folder (or ``root``).
     """
     path = Path(path)
     if not path.is_file():
         raise MissingFileError(f"{path}: no such manifest file")
     base = path.parent
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError:
-        raise FileFormatError(f"{path}: not a text manifest (CSV or JSON)") from None
+    if root is not None:
+        root = Path(root)
+        if not root.is_dir():
+            raise MissingFileError(f"{root}: no such folder (frames root)")
+    text = ut.read_text(path, what="text manifest (CSV or JSON)", encoding="utf-8-sig")
     options: dict[str, Any] = {}
     if path.suffix.lower() == ".json" or text.lstrip().startswith(("{", "[")):
         try:
-            doc = json.loads(text)
-        except ValueError as exc:
-            raise FileFormatError(f"{path}: not a JSON manifest ({exc})") from None
+            doc = ut.parse_json(text, source=path)
+        except FileFormatError as exc:
+            raise FileFormatError(f"{path}: not a JSON manifest ({str(exc).removeprefix(f'{path}: ')})") from None
         if isinstance(doc, dict):
             rows = doc.get("frames")
-            options = {k: doc[k] for k in ("cfa_pattern", "adc_bits", "name") if doc.get(k) is not None}
+            node = ut.Node(doc, path, error=FileFormatError)
+            if node.has("cfa_pattern"):
+                options["cfa_pattern"] = node["cfa_pattern"].as_str(choices=_CFA)
+            if node.has("adc_bits"):
+                options["adc_bits"] = node["adc_bits"].as_int(low=1, high=32)
+            if node.has("name"):
+                options["name"] = node["name"].as_str(max_len=256)
         else:
             rows = doc
         if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
             raise FileFormatError(f"{path}: expected a list of frame objects (or {{\"frames\": [...]}})")
-        records = [_record(r, base=base, where=f"{path.name} frame {i}", defaults=options) for i, r in enumerate(rows)]
+        if len(rows) > MAX_MANIFEST_FRAMES:
+            raise FileFormatError(f"{path}: {len(rows)} frames, above the limit of {MAX_MANIFEST_FRAMES}")
+        records = [_record(r, base=base, where=f"{path.name} frame {i}", defaults=options, root=root)
+                   for i, r in enumerate(rows)]
     else:
-        reader = csv.DictReader(text.splitlines())
-        header = [h.strip().lower() for h in (reader.fieldnames or [])]
-        missing = [c for c in ("path", "kind", "iso", "exposure_s") if c not in header]
-        if missing:
-            raise FileFormatError(f"{path}: CSV header lacks column(s) {', '.join(missing)}; found {', '.join(header) or 'none'}")
-        # row numbers as a text editor shows them (the header is line 1)
-        records = [_record(r, base=base, where=f"{path.name} line {i + 2}", defaults=options)
-                   for i, r in enumerate(reader)]
+        try:
+            reader = csv.DictReader(text.splitlines())
+            header = [h.strip().lower() if isinstance(h, str) else "" for h in (reader.fieldnames or [])]
+            missing = [c for c in ("path", "kind", "iso", "exposure_s") if c not in header]
+            if missing:
+                raise FileFormatError(f"{path}: CSV header lacks column(s) {', '.join(missing)}; found "
+                                      f"{ut.show(', '.join(header) or 'none', 200)}")
+            # row numbers as a text editor shows them (the header is line 1)
+            records = []
+            for i, r in enumerate(reader):
+                if i >= MAX_MANIFEST_FRAMES:
+                    raise FileFormatError(f"{path}: more than {MAX_MANIFEST_FRAMES} frames")
+                records.append(_record(r, base=base, where=f"{path.name} line {i + 2}", defaults=options, root=root))
+        except csv.Error as exc:
+            raise FileFormatError(f"{path}: not a readable CSV manifest ({exc})") from None
     if not records:
         raise FileFormatError(f"{path}: the manifest lists no frames")
     return records, options
@@ -310,9 +351,14 @@ def _read_lytro(path: Path) -> Frame:
 def _read_image(path: Path) -> Frame:
     import cv2
 
-    data = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if data is None:
-        raise FileFormatError(f"{path}: cannot read the image (corrupt, truncated or not a PNG/TIFF)")
+    from lfproc.io.images import imread
+
+    try:
+        data = imread(path, cv2.IMREAD_UNCHANGED)
+    except FileFormatError as exc:
+        detail = str(exc).removeprefix(f"{path}: ")
+        raise FileFormatError(f"{path}: cannot read the image (corrupt, truncated or not a PNG/TIFF: {detail})") \
+            from None
     if data.ndim != 2:
         raise FileFormatError(f"{path}: expected a single-channel raw frame, found {data.shape[2]} channels")
     if data.dtype == np.uint8:

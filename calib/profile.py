@@ -25,15 +25,17 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from lfproc import _untrusted as ut
 from lfproc._util import FrozenDict, frozen_array
 from lfproc._version import __version__
-from lfproc.errors import FileFormatError, MissingFileError, ProfileError
+from lfproc.errors import FileFormatError, MissingFileError, ProfileError, UnsafeFileError
 from lfproc.io._atomic import atomic_outputs
 
 __all__ = [
@@ -46,7 +48,8 @@ __all__ = [
     "save_profile",
     "is_profile_file",
     "bias_sidecar_path",
-    "profile_files",
+    "flat_sidecar_path",
+    "profile_outputs",
     "paper_gain_dn_per_e",
     "SHIPPED_PROFILES",
     "SCHEMA",
@@ -125,11 +128,10 @@ class CameraProfile:
     flat_field_std : float
         Relative standard deviation of each value of ``flat_field`` as an estimate (0 = exact).
 
-        ISO -> master bias frame (DN, a finite 2-D array).
-
-    ``isos`` and ``bias_frames`` are stored as read-only mappings and the bias frames as
-    read-only arrays (copied once unless already read-only), so a validated profile
-    cannot be changed; use :func:`dataclasses.replace` to derive a new one.
+    ``isos``, ``bias_frames`` and ``bias_frame_std_dn`` are stored as read-only mappings and
+    the bias frames and flat field as read-only arrays (copied once unless already
+    read-only), so a validated profile cannot be changed; use :func:`dataclasses.replace`
+    to derive a new one.
     unknown : dict
         Field name -> reason, for figures the calibration could not determine.
     """
@@ -199,12 +201,17 @@ class CameraProfile:
                 )
             frames[iso] = frozen_array(frame)
         object.__setattr__(self, "bias_frames", FrozenDict(frames))
+        object.__setattr__(self, "bias_frame_std_dn", FrozenDict(self.bias_frame_std_dn))
+        if self.flat_field is not None:
+            object.__setattr__(self, "flat_field", frozen_array(self.flat_field))
 
     def __setstate__(self, state):
         # pickle and copy.deepcopy bring new (writeable) bias arrays: make them read-only again
         for name, value in state.items():
             if name == "bias_frames":
                 value = FrozenDict({k: frozen_array(v) for k, v in value.items()})
+            elif name == "flat_field" and value is not None:
+                value = frozen_array(value)
             object.__setattr__(self, name, value)
 
     # -- lookups ---------------------------------------------------------------------
@@ -219,8 +226,9 @@ class CameraProfile:
 
     def iso_figures(self, iso: float) -> IsoFigures:
         """Figures of one ISO; :class:`ProfileError` naming the available ISOs otherwise."""
-        key = int(round(float(iso)))
-        if key not in self.isos or abs(key - float(iso)) > 1e-6:
+        value = float(iso)
+        key = int(round(value)) if math.isfinite(value) else None
+        if key not in self.isos or abs(key - value) > 1e-6:
             raise ProfileError(
                 f"ISO {iso:g} is not in camera profile {self.name!r}; it has ISO {', '.join(map(str, self.iso_values))}"
             )
@@ -308,68 +316,107 @@ class CameraProfile:
     @classmethod
     def from_json(cls, doc: dict[str, Any], *, where: str = "profile", bias_frames=None,
                   flat_field=None) -> "CameraProfile":
-        """Build and validate a profile from its JSON dict; errors name the field."""
-        if not isinstance(doc, dict):
+        """Build and validate a profile from its JSON dict; errors name the field.
+
+        Every field is checked for type, finiteness and a plausible range
+        (:mod:`lfproc._untrusted`) before the profile is built.
+        """
+        n = ut.Node(doc, where, error=ProfileError)
+        if not n.is_dict():
             raise ProfileError(f"{where}: expected a JSON object")
         if doc.get("schema") != SCHEMA:
-            raise ProfileError(f"{where}: field 'schema': expected {SCHEMA!r}, found {doc.get('schema')!r}")
+            raise ProfileError(f"{where}: field 'schema': expected {SCHEMA!r}, found {ut.show(doc.get('schema'))}")
         version = doc.get("schema_version")
-        if version != SCHEMA_VERSION:
-            raise ProfileError(f"{where}: field 'schema_version': expected {SCHEMA_VERSION}, found {version!r}")
+        if version != SCHEMA_VERSION or isinstance(version, bool):
+            raise ProfileError(f"{where}: field 'schema_version': expected {SCHEMA_VERSION}, found {ut.show(version)}")
         required = ("name", "adc_bits", "white_level_dn", "black_level_dn", "full_well_e", "isos")
         for key in required:
             if key not in doc or doc[key] is None:
                 raise ProfileError(f"{where}: missing field {key!r}")
-        if not isinstance(doc["isos"], dict) or not doc["isos"]:
+        isos_node = n["isos"]
+        if not isos_node.is_dict() or not isos_node.value:
             raise ProfileError(f"{where}: field 'isos': expected an object from ISO to figures")
+        if len(isos_node.value) > MAX_ISOS:
+            raise ProfileError(f"{where}: field 'isos': {len(isos_node.value)} ISOs, above the limit of {MAX_ISOS}")
         isos = {}
         names = {f.name for f in fields(IsoFigures)}
-        for key, figs in doc["isos"].items():
-            try:
-                iso = int(key)
-            except ValueError:
-                raise ProfileError(f"{where}: field 'isos': key {key!r} is not an ISO number") from None
-            if not isinstance(figs, dict):
+        for key, figs in isos_node.items():
+            if not (isinstance(key, str) and key.isascii() and key.isdigit() and len(key) <= 7 and int(key) > 0):
+                raise ProfileError(f"{where}: field 'isos': key {ut.show(key)} is not an ISO number")
+            if not figs.is_dict():
                 raise ProfileError(f"{where}: field 'isos.{key}': expected an object")
-            extra = set(figs) - names
+            extra = set(figs.value) - names
             if extra:
-                raise ProfileError(f"{where}: field 'isos.{key}': unknown keys {', '.join(sorted(extra))}")
-            isos[iso] = IsoFigures(**{n: figs.get(n) for n in names})
-        kwargs = {k: doc[k] for k in ("gamma", "cfa_pattern", "dark_current_e_per_s", "prnu", "dsnu_e",
-                                      "fixed_pattern_seed", "description", "flat_field_std") if doc.get(k) is not None}
-        std = doc.get("bias_frame_std_dn") or {}
-        if not isinstance(std, dict):
-            raise ProfileError(f"{where}: field 'bias_frame_std_dn': expected an object from ISO to DN")
+                raise ProfileError(f"{where}: field 'isos.{key}': unknown keys {', '.join(sorted(map(str, extra)))}")
+            values = {}
+            for name in names:
+                values[name] = figs.opt_float(name, low=_FIGURE_LOWER.get(name, 0),
+                                              high=_FIGURE_LIMITS.get(name, 1e12))
+            isos[int(key)] = IsoFigures(**values)
+        kwargs = {}
+        for key, checks in (("gamma", dict(low=1, high=16)), ("dark_current_e_per_s", dict(low=0, high=1e12)),
+                            ("prnu", dict(low=0, high=1)), ("dsnu_e", dict(low=0, high=1e9))):
+            value = n.opt_float(key, **checks)
+            if value is not None:
+                kwargs[key] = value
+        if n.has("cfa_pattern"):
+            kwargs["cfa_pattern"] = n["cfa_pattern"].as_str(choices=_CFA)
+        if n.has("fixed_pattern_seed"):
+            kwargs["fixed_pattern_seed"] = n["fixed_pattern_seed"].as_int(low=0, high=2**63 - 1)
+        flat_std = n.opt_float("flat_field_std", low=0, high=1e3)
+        if flat_std is not None:
+            kwargs["flat_field_std"] = flat_std
+        std_node = n.opt_dict("bias_frame_std_dn")
+        if len(std_node.value) > MAX_ISOS:
+            raise ProfileError(f"{where}: field 'bias_frame_std_dn': {len(std_node.value)} ISOs, above the limit of "
+                               f"{MAX_ISOS}")
+        std = {}
+        for key, value in std_node.items():
+            if not (isinstance(key, str) and key.isascii() and key.isdigit() and len(key) <= 7 and int(key) > 0):
+                raise ProfileError(f"{where}: field 'bias_frame_std_dn': keys must be ISO numbers, found {ut.show(key)}")
+            std[int(key)] = value.as_float(low=0, high=2.0**32)
+        if std:
+            kwargs["bias_frame_std_dn"] = std
+        if n.has("description"):
+            kwargs["description"] = n["description"].as_str(max_len=1 << 16)
+        unknown = {}
+        for key, reason in n.opt_dict("unknown").items():
+            unknown[key] = reason.as_str(max_len=1 << 12) if not isinstance(reason.value, (int, float)) else str(reason.value)
+        kwargs.update(
+            name=n["name"].as_str(max_len=256),
+            adc_bits=n["adc_bits"].as_int(low=1, high=32),
+            white_level_dn=n["white_level_dn"].as_float(low=1, high=2.0**32),
+            black_level_dn=n["black_level_dn"].as_float(low=0, high=2.0**32),
+            full_well_e=n["full_well_e"].as_float(low=1, high=_FIGURE_LIMITS["full_well_e"]),
+            source=dict(n.opt_dict("source").value),
+        )
         try:
-            kwargs["bias_frame_std_dn"] = {int(k): v for k, v in std.items()}
-        except ValueError:
-            raise ProfileError(f"{where}: field 'bias_frame_std_dn': keys must be ISO numbers, found "
-                               f"{', '.join(map(repr, std))}") from None
-        try:
-            return cls(
-                name=str(doc["name"]),
-                adc_bits=doc["adc_bits"],
-                white_level_dn=doc["white_level_dn"],
-                black_level_dn=doc["black_level_dn"],
-                full_well_e=doc["full_well_e"],
-                isos=isos,
-                unknown=dict(doc.get("unknown") or {}),
-                source=dict(doc.get("source") or {}),
-                bias_frames=bias_frames or {},
-                flat_field=flat_field,
-                **kwargs,
-            )
+            return cls(isos=isos, unknown=unknown, bias_frames=bias_frames or {}, flat_field=flat_field, **kwargs)
         except ProfileError as exc:
             raise ProfileError(f"{where}: {exc}") from None
 
 
+#: Most ISO settings in one profile.
+MAX_ISOS = 256
+#: Upper bounds of per-ISO figures read from files (far above any real sensor).
+#: Lower bounds of figures read from files: a gain below 1e-6 DN/e- or a full well below one
+#: electron is no sensor, and would make the radiance (DN / (gain * t)) overflow.
+_FIGURE_LOWER = {"gain_dn_per_e": 1e-6, "full_well_e": 1.0}
+_FIGURE_LIMITS = {"gain_dn_per_e": 1e6, "read_noise_e": 1e9, "read_noise_dn": 1e9, "dark_current_e_per_s": 1e12,
+                  "black_level_dn": 2.0**32, "full_well_e": 1e12, "dsnu_dn": 1e9, "prnu": 1.0}
+
+
 def _check_number(value, name: str, *, integer: bool = False, low=None, high=None, strict: bool = False) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ProfileError(f"field {name!r}: expected a number, found {value!r}")
+        raise ProfileError(f"field {name!r}: expected a number, found {ut.show(value)}")
+    try:
+        finite = math.isfinite(float(value))
+    except OverflowError:
+        finite = False
+    if not finite:
+        raise ProfileError(f"field {name!r}: expected a finite number, found {ut.show(value)}")
     if integer and int(value) != value:
         raise ProfileError(f"field {name!r}: expected an integer, found {value!r}")
-    if not math.isfinite(float(value)):
-        raise ProfileError(f"field {name!r}: expected a finite number, found {value!r}")
     if low is not None and (value < low or (strict and value == low)):
         raise ProfileError(f"field {name!r}: expected a value {'>' if strict else '>='} {low}, found {value!r}")
     if high is not None and value > high:
@@ -420,29 +467,20 @@ def load_profile(name_or_path: str | os.PathLike | CameraProfile) -> CameraProfi
                 f"{path}: no such camera profile file (shipped profiles: {', '.join(SHIPPED_PROFILES)})"
             )
     try:
-        doc = json.loads(path.read_text())
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise FileFormatError(f"{path}: not a JSON camera profile ({exc})") from None
+        doc = ut.load_json(path, max_bytes=MAX_PROFILE_BYTES).value
+    except UnsafeFileError:
+        raise
+    except FileFormatError as exc:
+        why = str(exc).removeprefix(f"{path}: ")
+        raise FileFormatError(f"{path}: not a JSON camera profile ({why})") from None
     bias = {}
     sidecar = doc.get("bias_frame_file") if isinstance(doc, dict) else None
-    if sidecar:
-        side = path.parent / sidecar
-        if not side.exists():
-            raise ProfileError(f"{path}: field 'bias_frame_file': {side} does not exist")
-        with np.load(side) as npz:
-            bias = {int(k.removeprefix("iso_")): npz[k] for k in npz.files}
+    if sidecar is not None:
+        bias = _read_bias_sidecar(path, doc, sidecar)
     flat = None
     sidecar = doc.get("flat_field_file") if isinstance(doc, dict) else None
-    if sidecar:
-        side = path.parent / sidecar
-        if not side.exists():
-            raise ProfileError(f"{path}: field 'flat_field_file': {side} does not exist")
-        try:
-            with np.load(side, allow_pickle=False) as npz:
-                flat = npz["flat_field"]
-        except (KeyError, ValueError, OSError, EOFError) as exc:
-            raise ProfileError(f"{path}: field 'flat_field_file': {side} is not a flat-field map "
-                               f"(.npz with array 'flat_field'): {exc}") from None
+    if sidecar is not None:
+        flat = _read_flat_sidecar(path, sidecar)
     return CameraProfile.from_json(doc, where=str(path), bias_frames=bias, flat_field=flat)
 
 
@@ -452,33 +490,111 @@ def bias_sidecar_path(path: str | os.PathLike) -> Path:
     return path.with_name(f"{path.stem}.bias.npz")
 
 
-def profile_files(profile: CameraProfile, path: str | os.PathLike) -> list[Path]:
-    """Every file :func:`save_profile` writes for ``profile`` at ``path``: the JSON first, then its
-    bias sidecar and flat-field sidecar when the profile has them."""
+def flat_sidecar_path(path: str | os.PathLike) -> Path:
+    """Where :func:`save_profile` writes the flat-field map of a profile saved at ``path``."""
     path = Path(path)
-    files = [path]
-    if profile.bias_frames:
-        files.append(bias_sidecar_path(path))
-    if profile.flat_field is not None:
-        files.append(path.with_name(f"{path.stem}.flat.npz"))
-    return files
+    return path.with_name(f"{path.stem}.flat.npz")
+
+
+def profile_outputs(profile: CameraProfile, path: str | os.PathLike) -> list[Path]:
+    """The files :func:`save_profile` writes for ``profile`` at ``path``: the JSON first, then its
+    bias and flat-field sidecars when the profile has them."""
+    path = Path(path)
+    return ([path] + ([bias_sidecar_path(path)] if profile.bias_frames else [])
+            + ([flat_sidecar_path(path)] if profile.flat_field is not None else []))
+
+
+#: Largest profile JSON (bytes); shipped ones have about 2 kB.
+MAX_PROFILE_BYTES = 16 << 20
+#: Largest bias frame (pixels) in a sidecar.
+MAX_BIAS_PIXELS = 1 << 27
+
+
+def _read_bias_sidecar(path: Path, doc: dict, sidecar: Any) -> dict[int, np.ndarray]:
+    """The bias frames of a profile's sidecar ``.npz``: it must lie in the profile's folder;
+    members ``iso_<ISO>`` of ISOs of the profile, 2-D, all of one shape (the
+    ``bias_frame_shape`` the profile records, when it does), finite; expansion capped."""
+    if not isinstance(sidecar, str) or not sidecar.strip():
+        raise ProfileError(f"{path}: field 'bias_frame_file': expected a file name, found {ut.show(sidecar)}")
+    side = ut.resolve_inside(path.parent, sidecar, source=path, field="bias_frame_file")
+    if not side.is_file():
+        raise ProfileError(f"{path}: field 'bias_frame_file': {side} does not exist")
+    shape = None
+    if isinstance(doc.get("bias_frame_shape"), list):
+        shape = ut.Node(doc, path, error=ProfileError)["bias_frame_shape"].as_ints(length=2, low=1,
+                                                                                   high=ut.MAX_DIMENSION)
+    isos = doc.get("isos") if isinstance(doc.get("isos"), dict) else {}
+    members = ut.npz_members(side)
+    bias = {}
+    for name in members:
+        if not re.fullmatch(r"iso_\d{1,7}", name) or str(int(name[4:])) not in isos:
+            raise FileFormatError(f"{side}: member {ut.show(name)} is not iso_<ISO> of an ISO of {path.name} "
+                                  f"({', '.join(f'iso_{k}' for k in isos)})")
+
+    def check(name, array_shape, dtype):
+        nonlocal shape
+        if len(array_shape) != 2 or dtype.kind not in "uif":
+            raise FileFormatError(f"{side}: array {name!r}: expected a 2-D numeric bias frame, found {dtype} "
+                                  f"{array_shape}")
+        ut.check_dims(array_shape, source=side, what=f"bias frame {name}", max_pixels=MAX_BIAS_PIXELS)
+        if shape is not None and tuple(array_shape) != tuple(shape):
+            raise FileFormatError(f"{side}: array {name!r} is {array_shape[0]} x {array_shape[1]}; "
+                                  f"{'the profile says' if doc.get('bias_frame_shape') else 'the first frame is'} "
+                                  f"{shape[0]} x {shape[1]}")
+        shape = tuple(array_shape)
+
+    arrays = ut.read_npz(side, check=check)
+    for name, frame in arrays.items():
+        if not np.isfinite(frame).all():
+            raise FileFormatError(f"{side}: array {name!r} holds NaN or Inf values")
+        bias[int(name[4:])] = frame
+    return bias
+
+
+def _read_flat_sidecar(path: Path, sidecar: Any) -> np.ndarray:
+    """The flat-field map of a profile's sidecar ``.npz``, checked like the bias sidecar: it must
+    lie in the profile's folder and hold one array ``flat_field``, 2-D float, at most
+    ``MAX_BIAS_PIXELS`` pixels (expansion capped); finite and positive (checked here and by
+    :class:`CameraProfile`)."""
+    if not isinstance(sidecar, str) or not sidecar.strip():
+        raise ProfileError(f"{path}: field 'flat_field_file': expected a file name, found {ut.show(sidecar)}")
+    side = ut.resolve_inside(path.parent, sidecar, source=path, field="flat_field_file")
+    if not side.is_file():
+        raise ProfileError(f"{path}: field 'flat_field_file': {side} does not exist")
+
+    def bad(why: str) -> ProfileError:
+        return ProfileError(f"{path}: field 'flat_field_file': {side} is not a flat-field map "
+                            f"(.npz with array 'flat_field'): {why}")
+
+    members = ut.npz_members(side)
+    if set(members) != {"flat_field"}:
+        raise bad(f"found {', '.join(map(ut.show, sorted(members))) or 'no arrays'}")
+
+    def check(name, array_shape, dtype):
+        if len(array_shape) != 2 or dtype.kind != "f":
+            raise bad(f"expected a 2-D float array, found {dtype} {tuple(array_shape)}")
+        ut.check_dims(array_shape, source=side, what="flat-field map", max_pixels=MAX_BIAS_PIXELS)
+
+    return ut.read_npz(side, names=["flat_field"], check=check)["flat_field"]
 
 
 def save_profile(profile: CameraProfile, path: str | os.PathLike, *, force: bool = False) -> Path:
     """Write a profile as JSON, its bias frames in a sidecar ``<stem>.bias.npz`` and its flat-field
-    map in ``<stem>.flat.npz``; all or none (:func:`lfproc.io.atomic_outputs`)."""
+    map in ``<stem>.flat.npz``: all of them or none (:func:`lfproc.io.atomic_outputs`)."""
     path = Path(path)
     doc = profile.to_json()
-    outputs = profile_files(profile, path)
-    flat_at = len(outputs) - 1
+    outputs = profile_outputs(profile, path)
     with atomic_outputs(outputs, force=force) as staged:
         if profile.bias_frames:
             with open(staged[1], "wb") as fh:
                 np.savez_compressed(fh, **{f"iso_{iso}": frame for iso, frame in profile.bias_frames.items()})
-            doc["bias_frame_file"] = outputs[1].name
+            doc["bias_frame_file"] = bias_sidecar_path(path).name
+            shapes = {tuple(np.shape(frame)) for frame in profile.bias_frames.values()}
+            if len(shapes) == 1:
+                doc["bias_frame_shape"] = list(shapes.pop())
         if profile.flat_field is not None:
-            with open(staged[flat_at], "wb") as fh:
+            with open(staged[-1], "wb") as fh:
                 np.savez_compressed(fh, flat_field=np.asarray(profile.flat_field, dtype=np.float32))
-            doc["flat_field_file"] = outputs[flat_at].name
+            doc["flat_field_file"] = flat_sidecar_path(path).name
         staged[0].write_text(json.dumps(doc, indent=2))
     return path

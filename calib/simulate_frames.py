@@ -74,6 +74,11 @@ def _dark_times(fig: dict[str, float]) -> tuple[float, float, float]:
     return (t_max / 4, t_max / 2, t_max)
 
 
+#: Largest simulated calibration frame (a side, and pixels in all).
+MAX_FRAME_SIDE = 16384
+MAX_FRAME_PIXELS = 1 << 24
+
+
 def simulate_frames(
     profile,
     out_dir: str | os.PathLike,
@@ -115,6 +120,9 @@ def simulate_frames(
         raise InputError(f"size: expected (H, W), got {size!r}") from None
     if h < 2 or w < 2:
         raise InputError(f"size: expected at least 2x2 pixels, got {h}x{w}")
+    if max(h, w) > MAX_FRAME_SIDE or h * w > MAX_FRAME_PIXELS:
+        raise InputError(f"size: expected at most {MAX_FRAME_SIDE} pixels a side and {MAX_FRAME_PIXELS} pixels in all "
+                         f"(simulated frames are written by the hundred), got {h} x {w}")
     iso_list = profile.iso_values if isos is None else [float(i) for i in isos]
     if format == "emva":
         if isos is None:

@@ -59,11 +59,11 @@ def parse_ints(text: str, *, option: str) -> list[int]:
         raise InputError(f"{option}: expected comma-separated integers, got {text!r}") from None
 
 
-def parse_size(values: list[str], *, option: str) -> tuple[int, int]:
+def parse_size(values: list[str], *, option: str, max_side: int = 1 << 16) -> tuple[int, int]:
     try:
         h, w = (int(v) for v in values)
     except ValueError:
         raise InputError(f"{option}: expected two integers H W, got {' '.join(values)}") from None
-    if h < 1 or w < 1:
-        raise InputError(f"{option}: expected positive sizes, got {h} {w}")
+    if h < 1 or w < 1 or h > max_side or w > max_side:
+        raise InputError(f"{option}: expected sizes from 1 to {max_side}, got {h} {w}")
     return h, w

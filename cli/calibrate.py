@@ -39,6 +39,9 @@ def register(sub, common) -> None:
     p.add_argument("--cfa", choices=("RGGB", "GRBG", "GBRG", "BGGR", "mono"),
                    help="CFA layout when the frames lack one; 'mono' for a monochrome sensor (the default for EMVA "
                         "1288 data; frame manifests default to RGGB, recorded as unknown)")
+    p.add_argument("--frames-root", type=Path, metavar="DIR",
+                   help="folder the frames may lie in (default: the manifest's folder; paths leading elsewhere are "
+                        "refused)")
     add_json(p)
     g = p.add_argument_group(f"{SIMULATE} options")
     g.add_argument("--profile", help="camera profile: shipped name or JSON path")
@@ -52,8 +55,9 @@ def register(sub, common) -> None:
 def _simulate(args) -> int:
     from lfproc.calib.simulate_frames import simulate_frames
 
-    if args.report or args.name or args.adc_bits or args.cfa:
-        raise InputError(f"{SIMULATE}: --report, --name, --adc-bits and --cfa apply to calibration, not simulation")
+    if args.report or args.name or args.adc_bits or args.cfa or args.frames_root:
+        raise InputError(f"{SIMULATE}: --report, --name, --adc-bits, --cfa and --frames-root apply to calibration, "
+                         "not simulation")
     if not args.profile:
         raise InputError(f"{SIMULATE}: --profile is required (a shipped profile name or a profile JSON)")
     size = parse_size(args.size, option="--size") if args.size else (128, 128)
@@ -72,16 +76,17 @@ def run(args) -> int:
     if given:
         raise InputError(f"{', '.join(given)}: only for 'lfproc calibrate {SIMULATE}'")
     from lfproc.calib.calibrate import calibrate
-    from lfproc.calib.profile import profile_files, save_profile
+    from lfproc.calib.profile import profile_outputs, save_profile
     from lfproc.io import atomic_outputs, check_output
 
     check_output(args.output, force=args.force)
     if args.report is not None:
         check_output(args.report, force=args.force)
-    result = calibrate(args.input, name=args.name, adc_bits=args.adc_bits, cfa_pattern=args.cfa)
-    # the profile, its bias sidecar and the report are published together: a run killed at any
+    result = calibrate(args.input, name=args.name, adc_bits=args.adc_bits, cfa_pattern=args.cfa,
+                       frames_root=args.frames_root)
+    # the profile, its sidecars and the report are published together: a run killed at any
     # moment leaves all of them or none (and a re-run as it was then succeeds)
-    outputs = profile_files(result.profile, args.output)  # the JSON and its sidecars
+    outputs = profile_outputs(result.profile, args.output)
     if args.report is not None:
         outputs.append(args.report)
     with atomic_outputs(outputs, force=args.force) as staged:

@@ -33,8 +33,13 @@ def run(args) -> int:
     from lfproc.dataset import build_dataset
     from lfproc.errors import InputError
 
-    if args.workers is not None and args.workers < 1:
-        raise InputError(f"--workers: expected a positive number, got {args.workers}")
+    if args.workers is not None:
+        import os
+
+        from lfproc._util import check_count, max_workers
+
+        check_count("--workers", args.workers, high=max_workers(),
+                    why=f"at most 4 per CPU core; this machine has {os.cpu_count() or 1}")
     report = build_dataset(args.scenes_dir, args.output, method=args.method, profile=args.profile,
                            scheduler=args.scheduler, workers=args.workers)
     failed = report["failed"]

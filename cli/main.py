@@ -3,7 +3,8 @@
 Expected errors (any :class:`lfproc.LfprocError`, and OS errors on files) print one line
 ``lfproc COMMAND: error: ...`` on stderr and exit with code 2; ``--debug`` shows the
 traceback instead. lfproc's warnings (:class:`lfproc.errors.LfprocWarning`) print one line
-``lfproc COMMAND: warning: ...`` each and do not change the exit code. Bad options are reported by argparse, also with code 2.
+``lfproc COMMAND: warning: ...`` each after a successful command (not after an error) and do
+not change the exit code. Bad options are reported by argparse, also with code 2.
 """
 
 from __future__ import annotations
@@ -58,9 +59,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _show_warning(message, category, filename, lineno, file=None, line=None, *, command: str, show) -> None:
+def _keep_warning(message, category, filename, lineno, file=None, line=None, *, kept: list, show) -> None:
     if issubclass(category, LfprocWarning):
-        print(f"lfproc {command}: warning: {message}", file=sys.stderr)
+        if str(message) not in kept:
+            kept.append(str(message))
     else:
         show(message, category, filename, lineno, file, line)
 
@@ -72,13 +74,18 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse: --help/--version (0) or a bad option (2)
         return int(exc.code or 0)
+    kept: list[str] = []
     try:
         with warnings.catch_warnings():
-            # lfproc's own warnings are shown as one line each (once per message), whatever the
-            # interpreter's filters say; other warnings keep the usual handling
-            warnings.simplefilter("default", LfprocWarning)
-            warnings.showwarning = partial(_show_warning, command=args.command, show=warnings.showwarning)
-            return int(args.run(args) or 0)
+            # lfproc's own warnings are kept (whatever the interpreter's filters say) and shown
+            # as one line each once the command has succeeded: a failed command shows its one
+            # error line only. Other warnings keep the usual handling.
+            warnings.simplefilter("always", LfprocWarning)
+            warnings.showwarning = partial(_keep_warning, kept=kept, show=warnings.showwarning)
+            code = int(args.run(args) or 0)
+        for message in kept:
+            print(f"lfproc {args.command}: warning: {message}", file=sys.stderr)
+        return code
     except (LfprocError, OSError) as exc:
         if args.debug:
             raise

@@ -21,15 +21,25 @@ def register(sub, common) -> None:
     p.add_argument("--dictionary", default="default", metavar="default|FILE",
                    help="dictionary: the shipped 'default' or a dictionary .npz file")
     p.add_argument("--solver", default="admm", metavar="admm|fista|omp",
-                   help="admm (default; Woodbury, batched), fista, or omp (fast greedy mode)")
+                   help="admm (default; batched, one factor per operator phase), fista, or omp (fast greedy mode)")
     p.add_argument("--stride", type=int, default=4, help="patch spacing in pixels, 1..patch size (default 4)")
-    p.add_argument("--mu", type=float, default=1e-4,
-                   help="l1 weight relative to a unit-norm patch (default 1e-4, the paper's)")
-    p.add_argument("--max-iter", type=int, default=None, help="iteration limit (default 300 ADMM, 1000 FISTA)")
-    p.add_argument("--tol", type=float, default=2.0**-15, help="relative change that stops a patch (default 2^-15)")
+    p.add_argument("--mu", type=float, default=None,
+                   help="l1 weight relative to the patch's norm against the chi-square data term (default 1); with "
+                        "--scale patch relative to a unit-norm patch (the paper's: 1e-4)")
+    p.add_argument("--max-iter", type=int, default=None, help="iteration limit (default 50 ADMM, 1000 FISTA)")
+    p.add_argument("--tol", type=float, default=None,
+                   help="relative change that stops a patch (default 1e-2 ADMM, 2^-15 = 3.0517578125e-05 FISTA; "
+                        "the paper's: --tol 3.0517578125e-05 --max-iter 300)")
     p.add_argument("--sparsity", type=int, default=None, help="atoms per patch for omp (default: the dictionary's)")
-    p.add_argument("--scale", default="patch", metavar="patch|global",
-                   help="per-patch scale normalisation (default) or one scale for the capture")
+    p.add_argument("--scale", default="noise", metavar="noise|patch|global",
+                   help="HDR scale: per-patch codes with the chi-square data term (default), per-patch codes and "
+                        "data term (the paper-faithful reading), or one scale for the capture")
+    p.add_argument("--overlap", default="scale-window", metavar="scale-window|scale|window|mean",
+                   help="how overlapping patch estimates are combined (default scale-window; the paper's: mean)")
+    p.add_argument("--paper", action="store_true",
+                   help="the paper's settings: --scale patch --overlap mean --mu 1e-4 --tol 2^-15 --max-iter 300 "
+                        "(options given explicitly win)")
+    p.add_argument("--threads", type=int, default=None, help="blocks solved at once in this process (default: CPUs)")
     p.add_argument("--per-shot", default=None, metavar="debevec|ml", dest="per_shot",
                    help="the paper's baselines (captures of global-ISO shots: simulate --baseline individual-iso|"
                         "bracketing): reconstruct every shot alone and merge them view by view with Debevec hat "
@@ -52,8 +62,19 @@ def run(args) -> int:
     check_output(args.output, force=args.force)
     capture = load_capture(args.capture)
     dictionary = load_dictionary(args.dictionary)
-    options = dict(solver=args.solver, stride=args.stride, mu=args.mu, max_iter=args.max_iter, tol=args.tol,
-                   sparsity=args.sparsity, scale=args.scale, workers=args.workers, scheduler=args.scheduler)
+    from lfproc.recon import DEFAULTS, PAPER
+
+    base = PAPER if args.paper else {"mu": DEFAULTS["mu"]}
+    given = {k: v for k, v in (("mu", args.mu), ("tol", args.tol), ("max_iter", args.max_iter)) if v is not None}
+    options = {k: base[k] for k in ("mu", "tol", "max_iter") if k in base}
+    options.update(given)
+    if args.paper:
+        scale = args.scale if args.scale != "noise" else PAPER["scale"]
+        overlap = args.overlap if args.overlap != "scale-window" else PAPER["overlap"]
+    else:
+        scale, overlap = args.scale, args.overlap
+    options.update(solver=args.solver, stride=args.stride, sparsity=args.sparsity, scale=scale, overlap=overlap,
+                   workers=args.workers, scheduler=args.scheduler, threads=args.threads)
     if args.per_shot is not None:
         from lfproc.bench import reconstruct_per_shot
 

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import io
 import math
 import os
+import sys
+import tempfile
 import warnings
 from pathlib import Path
 from collections.abc import Iterable, Sequence
@@ -19,8 +23,11 @@ __all__ = [
     "progress",
     "check_choice",
     "check_positive",
+    "check_count",
+    "max_workers",
     "to_jsonable",
     "file_sha256",
+    "quiet",
     "freeze",
     "frozen_array",
     "is_frozen",
@@ -79,6 +86,23 @@ def check_positive(name: str, value: float, *, allow_zero: bool = False) -> floa
     if not ok:
         raise InputError(f"{name}: expected a {'non-negative' if allow_zero else 'positive'} finite number, got {value!r}")
     return v
+
+
+def check_count(name: str, value: Any, *, low: int = 1, high: int, why: str = "") -> int:
+    """Validate an integer count (shots, workers, sizes...) in ``low..high`` before anything
+    is allocated or started; the error names the option and the allowed range."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        if not (isinstance(value, float) and math.isfinite(value) and value == int(value)):
+            raise InputError(f"{name}: expected an integer from {low} to {high}, got {value!r}")
+    value = int(value)
+    if not low <= value <= high:
+        raise InputError(f"{name}: expected an integer from {low} to {high}{f' ({why})' if why else ''}, got {value}")
+    return value
+
+
+def max_workers() -> int:
+    """Most worker processes lfproc starts: four per CPU core, at most 256."""
+    return max(1, min(256, 4 * (os.cpu_count() or 1)))
 
 
 def to_jsonable(obj: Any) -> Any:
@@ -217,3 +241,40 @@ class ReadOnlyState:
     def __setstate__(self, state):
         for name, value in state.items():
             object.__setattr__(self, name, frozen_array(value) if isinstance(value, np.ndarray) else value)
+
+
+@contextlib.contextmanager
+def quiet():
+    """Capture what the block prints on ``sys.stdout``/``sys.stderr`` *and* on the
+    process's file descriptors 1 and 2 (where C libraries write); yields a list that is
+    filled with the captured lines when the block ends.
+
+    Other threads writing to fds 1/2 meanwhile are captured too (the block is short).
+    """
+    lines: list[str] = []
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    py_out = io.StringIO()
+    try:
+        tmp = tempfile.TemporaryFile()
+        saved = [os.dup(1), os.dup(2)]
+    except OSError:  # pragma: no cover - no spare descriptors: run without capturing
+        with contextlib.redirect_stdout(py_out), contextlib.redirect_stderr(py_out):
+            yield lines
+        lines.extend(py_out.getvalue().splitlines())
+        return
+    try:
+        os.dup2(tmp.fileno(), 1)
+        os.dup2(tmp.fileno(), 2)
+        with contextlib.redirect_stdout(py_out), contextlib.redirect_stderr(py_out):
+            yield lines
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        os.close(saved[0])
+        os.close(saved[1])
+        tmp.seek(0)
+        captured = tmp.read(1 << 16).decode("utf-8", errors="replace")
+        tmp.close()
+        lines.extend(line.strip() for line in (py_out.getvalue() + "\n" + captured).splitlines() if line.strip())

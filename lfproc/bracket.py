@@ -102,9 +102,9 @@ def read_exif_exposure(path: str | os.PathLike) -> dict[str, float | None]:
 def _read_ldr(path: Path) -> LightField:
     import cv2
 
-    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
-    if raw is None:
-        raise FileFormatError(f"{path}: not a readable image (OpenCV could not decode it)")
+    from .io.images import imread
+
+    raw = imread(path, cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if raw.ndim == 2:
         raw = raw[..., None]
     elif raw.shape[2] == 4:

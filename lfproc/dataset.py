@@ -362,8 +362,11 @@ def build_dataset(
         ``processed``, ``skipped`` and ``failed`` (scene -> error message) scene names,
         ``manifest`` (path) and ``rows`` (the manifest rows).
     """
-    from ._util import progress
+    from ._util import check_count, max_workers, progress
 
+    if workers is not None:  # before any folder is made or process started
+        check_count("--workers", workers, high=max_workers(),
+                    why=f"at most 4 per CPU core; this machine has {os.cpu_count() or 1}")
     scenes = find_scenes(scenes_dir)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

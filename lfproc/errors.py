@@ -16,6 +16,7 @@ __all__ = [
     "ShapeError",
     "FileFormatError",
     "MissingFileError",
+    "UnsafeFileError",
     "LfpFormatError",
     "ChecksumError",
     "OutputExistsError",
@@ -52,6 +53,11 @@ class ShapeError(InputError):
 
 class FileFormatError(LfprocError, ValueError):
     """A file exists but is not in the format expected, or is corrupt or truncated."""
+
+
+class UnsafeFileError(FileFormatError):
+    """A file names something outside its folder, holds links or ``..`` members, or would
+    expand beyond the limits (a compression bomb); lfproc refuses it."""
 
 
 class MissingFileError(LfprocError, FileNotFoundError):

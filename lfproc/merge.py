@@ -224,8 +224,8 @@ def merge_ml(
     n = stack.shape[0]
     t = _per_exposure("exposures_s", exposures_s, n)
     iso = _per_exposure("isos", isos, n)
-    if int(n_iter) != n_iter or n_iter < 0:
-        raise InputError(f"n_iter: expected a non-negative integer, got {n_iter}")
+    if int(n_iter) != n_iter or n_iter < 0 or n_iter > 100:
+        raise InputError(f"n_iter: expected an integer from 0 to 100, got {n_iter}")
     n_threads = _n_threads(n_threads)
     sample_shape = stack.shape[1:]
     total = math.prod(sample_shape)

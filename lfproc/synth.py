@@ -665,6 +665,10 @@ def synthesize(scene: str = "layers", *, size: tuple[int, int] = (256, 256), vie
     h, w = _check_size(size)
     nviews = _check_views(views)
     b = _check_baseline(baseline_px)
+    from . import _untrusted as ut
+
+    ut.check_nbytes((*nviews, h, w, 3), np.float32, error=InputError,
+                    what=f"size x views: a light field of {nviews[0]} x {nviews[1]} views of {h} x {w} pixels")
     arrays, names = _load_textures(textures)
     ctx = _Context((h, w), _margin(nviews, b), b, check_random_state(random_state), arrays)
     layers = SCENES[scene][0](ctx)

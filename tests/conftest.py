@@ -31,6 +31,30 @@ def lytro_dir(shared_data) -> Path:
     return folder
 
 
+@pytest.fixture(scope="session")
+def run_lfproc():
+    """Run ``lfproc ARGS...`` in a fresh process; ``kill_at="point"`` (or ``"point#n"``) makes it
+    SIGKILL itself at that point of lfproc.io._atomic (``LFPROC_TEST_KILL_AT``), and the run is
+    checked to have died there. Returns the CompletedProcess (text output)."""
+    import signal
+    import subprocess
+    import sys
+
+    def run(*args, kill_at: str | None = None, timeout: float = 120):
+        env = dict(os.environ, LFPROC_PROGRESS="0", MPLBACKEND="Agg")
+        env.pop("LFPROC_TEST_KILL_AT", None)
+        if kill_at:
+            env["LFPROC_TEST_KILL_AT"] = kill_at
+        proc = subprocess.run([sys.executable, "-m", "lfproc.cli.main", *map(str, args)], env=env,
+                              capture_output=True, text=True, timeout=timeout)
+        if kill_at:
+            assert proc.returncode == -signal.SIGKILL, (
+                f"expected a kill at {kill_at}, got exit {proc.returncode}: {proc.stderr[-2000:]}")
+        return proc
+
+    return run
+
+
 # -- genuine raw files for the import tests ------------------------------------------------------
 
 _CFA_CODES = {"R": 0, "G": 1, "B": 2}
@@ -76,27 +100,3 @@ def dng_writer():
     """:func:`write_dng` (skips when tifffile is missing)."""
     pytest.importorskip("tifffile")
     return write_dng
-
-
-@pytest.fixture(scope="session")
-def run_lfproc():
-    """Run ``lfproc ARGS...`` in a fresh process; ``kill_at="point"`` (or ``"point#n"``) makes it
-    SIGKILL itself at that point of lfproc.io._atomic (``LFPROC_TEST_KILL_AT``), and the run is
-    checked to have died there. Returns the CompletedProcess (text output)."""
-    import signal
-    import subprocess
-    import sys
-
-    def run(*args, kill_at: str | None = None, timeout: float = 120):
-        env = dict(os.environ, LFPROC_PROGRESS="0", MPLBACKEND="Agg")
-        env.pop("LFPROC_TEST_KILL_AT", None)
-        if kill_at:
-            env["LFPROC_TEST_KILL_AT"] = kill_at
-        proc = subprocess.run([sys.executable, "-m", "lfproc.cli.main", *map(str, args)], env=env,
-                              capture_output=True, text=True, timeout=timeout)
-        if kill_at:
-            assert proc.returncode == -signal.SIGKILL, (
-                f"expected a kill at {kill_at}, got exit {proc.returncode}: {proc.stderr[-2000:]}")
-        return proc
-
-    return run

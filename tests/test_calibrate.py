@@ -225,11 +225,11 @@ def test_missing_iso_or_exposure_names_the_row(frames, tmp_path):
     rows = _select(_rows(frames), 100)
     rows[2] = dict(rows[2], iso="")
     with pytest.raises(InputError, match=r"m.csv line 4: missing ISO"):
-        calibrate(_manifest(tmp_path, rows))
+        calibrate(_manifest(tmp_path, rows), frames_root=tmp_path.parent)
     rows = _select(_rows(frames), 100)
     rows[5] = dict(rows[5], exposure_s="fast")
     with pytest.raises(InputError, match=r"m.csv line 7: exposure_s: expected a number"):
-        read_manifest(_manifest(tmp_path, rows))
+        read_manifest(_manifest(tmp_path, rows), root=tmp_path.parent)
     bad = tmp_path / "nocol.csv"
     bad.write_text("path,kind\nx.png,bias\n")
     with pytest.raises(FileFormatError, match="lacks column.*iso"):
@@ -242,10 +242,10 @@ def test_unreadable_and_missing_frames(frames, tmp_path):
     broken.write_bytes(b"\x89PNG\r\n\x1a\n garbage")
     rows[3] = dict(rows[3], path=str(broken))
     with pytest.raises(FileFormatError, match="broken.png: cannot read"):
-        calibrate(_manifest(tmp_path, rows))
+        calibrate(_manifest(tmp_path, rows), frames_root=tmp_path.parent)
     rows[3] = dict(rows[3], path=str(tmp_path / "gone.png"))
     with pytest.raises(MissingFileError, match="gone.png"):
-        calibrate(_manifest(tmp_path, rows))
+        calibrate(_manifest(tmp_path, rows), frames_root=tmp_path.parent)
 
 
 def test_mixed_sizes_name_the_files(frames, tmp_path):
@@ -254,7 +254,7 @@ def test_mixed_sizes_name_the_files(frames, tmp_path):
     cv2.imwrite(str(small), np.full((64, 64), 64, np.uint16))
     rows[1] = dict(rows[1], path=str(small))
     with pytest.raises(CalibrationError, match=r"mixed frames in ISO 100: .*small.png differs from .*iso100_.*png \(size 64x64 vs 128x128"):
-        calibrate(_manifest(tmp_path, rows))
+        calibrate(_manifest(tmp_path, rows), frames_root=tmp_path.parent)
 
 
 def test_single_bias_frame_records_unknown_read_noise(frames, tmp_path):
@@ -262,12 +262,12 @@ def test_single_bias_frame_records_unknown_read_noise(frames, tmp_path):
     first_bias = next(r for r in rows if r["kind"] == "bias" and float(r["iso"]) == 400)
     rows = [r for r in rows if not (r["kind"] == "bias" and float(r["iso"]) == 400) or r is first_bias]
     # with dark pairs at several exposures the read noise is their intercept at t = 0
-    res = calibrate(_manifest(tmp_path, rows))
+    res = calibrate(_manifest(tmp_path, rows), frames_root=tmp_path.parent)
     assert res.figures["400"]["read_noise_method"].startswith("intercept of the dark pair variance")
     assert res.figures["400"]["read_noise_dn"] == pytest.approx(2.8 * 0.819, rel=0.15)
     # without darks nothing gives a temporal pair at ISO 400
     rows = [r for r in rows if not (r["kind"] == "dark" and float(r["iso"]) == 400)]
-    res = calibrate(_manifest(tmp_path, rows))
+    res = calibrate(_manifest(tmp_path, rows), frames_root=tmp_path.parent)
     f = res.figures["400"]
     assert f["read_noise_dn"] is None and f["read_noise_e"] is None and f["gain_dn_per_e"] is None
     assert "needs a pair of bias frames; ISO 400 has 1 bias frame" in res.unknown["isos.400.read_noise_dn"]
@@ -287,7 +287,7 @@ def test_flats_without_pairs_record_unknown_gain(frames, tmp_path):
                 continue
             seen.add(key)
         keep.append(r)
-    res = calibrate(_manifest(tmp_path, keep))
+    res = calibrate(_manifest(tmp_path, keep), frames_root=tmp_path.parent)
     assert res.figures["1600"]["gain_dn_per_e"] is None
     assert "no frame pairs" in res.unknown["isos.1600.gain_dn_per_e"]
 
@@ -296,19 +296,19 @@ def test_all_saturated_flats(frames, tmp_path):
     rows = _rows(frames)
     saturated = [r for r in rows if r["kind"] != "flat" or float(r["iso"]) == 100
                  or float(r["exposure_s"]) > 0.0105]
-    res = calibrate(_manifest(tmp_path, saturated))
+    res = calibrate(_manifest(tmp_path, saturated), frames_root=tmp_path.parent)
     assert res.figures["400"]["gain_dn_per_e"] is None
     assert "all 8 flat frames at ISO 400 are saturated (clipped at 4095 DN)" == res.unknown["isos.400.gain_dn_per_e"]
     assert res.figures["400"]["read_noise_dn"] == pytest.approx(2.8 * 0.819, rel=0.03)
     only = [r for r in saturated if float(r["iso"]) == 400]
     with pytest.raises(CalibrationError, match="no system gain at any ISO.*saturated"):
-        calibrate(_manifest(tmp_path, only, "only.csv"))
+        calibrate(_manifest(tmp_path, only, "only.csv"), frames_root=tmp_path.parent)
 
 
 def test_no_overexposed_flats(frames, tmp_path):
     rows = [r for r in _select(_rows(frames), 100) if r["kind"] != "flat" or float(r["exposure_s"]) < 0.0095]
     with pytest.raises(CalibrationError, match="no saturation level.*no flat frame reaches saturation"):
-        calibrate(_manifest(tmp_path, rows))
+        calibrate(_manifest(tmp_path, rows), frames_root=tmp_path.parent)
 
 
 def test_hot_pixels_are_found_and_masked(tmp_path, profile):
@@ -392,11 +392,12 @@ def test_cli_bad_frames_one_line(frames, tmp_path, capsys):
     rows = _select(_rows(frames), 100)
     rows[0] = dict(rows[0], exposure_s="")
     m = _manifest(tmp_path, rows)
-    assert main(["calibrate", str(m), "-o", str(tmp_path / "p.json")]) == 2
+    assert main(["calibrate", str(m), "-o", str(tmp_path / "p.json"), "--frames-root", str(tmp_path.parent)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "m.csv line 2: missing exposure_s" in err[0]
     only = [r for r in _select(_rows(frames), 400) if r["kind"] != "flat" or float(r["exposure_s"]) > 0.0105]
-    assert main(["calibrate", str(_manifest(tmp_path, only, "sat.csv")), "-o", str(tmp_path / "p.json")]) == 2
+    assert main(["calibrate", str(_manifest(tmp_path, only, "sat.csv")), "-o", str(tmp_path / "p.json"),
+                 "--frames-root", str(tmp_path.parent)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "saturated" in err[0]
     assert not (tmp_path / "p.json").exists()

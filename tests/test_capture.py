@@ -114,7 +114,8 @@ def test_load_errors_are_clear(tmp_path, capture):
         load_capture(bad)
     bad = _rewrite(good, tmp_path / "shape.npz",
                    header=lambda h: h | {"arrays": h["arrays"] | {"dn": {"shape": [1, 32, 32], "dtype": "uint16"}}})
-    with pytest.raises(FileFormatError, match="array 'dn': header says"):
+    with pytest.raises(FileFormatError, match=r"field 'arrays.dn': expected shape \[2, 32, 32\] \(shots, height, "
+                                              r"width\), found \[1, 32, 32\]"):
         load_capture(bad)
     bad = _rewrite(good, tmp_path / "prof.npz", header=lambda h: h | {"profile": h["profile"] | {"full_well_e": None}})
     with pytest.raises(ProfileError, match="missing field 'full_well_e'"):

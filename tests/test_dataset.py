@@ -134,7 +134,8 @@ def test_cli_dataset_build_killed_then_resumed(scenes, tmp_path, capsys):
     assert main(["dataset", "build", str(scenes), "-o", str(out), "--workers", "1", "--profile", "illum",
                  "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
-    assert doc["skipped"] == len(done_at_kill) and doc["processed"] == 4 - len(done_at_kill) and doc["failed"] == 0
+    assert doc["skipped"] == len(done_at_kill) and doc["processed"] == 4 - len(done_at_kill) and doc["failed"] == 0, (
+        doc, sorted(done_at_kill))
     after = _record_mtimes(out)
     assert len(after) == 4 and all(after[k] == v for k, v in done_at_kill.items())
     rows = read_manifest(out)
@@ -158,7 +159,12 @@ def test_cli_dataset_errors(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "scene s failed" in err and "at least two inputs" in err and "1 of 1 scenes failed" in err
     assert main(["dataset", "build", str(tmp_path / "one"), "-o", str(tmp_path / "o"), "--workers", "0"]) == 2
-    assert "--workers: expected a positive number" in capsys.readouterr().err
+    assert "--workers: expected an integer from 1 to " in capsys.readouterr().err
+    # a worker count far beyond the machine is refused before any folder is made or process started
+    assert main(["dataset", "build", str(tmp_path / "one"), "-o", str(tmp_path / "p"), "--workers", "1000"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("lfproc dataset: error: --workers: expected an integer from 1 to") and "got 1000" in err
+    assert "\n" not in err and not (tmp_path / "p").exists()
 
 
 def test_dataset_build_virtual_illum_brackets(tmp_path):

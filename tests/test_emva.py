@@ -14,7 +14,7 @@ from lfproc.calib.emva import (EmvaDescriptor, EmvaStep, evaluate_descriptor, fo
                                read_descriptor, saturation_index, write_descriptor)
 from lfproc.calib.simulate_frames import expected_figures, simulate_frames
 from lfproc.cli.main import main
-from lfproc.errors import CalibrationError, FileFormatError, InputError, OutputExistsError
+from lfproc.errors import CalibrationError, FileFormatError, InputError, OutputExistsError, UnsafeFileError
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +29,9 @@ def test_descriptor_parse(tmp_path):
     p = tmp_path / "desc.txt"
     p.write_text(text)
     assert is_descriptor(p)
-    d = read_descriptor(p)
+    with pytest.raises(UnsafeFileError, match=r"line 12 .*'/abs/x.png' is an absolute path"):
+        read_descriptor(p)  # images must lie in the descriptor's folder unless a root is named
+    d = read_descriptor(p, root="/")
     assert (d.release, d.bits, d.width, d.height) == ("3.1", 12, 4, 3)
     assert [s.kind for s in d.steps] == ["bright", "dark", "bright"]
     assert d.steps[0].photons == 12.5 and d.steps[1].photons is None and d.steps[2].exposure_ns == 2000
@@ -38,7 +40,7 @@ def test_descriptor_parse(tmp_path):
     assert d.steps[0].exposure_s == pytest.approx(1e-6)
     # write and read back
     out = write_descriptor(d, tmp_path / "copy.txt")
-    back = read_descriptor(out)
+    back = read_descriptor(out, root="/")
     assert back.steps == tuple(s.__class__(**{**s.__dict__, "line": b.line}) for s, b in zip(d.steps, back.steps))
     assert "i img/a.png" in out.read_text()
     with pytest.raises(OutputExistsError):

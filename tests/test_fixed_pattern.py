@@ -181,6 +181,9 @@ def test_capture_observations_correct_prnu_and_survive_the_file(tmp_path):
     np.testing.assert_array_equal(again.variance, obs.variance)
 
 
+# a constant light field at the automatic radiance scale saturates 37 % of the ISO-100 pixels: a
+# legitimate SaturationWarning (tests/test_warnings.py), not what this test is about
+@pytest.mark.filterwarnings("ignore::lfproc.errors.SaturationWarning")
 def test_capture_file_keeps_a_measured_profiles_maps(tmp_path):
     """A measured profile's flat field and bias frames travel inside the capture file (the JSON header
     cannot hold them), so observations after loading equal those before."""

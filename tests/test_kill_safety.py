@@ -145,13 +145,14 @@ def frames(tmp_path_factory):
     return root / "frames" / "manifest.csv"
 
 
-# calibrate --report publishes profile.json (itself staged with its sidecar: journal#1, moved#1-2),
-# then profile.json, profile.bias.npz and the report folder together (journal#2, moved#3-5, committed#2)
-@pytest.mark.parametrize("point", ["dir-written", "journal#2", "moved#3", "moved#4", "committed#2"])
+# calibrate --report stages p.json (itself staged with its bias and flat-field sidecars: journal#1,
+# moved#1-3), then publishes p.json, p.bias.npz, p.flat.npz and the report folder together
+# (journal#2, moved#4-7, committed#2)
+@pytest.mark.parametrize("point", ["dir-written", "journal#2", "moved#4", "moved#6", "committed#2"])
 def test_calibrate_with_report_killed_then_rerun(tmp_path, frames, run_lfproc, capsys, point):
     args = ["calibrate", frames, "-o", tmp_path / "p.json", "--report", tmp_path / "rep"]
     run_lfproc(*args, kill_at=point)
-    if point == "moved#3":  # the profile is in place, its sidecar and the report are not
+    if point == "moved#4":  # the profile is in place, its sidecars and the report are not
         assert (tmp_path / "p.json").exists() and not (tmp_path / "rep").exists()
     code = main(list(map(str, args)))
     err = capsys.readouterr().err
@@ -160,11 +161,11 @@ def test_calibrate_with_report_killed_then_rerun(tmp_path, frames, run_lfproc, c
     else:
         assert code == 0, err
     profile = load_profile(tmp_path / "p.json")
-    assert profile.bias_frames[100].shape == (32, 32)
+    assert profile.bias_frames[100].shape == (32, 32) and profile.flat_field.shape == (32, 32)
     assert sorted(p.name for p in (tmp_path / "rep").iterdir()) == [
         "dark_level.png", "dark_variance.png", "figures.json", "photon_transfer.png", "read_noise_vs_iso.png",
         "summary.md"]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.bias.npz", "p.json", "rep"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.bias.npz", "p.flat.npz", "p.json", "rep"]
 
 
 def _bracket(root: Path) -> list[str]:

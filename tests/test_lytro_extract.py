@@ -31,6 +31,8 @@ def test_decode_says_first_that_there_is_no_raw_image(lytro_dir, name, holds, tm
     assert len(err) == 1 and "no raw lenslet image to decode" in err[0] and holds in err[0]
     assert f"lfproc extract {lytro_dir / name} -o DIR" in err[0]
     assert contents_summary(lfp_contents(read_lfp(lytro_dir / name))).startswith(holds)
+    assert main(["info", str(lytro_dir / name), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["holds"].startswith(holds)
 
 
 def test_extract_f01_focal_stack(lytro_dir, tmp_path, capsys):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lfproc.cli.main import main
-from lfproc.errors import ConvergenceWarning, InputError, SaturationWarning, ShapeError
+from lfproc.errors import InputError, SaturationWarning, ShapeError
 from lfproc.io import read_lightfield, write_lightfield
 from lfproc.lightfield import LightField
 from lfproc.merge import merge_debevec, merge_lightfields, merge_ml, recover_response

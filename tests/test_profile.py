@@ -68,7 +68,7 @@ def _write(tmp_path, doc, name="bad.json"):
         (lambda d: d.update(flat_field_file="missing.npz"), r"field 'flat_field_file': .*missing.npz does not exist"),
         (lambda d: d.update(flat_field_file="notflat.npz"), r"field 'flat_field_file': .*notflat.npz is not a flat-field"),
         (lambda d: d.update(flat_field_file="negflat.npz"), r"flat_field: expected an \(H, W\) map of positive finite gains"),
-        (lambda d: d.update(flat_field_std=-0.1), "field 'flat_field_std': expected a value >= 0"),
+        (lambda d: d.update(flat_field_std=-0.1), "field 'flat_field_std': expected a number >= 0"),
         (lambda d: d.update(bias_frame_std_dn={"fast": 1.0}), "field 'bias_frame_std_dn': keys must be ISO numbers"),
         (lambda d: d.update(bias_frame_std_dn={"100": "big"}), "field 'bias_frame_std_dn.100': expected a number"),
     ],
@@ -130,3 +130,24 @@ def test_cli_info_describes_a_profile(tmp_path, capsys):
     assert main(["info", str(other)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "other.json" in err[0] and "camera profiles" in err[0]
+
+
+def test_flat_field_sidecar_is_confined_and_checked_like_the_bias_sidecar(tmp_path):
+    from lfproc.errors import UnsafeFileError
+
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    np.savez(outside / "flat.npz", flat_field=np.ones((2, 2), np.float32))
+    folder = tmp_path / "profile"
+    folder.mkdir()
+    doc = load_profile("paper-high").to_json()
+    doc["flat_field_file"] = "../elsewhere/flat.npz"
+    with pytest.raises(UnsafeFileError, match="'flat_field_file'.*leads outside"):
+        load_profile(_write(folder, doc))
+    np.savez(folder / "cube.npz", flat_field=np.ones((2, 2, 2), np.float32))
+    doc["flat_field_file"] = "cube.npz"
+    with pytest.raises(ProfileError, match="cube.npz is not a flat-field map.*expected a 2-D float array"):
+        load_profile(_write(folder, doc))
+    np.savez(folder / "good.npz", flat_field=np.full((2, 3), 0.5, np.float32))
+    doc["flat_field_file"] = "good.npz"
+    assert load_profile(_write(folder, doc)).flat_field.tolist() == [[0.5] * 3] * 2

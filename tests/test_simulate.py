@@ -116,6 +116,7 @@ def test_auto_radiance_scale_saturates_the_lowest_iso():
         auto_radiance_scale(np.zeros((5, 5, 4, 4, 3)), profile=profile, iso=100, exposure_s=0.004)
 
 
+@pytest.mark.filterwarnings("ignore::lfproc.errors.SaturationWarning")  # the long exposures saturate on purpose
 def test_exposure_time_acts_as_in_a_camera(tmp_path, capsys):
     """The automatic scale belongs to the scene (reference exposure 4 ms), not to the shot: on main it was
     recomputed from --exposure-s, so 0.1 ms and 1 s saturated the same share of pixels."""
@@ -289,7 +290,8 @@ def _nan_image(tmp_path, value):
 @pytest.mark.parametrize("args, message", [
     (["--isos", "100,123"], "ISO 123 is not in camera profile"),
     (["--exposure-s", "0"], "exposure_s: expected a positive finite number"),
-    (["--shots", "0"], "shots: expected an integer >= 1"),
+    (["--shots", "0"], "--shots: expected an integer from 1 to 256, got 0"),
+    (["--shots", "1000000"], "--shots: expected an integer from 1 to 256, got 1000000"),
     (["--iso-pattern", "zigzag"], "iso pattern: expected one of random, row, block, dual or a file"),
     (["--isos", "100,x"], "--isos: expected comma-separated numbers"),
     (["--profile", "nowhere.json"], "no such camera profile file"),

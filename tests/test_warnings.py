@@ -19,7 +19,6 @@ from lfproc.camera.simulate import capture_summary, simulate_capture
 from lfproc.cli.main import main
 from lfproc.errors import SATURATION_WARNING_FRACTION, ConvergenceWarning, SaturationWarning
 from lfproc.io import write_lightfield
-from lfproc.lightfield import LightField
 from lfproc.merge import ML_TOLERANCE_STD, merge_debevec, merge_ml
 from lfproc.synth import synthesize
 

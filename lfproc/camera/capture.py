@@ -38,7 +38,9 @@ import io
 import json
 import math
 import os
+import re
 import zipfile
+import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,12 +48,13 @@ from typing import Any
 
 import numpy as np
 
+from .. import _untrusted as ut
 from .._util import ReadOnlyState, file_sha256, freeze, frozen_array, to_jsonable
 from .._version import __version__
 from ..calib import load_profile
-from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
+from ..errors import FileFormatError, InputError, LfprocError, MissingFileError, ShapeError
 from ..io import atomic_file
-from .projection import CFA_PATTERNS, MaskCode, ProjectionOperator, build_operator, decode_levels, encode_levels, sampling_rate
+from .projection import CFA_PATTERNS, MASK_KINDS, MaskCode, ProjectionOperator, build_operator, decode_levels, encode_levels, sampling_rate
 from .sensor import Observation, calibrated_observation
 
 __all__ = [
@@ -76,6 +79,8 @@ SCHEMA_VERSION = 1
 HEADER_NAME = "lfproc-capture.json"
 PREVIEW_KINDS = ("capture", "sensor", "iso", "mask")
 _ARRAYS = ("dn", "iso", "mask", "bias")
+#: Most measured profile maps (profile_flat_field, profile_bias_<ISO>) one capture file may embed.
+MAX_PROFILE_MAPS = 64
 
 
 @dataclass(frozen=True, eq=False)
@@ -334,20 +339,42 @@ def is_capture_file(path: str | os.PathLike) -> bool:
         return False
 
 
+#: Limits of capture files (checked on the header before any array is read).
+MAX_SHOTS = 256
+MAX_VIEWS = 64
+MAX_HEADER_BYTES = 16 << 20
+
+
 def _read_header(path: Path, zf: zipfile.ZipFile) -> dict[str, Any]:
+    """The JSON header, every field checked (types, ranges, finiteness, sizes against each
+    other and against the limits) before any array is read; returns plain values."""
     try:
-        header = json.loads(zf.read(HEADER_NAME).decode("utf-8"))
+        info = zf.getinfo(HEADER_NAME)
     except KeyError:
         raise FileFormatError(f"{path}: not an lfproc capture (no {HEADER_NAME} member)") from None
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise FileFormatError(f"{path}: capture header is not valid JSON ({exc})") from None
-    if not isinstance(header, dict):
+    if info.file_size > MAX_HEADER_BYTES:
+        raise FileFormatError(f"{path}: capture header of {info.file_size} bytes exceeds the limit of {MAX_HEADER_BYTES}")
+    try:
+        with zf.open(info) as fh:
+            data = ut.read_capped(fh, MAX_HEADER_BYTES, source=path, what="capture header")
+    except ut.UnsafeFileError:
+        raise
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, zlib.error, NotImplementedError) as exc:
+        raise FileFormatError(f"{path}: capture header is corrupt ({type(exc).__name__}: {str(exc)[:120]})") from None
+    try:
+        value = ut.parse_json(data, source=path, what="capture header")
+    except FileFormatError as exc:
+        raise FileFormatError(str(exc).replace("capture header: not valid JSON", "capture header is not valid JSON")) \
+            from None
+    doc = ut.Node(value, path, error=FileFormatError)
+    if not doc.is_dict():
         raise FileFormatError(f"{path}: capture header: expected a JSON object")
+    header = doc.value
     if header.get("schema") != SCHEMA:
-        raise FileFormatError(f"{path}: field 'schema': expected {SCHEMA!r}, found {header.get('schema')!r}")
-    if header.get("schema_version") != SCHEMA_VERSION:
+        raise FileFormatError(f"{path}: field 'schema': expected {SCHEMA!r}, found {ut.show(header.get('schema'))}")
+    if header.get("schema_version") != SCHEMA_VERSION or isinstance(header.get("schema_version"), bool):
         raise FileFormatError(
-            f"{path}: field 'schema_version': expected {SCHEMA_VERSION}, found {header.get('schema_version')!r} "
+            f"{path}: field 'schema_version': expected {SCHEMA_VERSION}, found {ut.show(header.get('schema_version'))} "
             "(written by a different lfproc version)"
         )
     required = ("shots", "size", "views", "cfa_pattern", "gamma", "exposures_s", "mask", "profile", "arrays")
@@ -356,31 +383,111 @@ def _read_header(path: Path, zf: zipfile.ZipFile) -> dict[str, Any]:
             raise FileFormatError(f"{path}: capture header: missing field {key!r}")
     if not isinstance(header["mask"], dict) or "kind" not in header["mask"]:
         raise FileFormatError(f"{path}: capture header: field 'mask': expected an object with 'kind'")
-    return header
+    shots = doc["shots"].as_int(low=1, high=MAX_SHOTS)
+    size = ut.check_dims(doc["size"].as_ints(length=2), source=path, what="field 'size'")
+    views = tuple(doc["views"].as_ints(length=2, low=1, high=MAX_VIEWS))
+    mask = doc["mask"]
+    kind = mask["kind"].as_str(choices=MASK_KINDS)
+    period = mask.opt_int("period", low=1, high=max(size))
+    shift = mask.opt_int("shift", 1, low=0, high=max(size))
+    out = {
+        "shots": shots,
+        "size": list(size),
+        "views": list(views),
+        "cfa_pattern": doc["cfa_pattern"].as_str(max_len=8),
+        "gamma": doc["gamma"].as_float(low=1, high=16),
+        # exposures from 1 ns to 11 days; shorter ones underflow the radiance (DN / (gain * t))
+        "exposures_s": doc["exposures_s"].as_floats(length=shots, low=1e-9, high=1e6),
+        "mask": {"kind": kind, "period": period, "shift": shift},
+        "profile": doc["profile"].as_dict(),
+        "radiance_scale": doc.opt_float("radiance_scale", low=1e-30, high=1e30),
+        "ground_truth": doc.opt_dict("ground_truth").value or None,
+        "iso_pattern": doc.opt_dict("iso_pattern").value,
+        "parameters": doc.opt_dict("parameters").value,
+    }
+    # array shapes and dtypes: as the header says, and as shots/size/views/mask require
+    s, (h, w) = shots, size
+    sensor = [s, h, w]
+    arrays_node = doc["arrays"]
+    arrays_node.as_dict()
+    arrays: dict[str, dict[str, Any]] = {}
+    for name in _ARRAYS:
+        entry = arrays_node.get(name)
+        if entry is None:
+            if name == "bias":
+                continue
+            raise arrays_node.fail(f"missing the {name!r} array")
+        shape = entry["shape"].as_ints(min_len=1, max_len=8, low=0, high=ut.MAX_PIXELS)
+        dtype = entry["dtype"].as_str(max_len=16)
+        allowed = {"dn": ("uint16",), "iso": ("float32",), "bias": ("float32",), "mask": ("uint8", "float32")}[name]
+        if dtype not in allowed:
+            raise entry.fail(f"expected dtype {' or '.join(allowed)}, found {ut.show(dtype)}")
+        if name != "mask" and shape != sensor:
+            raise entry.fail(f"expected shape {sensor} (shots, height, width), found {shape}")
+        arrays[name] = {"shape": shape, "dtype": dtype}
+    codes = arrays["mask"]["shape"]
+    if kind == "random":
+        tile = [period, period] if period is not None else [h, w]
+        want = [s, views[0], views[1], *tile, 3]
+        if codes != want:
+            raise arrays_node.fail(f"'mask': a random mask of {s} shots, {views[0]}x{views[1]} views and "
+                                   f"{'period ' + str(period) if period else 'no period'} needs shape {want}, found {codes}")
+    else:
+        need = (h + shift * (views[0] - 1), w + shift * (views[1] - 1)) if period is None else (period, period)
+        if len(codes) != 4 or codes[0] != s or codes[3] != 3 or (period is not None and tuple(codes[1:3]) != need) \
+                or (period is None and (codes[1] < need[0] or codes[2] < need[1] or codes[1] > 2 * need[0] + 64
+                                        or codes[2] > 2 * need[1] + 64)):
+            raise arrays_node.fail(f"'mask': a shifted mask of {s} shots for {views[0]}x{views[1]} views of "
+                                   f"{h} x {w} pixels needs shape [{s}, >={need[0]}, >={need[1]}, 3], found {codes}")
+    # the embedded profile's measured maps: profile_flat_field and profile_bias_<ISO>, 2-D float32
+    extra = [name for name, _ in arrays_node.items() if name not in _ARRAYS]
+    if len(extra) > MAX_PROFILE_MAPS:
+        raise arrays_node.fail(f"{len(extra)} extra arrays, more than the {MAX_PROFILE_MAPS} profile maps allowed")
+    for name in extra:
+        if name != "profile_flat_field" and not re.fullmatch(r"profile_bias_[0-9]{1,7}", name):
+            raise arrays_node.fail(f"unknown array {ut.show(name)} (expected dn, iso, mask, bias, profile_flat_field "
+                                   "or profile_bias_<ISO>)")
+        entry = arrays_node[name]
+        shape = list(ut.check_dims(entry["shape"].as_ints(length=2), source=path, what=f"array {name!r}"))
+        dtype = entry["dtype"].as_str(max_len=16)
+        if dtype != "float32":
+            raise entry.fail(f"expected dtype float32, found {ut.show(dtype)}")
+        arrays[name] = {"shape": shape, "dtype": dtype}
+    for name, entry in arrays.items():
+        ut.check_nbytes(entry["shape"], entry["dtype"], source=path, what=f"array {name!r}")
+    out["arrays"] = arrays
+    return out
 
 
 def _read_array(path: Path, zf: zipfile.ZipFile, name: str, header: dict) -> np.ndarray:
+    """One array, its ``.npy`` header checked against the capture header before the data are read."""
+    want = header["arrays"][name]
     try:
-        data = zf.read(f"{name}.npy")
+        info = zf.getinfo(f"{name}.npy")
     except KeyError:
         raise FileFormatError(f"{path}: capture has no {name!r} array") from None
-    except (zipfile.BadZipFile, OSError, EOFError) as exc:
-        raise FileFormatError(f"{path}: array {name!r} is corrupt ({exc})") from None
     try:
-        array = np.lib.format.read_array(io.BytesIO(data), allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
-        raise FileFormatError(f"{path}: array {name!r} is corrupt ({exc})") from None
-    want = header["arrays"].get(name)
-    if want is not None and (list(array.shape) != list(want.get("shape", [])) or str(array.dtype) != want.get("dtype")):
-        raise FileFormatError(
-            f"{path}: array {name!r}: header says {want.get('shape')} {want.get('dtype')}, found "
-            f"{list(array.shape)} {array.dtype}"
-        )
-    return array
+        with zf.open(info) as fh:
+            return ut.read_npy(fh, info.file_size, source=path, what=f"array {name!r}",
+                               expect_shape=tuple(want["shape"]), expect_dtype=want["dtype"])
+    except FileFormatError as exc:
+        text = str(exc)
+        if "expected shape" in text or "expected dtype" in text:
+            raise FileFormatError(f"{path}: array {name!r}: header says {want['shape']} {want['dtype']}, "
+                                  f"{text.split(': ', 2)[-1]}") from None
+        raise
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, zlib.error, NotImplementedError) as exc:
+        raise FileFormatError(f"{path}: array {name!r} is corrupt ({type(exc).__name__}: {str(exc)[:120]})") from None
 
 
 def load_capture(path: str | os.PathLike) -> Capture:
-    """Read a capture file (see the module documentation); errors name the file and field."""
+    """Read a capture file (see the module documentation); errors name the file and field.
+
+    The header is read and checked first (:mod:`lfproc._untrusted`: types, ranges, array
+    shapes against shots/size/views/mask, total expanded size against the file's size), and
+    each array's own header against it, so nothing is allocated that the file does not
+    plausibly hold.
+    """
     from ..calib import CameraProfile
 
     path = Path(path)
@@ -391,25 +498,27 @@ def load_capture(path: str | os.PathLike) -> Capture:
     try:
         with zipfile.ZipFile(path) as zf:
             header = _read_header(path, zf)
-            arrays = {name: _read_array(path, zf, name, header) for name in ("dn", "iso", "mask")}
-            if "bias" in header["arrays"]:
-                arrays["bias"] = _read_array(path, zf, "bias", header)
-            maps = {name: _read_array(path, zf, name, header) for name in header["arrays"]
-                    if name.startswith("profile_")}
-    except zipfile.BadZipFile as exc:
-        raise FileFormatError(f"{path}: corrupt capture archive ({exc})") from None
-    try:
-        profile_bias = {int(name.removeprefix("profile_bias_")): a for name, a in maps.items()
-                        if name.startswith("profile_bias_")}
-    except ValueError:
-        raise FileFormatError(f"{path}: profile bias arrays must be named profile_bias_<ISO>, found "
-                              f"{', '.join(sorted(maps))}") from None
+            names = ["dn", "iso", "mask"] + (["bias"] if "bias" in header["arrays"] else [])
+            names += sorted(name for name in header["arrays"] if name.startswith("profile_"))
+            total = sum(ut.check_nbytes(header["arrays"][n]["shape"], header["arrays"][n]["dtype"]) for n in names)
+            ut.check_expansion(total, path.stat().st_size, source=path, what="the capture's arrays")
+            arrays = {name: _read_array(path, zf, name, header) for name in names}
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, zlib.error, NotImplementedError) as exc:
+        if isinstance(exc, LfprocError):
+            raise
+        raise FileFormatError(f"{path}: corrupt capture archive ({type(exc).__name__}: {str(exc)[:120]})") from None
+    for name in ("iso", "bias", *(n for n in arrays if n.startswith("profile_"))):
+        if name in arrays and not np.isfinite(arrays[name]).all():
+            raise FileFormatError(f"{path}: array {name!r} holds NaN or Inf values")
+    maps = {name: arrays.pop(name) for name in list(arrays) if name.startswith("profile_")}
+    profile_bias = {int(name.removeprefix("profile_bias_")): a for name, a in maps.items()
+                    if name.startswith("profile_bias_")}
     profile = CameraProfile.from_json(header["profile"], where=f"{path}: embedded profile", bias_frames=profile_bias,
                                       flat_field=maps.get("profile_flat_field"))
     m = header["mask"]
     try:
         codes = decode_levels(arrays["mask"]) if arrays["mask"].dtype == np.uint8 else arrays["mask"]
-        mask = MaskCode(kind=m["kind"], codes=codes, period=m.get("period"), shift=int(m.get("shift", 1)))
+        mask = MaskCode(kind=m["kind"], codes=codes, period=m["period"], shift=m["shift"])
         capture = Capture(
             dn=arrays["dn"],
             iso=arrays["iso"],
@@ -420,10 +529,10 @@ def load_capture(path: str | os.PathLike) -> Capture:
             cfa_pattern=header["cfa_pattern"],
             gamma=header["gamma"],
             bias_dn=arrays.get("bias"),
-            radiance_scale=header.get("radiance_scale"),
-            ground_truth=header.get("ground_truth"),
-            iso_pattern=header.get("iso_pattern") or {},
-            parameters=header.get("parameters") or {},
+            radiance_scale=header["radiance_scale"],
+            ground_truth=header["ground_truth"],
+            iso_pattern=header["iso_pattern"],
+            parameters=header["parameters"],
         )
     except InputError as exc:
         raise FileFormatError(f"{path}: {exc}") from None
@@ -548,9 +657,9 @@ def read_sensor_frame(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, An
     if path.suffix.lower() in _CV_SUFFIXES:
         import cv2
 
-        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if image is None:
-            raise FileFormatError(f"{path}: cannot be read as an image")
+        from ..io.images import imread
+
+        image = imread(path, cv2.IMREAD_UNCHANGED, what="sensor image")
         if image.ndim != 2 or image.dtype != np.uint16:
             raise FileFormatError(
                 f"{path}: expected a single-channel 16-bit sensor image (raw Bayer mosaic), found "

@@ -30,16 +30,22 @@ def _load_iso_file(path: Path, size: tuple[int, int]) -> np.ndarray:
     if not path.is_file():
         raise MissingFileError(f"{path}: no such ISO map file (or use one of {', '.join(ISO_PATTERNS)})")
     if path.suffix.lower() == ".npy":
-        try:
-            values = np.load(path, allow_pickle=False)
-        except (ValueError, OSError) as exc:
-            raise FileFormatError(f"{path}: not a readable .npy ISO map ({exc})") from None
+        from .. import _untrusted as ut
+
+        def check(shape, dtype):
+            if dtype.kind not in "uif":
+                raise FileFormatError(f"{path}: ISO map of dtype {dtype}; expected numbers")
+            if tuple(shape) != tuple(size):
+                raise ShapeError(f"{path}: ISO map of shape {tuple(shape)}; expected the sensor size {tuple(size)}")
+
+        with open(path, "rb") as fh:
+            values = ut.read_npy(fh, path.stat().st_size, source=path, what=".npy ISO map", check=check)
     else:
         import cv2
 
-        values = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if values is None:
-            raise FileFormatError(f"{path}: cannot be read as an ISO map image (.npy, .png, .tif)")
+        from ..io.images import imread
+
+        values = imread(path, cv2.IMREAD_UNCHANGED, what="ISO map image (.npy, .png, .tif)")
         if values.ndim != 2:
             raise FileFormatError(f"{path}: ISO map image: expected one channel, found shape {values.shape}")
     values = np.asarray(values, dtype=np.float64)

@@ -72,7 +72,8 @@ def fixed_pattern(profile, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarr
     """
     profile = load_profile(profile)
     rng = np.random.default_rng(profile.fixed_pattern_seed)
-    prnu = 1.0 + profile.prnu * rng.standard_normal(shape) if profile.prnu else np.ones(shape)
+    # a pixel's gain cannot be negative: with a large PRNU the normal draw is cut at zero
+    prnu = np.maximum(1.0 + profile.prnu * rng.standard_normal(shape), 0.0) if profile.prnu else np.ones(shape)
     dsnu = profile.dsnu_e * rng.standard_normal(shape) if profile.dsnu_e else np.zeros(shape)
     return prnu, dsnu
 

@@ -49,10 +49,10 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_choice, check_positive, check_random_state, freeze
+from .._util import check_choice, check_count, check_positive, check_random_state, freeze
 from .._version import __version__
 from .iso import DEFAULT_ISOS, ISO_PATTERNS, iso_pattern
-from .capture import Capture, _num, _warn_saturation, file_sha256, observations
+from .capture import MAX_SHOTS, Capture, _num, _warn_saturation, file_sha256, observations
 from ..calib import load_profile
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 from ..lightfield import LightField, clean_nonfinite
@@ -131,6 +131,15 @@ def auto_radiance_scale(
     if not peak > 0:
         raise InputError("light field: all samples are zero; cannot choose a radiance scale (give radiance_scale)")
     return _saturation_electrons(profile, iso) / (check_positive("exposure_s", exposure_s) * mean_transmittance * peak)
+
+
+def _check_memory(shots: int, nv: int, nu: int, h: int, w: int) -> None:
+    """Refuse, before anything is allocated, a simulation whose projection operator (one
+    float32 weight per shot, view and pixel) would exceed lfproc's array limit."""
+    from .. import _untrusted as ut
+
+    ut.check_nbytes((shots, nv, nu, h, w), np.float32, what=f"simulating {shots} shots of {nv} x {nu} views of "
+                    f"{h} x {w} pixels: the projection operator", error=InputError)
 
 
 def simulate_capture(
@@ -220,9 +229,13 @@ def simulate_capture(
     check_choice("mask", mask, MASK_KINDS)
     if baseline is not None:
         check_choice("baseline", baseline, BASELINES)
-    if isinstance(shots, bool) or int(shots) != shots or int(shots) < 1:
+    if isinstance(shots, bool) or not isinstance(shots, (int, np.integer, float)) or not np.isfinite(shots) \
+            or int(shots) != shots or int(shots) < 1:
         raise InputError(f"shots: expected an integer >= 1, got {shots!r}")
-    shots = int(shots)
+    shots = check_count("shots", shots, high=MAX_SHOTS)
+    if relative_exposures is not None:
+        check_count("relative exposures (one per shot)", len(list(relative_exposures)), high=MAX_SHOTS)
+    _check_memory(max(shots, len(relative_exposures or ())), nv, nu, h, w)
     isos = _check_isos(profile, isos)
     if random_state is None:
         seed: Any = int(np.random.SeedSequence().entropy % (2**63))

@@ -164,8 +164,7 @@ def train_dictionary(
         "errors": [round(e, 8) for e in result.errors],
         "final_relative_error": round(result.final_error, 8),
         "replaced_atoms": result.replaced,
-        "seconds": round(result.seconds, 1),
-        "lfproc_version": __version__,
+        "lfproc_version": __version__,  # no timings: the file depends only on the data, seed and sizes
     }
     return Dictionary(atoms=result.atoms, patch=patch, sparsity=sparsity, preset=preset,
                       normalisation={"kind": normalise}, provenance=provenance, usage=result.usage, name="trained")

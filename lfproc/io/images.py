@@ -14,7 +14,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ..errors import FileFormatError, InputError, MissingFileError
+from .. import _untrusted as ut
+from ..errors import FileFormatError, InputError, MissingFileError, UnsafeFileError
 from ..lightfield import clean_nonfinite
 from ._atomic import atomic_file
 
@@ -27,6 +28,8 @@ __all__ = [
     "IMAGE_SUFFIXES",
     "LDR_SUFFIXES",
     "HDR_SUFFIXES",
+    "check_image_size",
+    "imread",
 ]
 
 HDR_SUFFIXES = (".exr", ".hdr", ".pic")
@@ -61,14 +64,11 @@ def _require_file(path: Path) -> None:
 
 def exr_parts(path: str | os.PathLike) -> list[dict[str, Any]]:
     """Describe the parts of an OpenEXR file: name, view, channels, size (header only)."""
-    import OpenEXR
+    from ._exr import open_exr
 
     path = Path(path)
     _require_file(path)
-    try:
-        f = OpenEXR.File(str(path), header_only=True)
-    except Exception as exc:  # the bindings raise plain RuntimeError on any failure
-        raise FileFormatError(f"{path}: not a readable OpenEXR file ({exc})") from None
+    f = open_exr(path, header_only=True)
     out = []
     for i, part in enumerate(f.parts):
         h = part.header
@@ -107,15 +107,13 @@ def _pick_channels(names: list[str], prefix: str) -> tuple[str, ...] | None:
 
 
 def _read_exr(path: Path, part: int | str | None, view: str | None) -> tuple[np.ndarray, dict[str, Any]]:
-    import OpenEXR
+    from ._exr import open_exr
 
-    try:
-        f = OpenEXR.File(str(path), separate_channels=True)
-    except Exception as exc:
-        raise FileFormatError(f"{path}: not a readable OpenEXR file ({exc})") from None
+    f = open_exr(path)
     parts = f.parts
     # choose the part
-    if part is None and view is not None and any(p.header.get("view") == view for p in parts):
+    if part is None and view is not None and any(p.header.get("view") == view and _pick_channels(list(p.channels), "")
+                                                 for p in parts):
         index = next(i for i, p in enumerate(parts) if p.header.get("view") == view and _pick_channels(list(p.channels), ""))
     elif part is None:
         candidates = [i for i, p in enumerate(parts) if _pick_channels(list(p.channels), "")]
@@ -153,9 +151,12 @@ def _read_exr(path: Path, part: int | str | None, view: str | None) -> tuple[np.
         raise FileFormatError(
             f"{path}: part {index} has channels {', '.join(sorted(names))}; expected R,G,B or Y (optionally in a layer)"
         )
-    array = np.stack([p.channels[c].pixels.astype(np.float32) for c in chans], axis=-1)
+    planes = [p.channels[c].pixels for c in chans]
+    if any(not isinstance(q, np.ndarray) or q.ndim != 2 or q.shape != planes[0].shape for q in planes):
+        raise FileFormatError(f"{path}: part {index} channels {', '.join(chans)} differ in size or hold no pixels")
+    array = np.stack([q.astype(np.float32) for q in planes], axis=-1)
     (x0, y0), (x1, y1) = header["dataWindow"]
-    (dx0, dy0), (dx1, dy1) = header["displayWindow"]
+    (dx0, dy0), (dx1, dy1) = header.get("displayWindow", header["dataWindow"])
     meta = {
         "format": "exr",
         "part": index,
@@ -174,12 +175,116 @@ def _read_exr(path: Path, part: int | str | None, view: str | None) -> tuple[np.
 
 # -- OpenCV formats ---------------------------------------------------------------------
 
+#: Largest expansion of a PNG/TIFF/JPEG/Radiance file's pixels over its size (deflate, the
+#: strongest of their codecs, stays below about 1032:1).
+MAX_IMAGE_RATIO = 1100
+
+
+def _radiance_size(path: Path) -> tuple[int, int] | None:
+    """``(H, W)`` from a Radiance header (text lines, a blank line, then ``-Y H +X W``)."""
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    end = head.find(b"\n\n")
+    if end < 0:
+        return None
+    line = head[end + 2:].split(b"\n", 1)[0].split()
+    if len(line) != 4 or not all(t.lstrip(b"+-").isdigit() for t in (line[1], line[3])):
+        return None
+    a, b = int(line[1]), int(line[3])
+    return (a, b) if line[0][1:2] == b"Y" else (b, a)
+
+
+def _check_png_chunks(path: Path, size: int) -> None:
+    """Walk a PNG's chunks (length, type, data, CRC): a chunk announcing more bytes than the file
+    holds is refused before a decoder tries to read (and allocate) it."""
+    with open(path, "rb") as fh:
+        if fh.read(8) != b"\x89PNG\r\n\x1a\n":
+            raise FileFormatError(f"{path}: not a PNG file (wrong signature)")
+        offset = 8
+        while offset < size:
+            head = fh.read(8)
+            if len(head) < 8:
+                raise FileFormatError(f"{path}: truncated PNG (chunk header at byte {offset} is cut off)")
+            length = int.from_bytes(head[:4], "big")
+            if length > 2**31 - 1 or offset + 12 + length > size:
+                raise FileFormatError(f"{path}: corrupt or truncated PNG: chunk {head[4:8]!r} at byte {offset} "
+                                      f"announces {length} bytes, the file has {size}")
+            if head[4:8] == b"IEND":
+                return
+            fh.seek(length + 4, 1)
+            offset += 12 + length
+
+
+def check_image_size(path: str | os.PathLike) -> None:
+    """Refuse an image whose header announces more pixels than the limits allow or than its
+    file could hold (:data:`MAX_IMAGE_RATIO`), before a decoder allocates them.
+
+    Reads the header only (Pillow for PNG/TIFF/JPEG, the text header for Radiance);
+    files Pillow cannot identify are left to the decoder, which reports them.
+    """
+    import warnings
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".png":
+        _check_png_chunks(path, path.stat().st_size)
+    size = None
+    bands = 3
+    try:
+        if suffix in (".hdr", ".pic"):
+            size = _radiance_size(path)
+        else:
+            from PIL import Image
+
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")  # Pillow's bomb warning: lfproc applies its own limits below
+                    with Image.open(path) as im:
+                        w, h = im.size
+                        size, bands = (h, w), len(im.getbands())
+            except Image.DecompressionBombError as exc:
+                raise UnsafeFileError(f"{path}: {exc}; refused as a possible decompression bomb") from None
+    except UnsafeFileError:
+        raise
+    except Exception as exc:  # Pillow raises OSError and assorted others on damaged headers
+        if suffix in (".png", ".tif", ".tiff", ".jpg", ".jpeg"):
+            # a header Pillow cannot parse is not worth handing to a decoder (libpng can spend seconds on one)
+            raise FileFormatError(f"{path}: not a readable {suffix[1:].upper()} image ({type(exc).__name__}: "
+                                  f"{str(exc)[:120]})") from None
+        return
+    if size is None:
+        return
+    h, w = ut.check_dims(size, source=path, what="image", error=FileFormatError)
+    nbytes = h * w * max(bands, 1) * 4
+    limit = max(ut.EXPANSION_FLOOR, MAX_IMAGE_RATIO * path.stat().st_size)
+    if nbytes > limit:
+        raise UnsafeFileError(f"{path}: the header announces a {w} x {h} image ({nbytes} bytes decoded) in a file of "
+                              f"{path.stat().st_size} bytes; refused as corrupt or a decompression bomb")
+
+def imread(path: str | os.PathLike, flags: int | None = None, *, what: str = "image") -> np.ndarray:
+    """``cv2.imread`` of an untrusted file: its header size checked first
+    (:func:`check_image_size`), the decoders' own messages kept off the terminal, and a
+    :class:`FileFormatError` quoting the first of them when nothing could be decoded."""
+    import cv2
+
+    from .._util import quiet
+
+    path = Path(path)
+    check_image_size(path)
+    flags = cv2.IMREAD_UNCHANGED if flags is None else flags
+    with quiet() as lines:
+        raw = cv2.imread(str(path), flags)
+    if raw is None:
+        detail = next((line for line in lines if "rror" in line), lines[0] if lines else "")
+        raise FileFormatError(f"{path}: not a readable {what} (OpenCV could not decode it"
+                              + (f": {detail[:160]})" if detail else ")"))
+    return raw
+
+
 def _read_cv(path: Path, transfer: Transfer) -> tuple[np.ndarray, dict[str, Any]]:
     import cv2
 
-    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
-    if raw is None:
-        raise FileFormatError(f"{path}: not a readable image (OpenCV could not decode it)")
+    raw = imread(path, cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if raw.ndim == 3:
         if raw.shape[2] == 4:
             raw = raw[..., :3]

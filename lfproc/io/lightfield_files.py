@@ -22,6 +22,7 @@ Layouts lfproc reads and writes:
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 from pathlib import Path
@@ -29,6 +30,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from .. import _untrusted as ut
 from .._util import freeze
 from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
@@ -82,39 +84,89 @@ def _meta_kwargs(meta: dict[str, Any]) -> dict[str, Any]:
 
 # -- reading ---------------------------------------------------------------------------
 
+def _exr_metadata(path: Path, text: Any) -> dict[str, Any]:
+    """The ``lfproc`` attribute of a light-field EXR, every field checked."""
+    if isinstance(text, bytes):
+        text = text.decode("utf-8", errors="replace")
+    if not isinstance(text, str):
+        raise FileFormatError(f"{path}: the 'lfproc' attribute is not a string")
+    doc = ut.Node(ut.parse_json(text, source=path, what="the 'lfproc' attribute"), path, error=FileFormatError)
+    return _checked_metadata(doc, views=True)
+
+
+def _checked_metadata(doc: ut.Node, *, views: bool) -> dict[str, Any]:
+    """Light-field metadata (EXR attribute or ``lightfield.json``) with every field checked."""
+    doc.as_dict()
+    out: dict[str, Any] = {}
+    if views:
+        out["views"] = tuple(doc["views"].as_ints(length=2, low=1, high=MAX_VIEWS_PER_SIDE))
+    transfer = doc.opt_str("transfer", max_len=32)
+    if transfer is not None:
+        out["transfer"] = transfer
+    for key in ("units", "colour_space", "source"):
+        value = doc.opt_str(key, max_len=4096)
+        if value is not None:
+            out[key] = value
+    for key in ("exposure_s", "iso", "saturation_level"):
+        value = doc.opt_float(key, low=0, strict_low=True)
+        if value is not None:
+            out[key] = value
+    attrs = doc.get("attrs")
+    if attrs is not None:
+        out["attrs"] = attrs.as_dict()
+    return out
+
+
+#: Most views per side of a light field file (the HCI archive has 9, Stanford's 17).
+MAX_VIEWS_PER_SIDE = 64
+
+
 def _read_exr_lightfield(path: Path, nonfinite: str, negative: str) -> LightField | None:
     """Read a multi-part lfproc EXR; None when the file is not one (then it is an image)."""
-    import OpenEXR
+    from ._exr import open_exr
 
-    try:
-        head = OpenEXR.File(str(path), header_only=True)
-    except Exception as exc:
-        raise FileFormatError(f"{path}: not a readable OpenEXR file ({exc})") from None
+    head = open_exr(path, header_only=True)
     if not any("lfproc" in p.header for p in head.parts):
         return None
-    f = OpenEXR.File(str(path), separate_channels=True)
-    views: dict[tuple[int, int], Any] = {}
     meta: dict[str, Any] | None = None
-    for part in f.parts:
+    expected: dict[tuple[int, int], int] = {}
+    for i, part in enumerate(head.parts):
         idx = parse_view_name(part.name() or "")
         if idx is None or "lfproc" not in part.header:
             raise FileFormatError(f"{path}: part {part.name()!r} is not a view_RR_CC part of an lfproc light field")
-        views[idx] = part
+        if idx in expected:
+            raise FileFormatError(f"{path}: two parts are named {part.name()!r}")
+        expected[idx] = i
         if meta is None:
-            try:
-                meta = json.loads(part.header["lfproc"])
-            except (TypeError, ValueError):
-                raise FileFormatError(f"{path}: the 'lfproc' attribute is not valid JSON") from None
-    assert meta is not None  # noqa: S101 (internal invariant: the loop ran at least once)
-    nv, nu = (int(x) for x in meta.get("views", (0, 0)))
-    missing = [view_name(v, u) for v in range(nv) for u in range(nu) if (v, u) not in views]
-    if missing or len(views) != nv * nu:
-        raise FileFormatError(f"{path}: expected {nv}x{nu} view parts, missing {', '.join(missing) or 'none'} "
-                              f"(found {len(views)} parts)")
+            meta = _exr_metadata(path, part.header["lfproc"])
+    if meta is None:  # open_exr refuses files without parts; kept as an error, not an assert
+        raise FileFormatError(f"{path}: no view parts")
+    nv, nu = meta["views"]
+    missing = [view_name(v, u) for v in range(nv) for u in range(nu) if (v, u) not in expected]
+    if missing or len(expected) != nv * nu:
+        extra = [view_name(v, u) for v, u in expected if v >= nv or u >= nu]
+        raise FileFormatError(f"{path}: the 'lfproc' attribute says {nv}x{nu} views; missing parts "
+                              f"{', '.join(missing[:8]) or 'none'}{' ...' if len(missing) > 8 else ''}, "
+                              f"unexpected parts {', '.join(extra[:8]) or 'none'}")
+    f = open_exr(path)
+    views = {idx: f.parts[i] for idx, i in expected.items()}
     first = views[(0, 0)]
     names = list(first.channels)
     colour = ["R", "G", "B"] if "R" in names else ["Y"]
     has_var = all(f"var.{c}" in names for c in colour)
+    wanted = colour + ([f"var.{c}" for c in colour] if has_var else [])
+    shape = None
+    for (v, u), part in views.items():
+        for c in wanted:
+            pixels = part.channels[c].pixels if c in part.channels else None
+            if not isinstance(pixels, np.ndarray) or pixels.ndim != 2:
+                raise FileFormatError(f"{path}: part {view_name(v, u)} has no channel {c!r} (channels of "
+                                      f"{view_name(0, 0)}: {', '.join(sorted(names))})")
+            if shape is None:
+                shape = pixels.shape
+            elif pixels.shape != shape:
+                raise FileFormatError(f"{path}: part {view_name(v, u)} channel {c!r} is {pixels.shape[1]} x "
+                                      f"{pixels.shape[0]} pixels, {view_name(0, 0)} {shape[1]} x {shape[0]}")
     data = np.stack([np.stack([np.stack([views[(v, u)].channels[c].pixels for c in colour], -1) for u in range(nu)])
                      for v in range(nv)]).astype(np.float32, copy=False)
     variance = None
@@ -124,8 +176,11 @@ def _read_exr_lightfield(path: Path, nonfinite: str, negative: str) -> LightFiel
     centre = views[(nv // 2, nu // 2)]
     disparity = centre.channels["disparity"].pixels if "disparity" in centre.channels else None
     data, _ = clean_nonfinite(data, policy=nonfinite, negative=negative, name=str(path))
-    return LightField(data=freeze(data), variance=None if variance is None else freeze(variance), disparity=disparity,
-                      **_meta_kwargs(meta))
+    try:
+        return LightField(data=freeze(data), variance=None if variance is None else freeze(variance),
+                          disparity=disparity, **_meta_kwargs(meta))
+    except InputError as exc:
+        raise FileFormatError(f"{path}: {exc}") from None
 
 
 def _view_files(folder: Path) -> dict[tuple[int, int], Path]:
@@ -157,10 +212,7 @@ def _read_folder(folder: Path, nonfinite: str, negative: str, transfer: str) -> 
     meta: dict[str, Any] = {}
     sidecar = folder / SIDECAR
     if sidecar.exists():
-        try:
-            meta = json.loads(sidecar.read_text())
-        except ValueError:
-            raise FileFormatError(f"{sidecar}: not valid JSON") from None
+        meta = _checked_metadata(ut.load_json(sidecar), views=False)
     if transfer == "auto" and meta.get("transfer") in ("srgb", "linear"):
         transfer = meta["transfer"]
     images = {}
@@ -184,7 +236,10 @@ def _read_folder(folder: Path, nonfinite: str, negative: str, transfer: str) -> 
         if disparity.shape != data.shape[2:4]:
             raise ShapeError(f"{folder / DISPARITY_FILE}: disparity size {disparity.shape} differs from the views "
                              f"{data.shape[2:4]}")
-    return LightField(data=freeze(data), disparity=disparity, **kwargs)
+    try:
+        return LightField(data=freeze(data), disparity=disparity, **kwargs)
+    except InputError as exc:
+        raise FileFormatError(f"{sidecar}: {exc}") from None
 
 
 def read_lightfield(
@@ -355,16 +410,24 @@ def _write_pfm(path: Path, disparity: np.ndarray) -> None:
 
 def _read_pfm(path: Path) -> np.ndarray:
     """Greyscale PFM to a (H, W) float32 array, top row first."""
-    raw = path.read_bytes()
+    # untrusted: the header's sizes are checked against the limits and the bytes present
+    raw = ut.read_bytes(path, max_bytes=ut.MAX_ARRAY_BYTES + 256)
     try:
         head, rest = raw.split(b"\n", 1)
         dims, rest = rest.split(b"\n", 1)
         scale, body = rest.split(b"\n", 1)
-        w, h = (int(x) for x in dims.split())
-        endian = "<" if float(scale) < 0 else ">"
         if head.strip() != b"Pf":
             raise ValueError("not greyscale")
-        d = np.frombuffer(body, dtype=f"{endian}f4", count=w * h).reshape(h, w)
+        w, h = (int(x) for x in dims.split())
+        scale_value = float(scale)
+        if not math.isfinite(scale_value) or scale_value == 0:
+            raise ValueError(f"scale {scale_value!r}")
+        endian = "<" if scale_value < 0 else ">"
     except ValueError as exc:
         raise FileFormatError(f"{path}: not a greyscale PFM file ({exc})") from None
+    h, w = ut.check_dims((h, w), source=path, what="disparity map")
+    if len(body) < 4 * w * h:
+        raise FileFormatError(f"{path}: truncated PFM file: {w} x {h} floats need {4 * w * h} bytes, "
+                              f"found {len(body)}")
+    d = np.frombuffer(body, dtype=f"{endian}f4", count=w * h).reshape(h, w)
     return np.flipud(d).astype(np.float32)

@@ -35,8 +35,9 @@ from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
+from .. import _untrusted as ut
 from .._version import __version__
-from ..errors import InputError, LfpFormatError, MissingFileError, ShapeError
+from ..errors import InputError, LfpFormatError, MissingFileError, ShapeError, UnsafeFileError
 from ..io import atomic_file
 from .capture import _get, _packing, _size, frame_fields, split_txt_metadata
 from .container import _parse_json, is_lfp, read_lfp, sha1_ref
@@ -222,17 +223,33 @@ def _storage_name(name: str) -> str:
     return name.replace("\\", "__").replace("/", "__")
 
 
+#: Largest raw white image lfproc reads from calibration data (bytes; a full Illum frame has 52 MB).
+MAX_RAW_BYTES = 1 << 30
+#: Largest other calibration file (geometry tables, hot-pixel lists) read whole.
+MAX_AUX_BYTES = 64 << 20
+
+
 class _Files:
-    """A flat view of named files (tar members, folder files, archive entries)."""
+    """A flat view of named files (tar members, folder files, archive entries).
+
+    ``loaders[name](max_bytes)`` returns the bytes of a file, refusing (before reading) one
+    larger than ``max_bytes``; ``sizes[name]`` is its size as the container declares it.
+    """
 
     def __init__(self, label: str):
         self.label = label
-        self.loaders: dict[str, Callable[[], bytes]] = {}
+        self.loaders: dict[str, Callable[[int], bytes]] = {}
         self.sizes: dict[str, int] = {}
 
-    def add(self, name: str, size: int, loader: Callable[[], bytes]) -> None:
+    def add(self, name: str, size: int, loader: Callable[[int], bytes]) -> None:
         self.loaders[name] = loader
         self.sizes[name] = size
+
+    def load(self, name: str, max_bytes: int) -> bytes:
+        if self.sizes[name] > max_bytes:
+            raise LfpFormatError(f"{self.label}:{name}: {self.sizes[name]} bytes, above the limit of {max_bytes} "
+                                 "for this file")
+        return self.loaders[name](max_bytes)
 
     def find(self, basename: str, near: str | None = None) -> str | None:
         """Name whose base name equals ``basename`` (case-insensitive), preferring ``near``'s folder."""
@@ -244,21 +261,27 @@ class _Files:
         return sorted(hits)[0] if hits else None
 
     def json(self, name: str) -> dict[str, Any]:
-        return _parse_json(self.loaders[name](), f"{self.label}:{name}")
+        return _parse_json(self.load(name, ut.MAX_JSON_BYTES), f"{self.label}:{name}")
+
+    def node(self, name: str) -> ut.Node:
+        """A JSON file as an :class:`lfproc._untrusted.Node` (errors name the file and field)."""
+        return ut.Node(self.json(name), f"{self.label}:{name}", error=LfpFormatError)
 
 
 def _tar_files(path: Path, tar: tarfile.TarFile) -> _Files:
+    """The regular files of a tar; ``..``/absolute names and links are refused."""
     files = _Files(str(path))
-    for member in tar.getmembers():
-        if member.isfile():
-            files.add(member.name, member.size, lambda m=member: tar.extractfile(m).read())
+    for member in ut.safe_members(tar, source=path):
+        files.add(member.name, member.size,
+                  lambda limit, m=member: ut.read_member(tar, m, max_bytes=limit, source=path, error=LfpFormatError))
     return files
 
 
 def _folder_files(folder: Path, paths: Iterable[Path]) -> _Files:
     files = _Files(str(folder))
     for p in paths:
-        files.add(p.relative_to(folder).as_posix(), p.stat().st_size, lambda p=p: p.read_bytes())
+        files.add(p.relative_to(folder).as_posix(), p.stat().st_size,
+                  lambda limit, p=p: ut.read_bytes(p, max_bytes=limit, error=LfpFormatError, what="calibration file"))
     return files
 
 
@@ -274,8 +297,23 @@ def _archive_files(first: Path, verify: bool) -> _Files:
     for p in paths:
         c = read_lfp(p, verify=verify)
         for name, sec in c.files().items():
-            files.add(_storage_name(name), sec.size, lambda d=sec.data: d)
+            files.add(_storage_name(name), sec.size, lambda limit, d=sec.data: d)
     return files
+
+
+def _is_tar(path: Path) -> bool:
+    """A tar, or a compressed file that may hold one (its content is checked when read)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(512)
+    except OSError:
+        return False
+    if head[:2] == b"\x1f\x8b" or head[:3] == b"BZh" or head[:6] == b"\xfd7zXZ\x00" or head[257:262] == b"ustar":
+        return True
+    try:
+        return tarfile.is_tarfile(path)
+    except Exception:  # a probe: anything unreadable is "not a tar" and reported as such below
+        return False
 
 
 def _serial_from_name(path: Path) -> str | None:
@@ -283,15 +321,35 @@ def _serial_from_name(path: Path) -> str | None:
     return m.group(1) if m else None
 
 
+def _serial(node: ut.Node | None) -> str | None:
+    if node is None:
+        return None
+    if isinstance(node.value, int) and not isinstance(node.value, bool):
+        return str(node.value)
+    return node.as_str(max_len=256)
+
+
+def _check_serial(serial: str | None, label: str) -> str | None:
+    """A serial number becomes part of file names (the white-image database): refuse one that
+    is not a plain name (a path such as ``../../x`` or ``/abs``)."""
+    if serial is None:
+        return None
+    return ut.safe_filename(serial, what="serial number", source=label)
+
+
 def _frames(files: _Files, *, load_raw: bool, serial_hint: str | None) -> Iterator[WhiteFrame]:
     unit = files.find("unit_info.json")
-    unit_serial = _get(files.json(unit), "camera", "serialNumber") if unit else None
+    unit_serial = _serial(files.node(unit).at("camera.serialNumber", None)) if unit else None
+    if unit:
+        _check_serial(unit_serial, f"{files.label}:{unit}")
     manifest = files.find("cal_file_manifest.json")
     manifest_hash: dict[str, str] = {}
     if manifest:
-        for entry in files.json(manifest).get("calibrationFiles", []) or []:
-            if isinstance(entry, dict) and "name" in entry and "hash" in entry:
-                manifest_hash[re.split(r"[/\\]", str(entry["name"]))[-1].upper()] = str(entry["hash"]).lower()
+        entries = files.node(manifest).get("calibrationFiles")
+        for entry in (entries.as_list() if entries is not None else []):
+            if entry.is_dict() and entry.has("name") and entry.has("hash"):
+                name = entry["name"].as_str(max_len=1024)
+                manifest_hash[re.split(r"[/\\]", name)[-1].upper()] = entry["hash"].as_str(max_len=64).lower()
     txts = sorted(n for n in files.loaders if _MOD_RE.match(n))
     if not txts:
         raise MissingFileError(f"{files.label}: no white images: expected MOD_xxxx.TXT + MOD_xxxx.RAW pairs, "
@@ -304,19 +362,19 @@ def _frames(files: _Files, *, load_raw: bool, serial_hint: str | None) -> Iterat
             raise MissingFileError(f"{files.label}: {txt} has no matching raw image {stem}.RAW")
         where = f"{files.label}:{raw_name}"
         doc = files.json(txt)
-        meta, private, extra = split_txt_metadata(doc)
+        meta, private, extra = split_txt_metadata(doc, source=f"{files.label}:{txt}")
         fields = frame_fields(meta, private, source=f"{files.label}:{txt}")
         height, width = _size(meta, f"{files.label}:{txt}")
-        bits, endian = _packing(meta)
+        bits, endian = _packing(meta, f"{files.label}:{txt}")
         expected = raw_byte_count(height, width, bits)
         if files.sizes[raw_name] != expected:
             raise LfpFormatError(f"{where}: wrong raw size: {txt} says {width} x {height} at {bits} bit = "
                                  f"{expected} bytes, the file has {files.sizes[raw_name]}")
-        raw = unpack_raw(files.loaders[raw_name](), height, width, bits_per_pixel=bits, endianness=endian,
-                         source=where) if load_raw else None
-        tags = extra["tags"] or {}
-        if "darkFrame" in tags:
-            is_dark = bool(tags["darkFrame"])
+        raw = unpack_raw(files.load(raw_name, max(expected, 0)), height, width, bits_per_pixel=bits,
+                         endianness=endian, source=where) if load_raw else None
+        tags = ut.Node(extra["tags"], f"{files.label}:{txt}", "com.lytro.tags", LfpFormatError)
+        if tags.has("darkFrame"):
+            is_dark = tags["darkFrame"].as_bool()
         elif raw is not None:
             span = max(fields["white_level"] - fields["black_level"]["gr"], 1.0)
             is_dark = bool((raw.mean(dtype=np.float64) - fields["black_level"]["gr"]) / span < DARK_MEAN_FRACTION)
@@ -326,8 +384,8 @@ def _frames(files: _Files, *, load_raw: bool, serial_hint: str | None) -> Iterat
         geo = manifest_hash.get(gct_base)
         if geo is None:
             gct = files.find(stem.rsplit("/", 1)[-1] + ".GCT", near=txt)
-            geo = sha1_ref(files.loaders[gct]()) if gct else extra["derivation"]
-        serial = unit_serial or fields["serial"] or serial_hint
+            geo = sha1_ref(files.load(gct, MAX_AUX_BYTES)) if gct else extra["derivation"]
+        serial = _check_serial(unit_serial or fields["serial"] or serial_hint, f"{files.label}:{txt}")
         yield WhiteFrame(raw=raw, metadata=meta, name=name, camera_model=fields["camera_model"],
                          serial=None if serial is None else str(serial), zoom_step=fields["zoom_step"],
                          focus_step=fields["focus_step"], exposure_s=fields["exposure_s"], is_dark=is_dark,
@@ -344,8 +402,8 @@ def iter_caldata(path: str | os.PathLike, *, load_raw: bool = True, verify: bool
     path = Path(path)
     if not path.exists():
         raise MissingFileError(f"{path}: no such file or folder")
-    if path.is_file() and tarfile.is_tarfile(path):
-        with tarfile.open(path, "r") as tar:
+    if path.is_file() and _is_tar(path):
+        with ut.open_tar(path, error=LfpFormatError) as tar:
             yield from _frames(_tar_files(path, tar), load_raw=load_raw, serial_hint=_serial_from_name(path))
         return
     if path.is_file() and is_lfp(path):

@@ -28,8 +28,9 @@ from typing import Any
 
 import numpy as np
 
+from .. import _untrusted as ut
 from ..errors import LfpFormatError, MissingFileError
-from .container import LFP_MAGIC, LfpContainer, _norm_sha1, _parse_json, is_lfp, read_lfp
+from .container import LFP_MAGIC, LfpContainer, _norm_sha1, _parse_json, _storage_entries, is_lfp, read_lfp
 from .raw import raw_byte_count, unpack_raw
 
 __all__ = [
@@ -156,13 +157,32 @@ def normalise_camera_model(model: Any, *, source=None) -> str:
                          "and first-generation ('F01') files")
 
 
-def _tile_and_ulp(metadata: dict) -> tuple[str, str]:
-    mosaic = (_get(metadata, "image", "mosaic") or _get(metadata, "image", "rawDetails", "mosaic")
-              or _get(metadata, "devices", "sensor", "mosaic") or {})
-    return str(mosaic.get("tile", "r,gr:gb,b")), str(mosaic.get("upperLeftPixel", ""))
+def _meta_node(metadata: Any, source) -> ut.Node:
+    node = metadata if isinstance(metadata, ut.Node) else ut.Node(metadata, source, error=LfpFormatError)
+    node.as_dict()
+    return node
 
 
-def cfa_from_mosaic(tile: str, upper_left_pixel: str) -> str:
+def _tile_and_ulp(metadata: Any, source=None) -> tuple[str, str]:
+    meta = _meta_node(metadata, source)
+    mosaic = meta.first("image.mosaic", "image.rawDetails.mosaic", "devices.sensor.mosaic")
+    if mosaic is None:
+        return "r,gr:gb,b", ""
+    return (mosaic.opt_str("tile", "r,gr:gb,b", max_len=64), mosaic.opt_str("upperLeftPixel", "", max_len=16))
+
+
+_BAYER_NAMES = {"r": "R", "gr": "G", "gb": "G", "b": "B"}
+
+
+def _tile_rows(tile: str, source=None) -> list[list[str]]:
+    rows = [r.split(",") for r in str(tile).replace(" ", "").split(":")]
+    if len(rows) != 2 or any(len(r) != 2 for r in rows) or sorted(sum(rows, [])) != sorted(_BAYER_NAMES):
+        raise LfpFormatError(f"{f'{source}: ' if source else ''}mosaic tile {ut.show(tile)} is not a 2x2 Bayer tile "
+                             "of r, gr, gb, b like 'r,gr:gb,b'")
+    return rows
+
+
+def cfa_from_mosaic(tile: str, upper_left_pixel: str, *, source=None) -> str:
     """Row-major Bayer pattern from Lytro ``mosaic.tile`` and ``mosaic.upperLeftPixel``.
 
     Examples
@@ -172,86 +192,136 @@ def cfa_from_mosaic(tile: str, upper_left_pixel: str) -> str:
     >>> cfa_from_mosaic("r,gr:gb,b", "b")
     'BGGR'
     """
-    rows = [r.split(",") for r in tile.replace(" ", "").split(":")]
-    if len(rows) != 2 or any(len(r) != 2 for r in rows):
-        raise LfpFormatError(f"mosaic tile {tile!r} is not a 2x2 Bayer tile like 'r,gr:gb,b'")
+    rows = _tile_rows(tile, source)
     where = [(i, j) for i in range(2) for j in range(2) if rows[i][j] == upper_left_pixel]
     if not where:
-        raise LfpFormatError(f"mosaic upperLeftPixel {upper_left_pixel!r} is not in tile {tile!r}")
+        raise LfpFormatError(f"{f'{source}: ' if source else ''}mosaic upperLeftPixel {ut.show(upper_left_pixel)} "
+                             f"is not in tile {ut.show(tile)}")
     i0, j0 = where[0]
-    letter = {"r": "R", "gr": "G", "gb": "G", "b": "B"}
-    return "".join(letter[rows[(i0 + y) % 2][(j0 + x) % 2]] for y in range(2) for x in range(2))
+    return "".join(_BAYER_NAMES[rows[(i0 + y) % 2][(j0 + x) % 2]] for y in range(2) for x in range(2))
 
 
 def _levels_2x2(levels: dict[str, float], metadata: dict) -> np.ndarray:
     tile, ulp = _tile_and_ulp(metadata)
-    rows = [r.split(",") for r in tile.replace(" ", "").split(":")]
-    i0, j0 = next((i, j) for i in range(2) for j in range(2) if rows[i][j] == (ulp or "gr"))
+    rows = _tile_rows(tile)
+    i0, j0 = next(((i, j) for i in range(2) for j in range(2) if rows[i][j] == (ulp or "gr")), (0, 0))
     return np.array([[float(levels[rows[(i0 + y) % 2][(j0 + x) % 2]]) for x in range(2)] for y in range(2)])
+
+
+#: Largest DN level of a Lytro raw (16-bit words at most).
+_MAX_DN = 65535.0
+
+
+def _levels(fmt: ut.Node, key: str) -> dict[str, float]:
+    node = fmt[key]
+    node.as_dict()
+    out = {}
+    for c in ("r", "gr", "gb", "b"):
+        value = node.get(c) or node.get("gr")
+        if value is None:
+            raise node.fail(f"missing the level of channel 'gr' (needed for {c!r})")
+        out[c] = value.as_float(low=0, high=_MAX_DN)
+    return out
 
 
 def frame_fields(metadata: dict[str, Any], private_metadata: dict[str, Any] | None, *, source=None) -> dict[str, Any]:
     """The capture fields of :class:`LytroCapture` (all but ``raw``/``path``) from frame metadata.
 
     Works for Illum picture metadata, Illum/F01 white-image metadata and F01 frame metadata.
+    Every value is checked for type, range and finiteness (:mod:`lfproc._untrusted`); an
+    error names the file and the field.
     """
-    model = normalise_camera_model(_get(metadata, "camera", "model"), source=source)
-    image = _get(metadata, "image", default={}) or {}
-    fmt = image.get("pixelFormat") or _get(image, "rawDetails", "pixelFormat")
-    if not isinstance(fmt, dict) or "black" not in fmt or "white" not in fmt:
+    meta = _meta_node(metadata, source)
+    model_node = meta.at("camera.model", None)
+    model = normalise_camera_model(model_node.value if model_node is not None else None, source=source)
+    image = meta.opt_dict("image")
+    fmt = image.get("pixelFormat") or image.at("rawDetails.pixelFormat", None)
+    if fmt is None or not fmt.is_dict() or "black" not in fmt.value or "white" not in fmt.value:
         raise LfpFormatError(f"{source}: metadata has no black/white levels "
                              "(image.pixelFormat or image.rawDetails.pixelFormat)")
-    black = {c: float(fmt["black"].get(c, fmt["black"].get("gr"))) for c in ("r", "gr", "gb", "b")}
-    whites = {c: float(fmt["white"].get(c, fmt["white"].get("gr"))) for c in ("r", "gr", "gb", "b")}
-    color = image.get("color") or {}
-    ccm = color.get("ccm") if model == "B01" and color.get("ccm") else color.get("ccmRgbToSrgbArray")
-    ccm = None if ccm is None else np.asarray(ccm, dtype=np.float64).reshape(3, 3)
+    black = _levels(fmt, "black")
+    whites = _levels(fmt, "white")
+    for c in ("r", "gr", "gb", "b"):
+        if whites[c] <= black[c]:
+            raise fmt.fail(f"white level {whites[c]:g} of channel {c!r} is not above its black level {black[c]:g}")
+    color = image.opt_dict("color")
+    ccm_node = color.get("ccm") if model == "B01" and color.has("ccm") and color.value["ccm"] else \
+        color.get("ccmRgbToSrgbArray")
+    ccm = None
+    if ccm_node is not None:
+        ccm = np.asarray(ccm_node.as_floats(length=9, low=-1e3, high=1e3), dtype=np.float64).reshape(3, 3)
     wbg = color.get("whiteBalanceGain")
-    wb = None if not wbg else {"r": float(wbg["r"]), "g": float(wbg.get("gr", wbg.get("gb", 1.0))),
-                               "b": float(wbg["b"])}
-    iso = image.get("iso", _get(metadata, "devices", "sensor", "iso"))
-    shutter = _get(metadata, "devices", "shutter", default={}) or {}
-    exposure = shutter.get("frameExposureDuration", shutter.get("pixelExposureDuration"))
-    lens = _get(metadata, "devices", "lens", default={}) or {}
-    serial = _get(private_metadata or {}, "camera", "serialNumber")
-    tile, ulp = _tile_and_ulp(metadata)
+    wb = None
+    if wbg is not None and wbg.as_dict():
+        gain = dict(low=0, strict_low=True, high=1e3)
+        g = wbg.get("gr") or wbg.get("gb")
+        wb = {"r": wbg["r"].as_float(**gain), "g": 1.0 if g is None else g.as_float(**gain),
+              "b": wbg["b"].as_float(**gain)}
+    iso_node = image.get("iso") or meta.at("devices.sensor.iso", None)
+    iso = None if iso_node is None else iso_node.as_float(low=0, strict_low=True, high=1e7)
+    shutter = meta.at("devices.shutter", None) or ut.Node({}, source, "devices.shutter", LfpFormatError)
+    exposure_node = shutter.get("frameExposureDuration") or shutter.get("pixelExposureDuration")
+    exposure = None if exposure_node is None else exposure_node.as_float(low=0, strict_low=True, high=1e6)
+    lens = meta.at("devices.lens", None) or ut.Node({}, source, "devices.lens", LfpFormatError)
+    steps = dict(low=-(1 << 31), high=1 << 31)
+    serial = None
+    if private_metadata:
+        private = ut.Node(private_metadata, source, "privateMetadata", LfpFormatError)
+        serial_node = private.at("camera.serialNumber", None)
+        if serial_node is not None:
+            if isinstance(serial_node.value, int) and not isinstance(serial_node.value, bool):
+                serial = str(serial_node.value)
+            else:
+                serial = serial_node.as_str(max_len=256)
+    tile, ulp = _tile_and_ulp(meta, source)
     if not ulp:
         ulp = "gr" if model == "B01" else "b"
+    bias = dict(low=-100.0, high=100.0)
     return {
         "camera_model": model,
-        "serial": None if serial is None else str(serial),
+        "serial": serial,
         "black_level": black,
         "white_level": whites["gr"],
         "white_levels": whites,
-        "cfa_pattern": cfa_from_mosaic(tile, ulp),
+        "cfa_pattern": cfa_from_mosaic(tile, ulp, source=source),
         "ccm": ccm,
         "white_balance": wb,
-        "exposure_bias_ev": float(image.get("modulationExposureBias", 0.0) or 0.0),
-        "limit_exposure_bias_ev": float(image.get("limitExposureBias", 0.0) or 0.0),
-        "exposure_s": None if exposure is None else float(exposure),
-        "iso": None if iso is None else float(iso),
-        "zoom_step": None if lens.get("zoomStep") is None else int(lens["zoomStep"]),
-        "focus_step": None if lens.get("focusStep") is None else int(lens["focusStep"]),
+        "exposure_bias_ev": image.opt_float("modulationExposureBias", 0.0, **bias),
+        "limit_exposure_bias_ev": image.opt_float("limitExposureBias", 0.0, **bias),
+        "exposure_s": exposure,
+        "iso": iso,
+        "zoom_step": lens.opt_int("zoomStep", **steps),
+        "focus_step": lens.opt_int("focusStep", **steps),
     }
 
 
-def _packing(metadata: dict) -> tuple[int, str]:
-    image = metadata.get("image", {}) or {}
-    pk = image.get("pixelPacking") or _get(image, "rawDetails", "pixelPacking")
-    if not isinstance(pk, dict) or "bitsPerPixel" not in pk:
-        raise LfpFormatError("metadata has no image.pixelPacking / image.rawDetails.pixelPacking")
-    return int(pk["bitsPerPixel"]), str(pk.get("endianness", "little"))
+def _packing(metadata: dict, source=None) -> tuple[int, str]:
+    meta = _meta_node(metadata, source)
+    image = meta.opt_dict("image")
+    pk = image.get("pixelPacking") or image.at("rawDetails.pixelPacking", None)
+    if pk is None or not pk.is_dict() or "bitsPerPixel" not in pk.value:
+        raise LfpFormatError(f"{f'{source}: ' if source else ''}metadata has no image.pixelPacking / "
+                             "image.rawDetails.pixelPacking")
+    return pk["bitsPerPixel"].as_int(low=1, high=32), pk.opt_str("endianness", "little", max_len=16)
+
+
+#: Largest raw sensor lfproc reads (pixels); the Illum's has 41.5 million.
+MAX_SENSOR_PIXELS = 1 << 28
 
 
 def _size(metadata: dict, source) -> tuple[int, int]:
-    image = metadata.get("image", {}) or {}
-    try:
-        return int(image["height"]), int(image["width"])
-    except (KeyError, TypeError, ValueError):
-        raise LfpFormatError(f"{source}: metadata has no image.width/image.height") from None
+    meta = _meta_node(metadata, source)
+    image = meta.opt_dict("image")
+    if image.get("height") is None or image.get("width") is None:
+        raise LfpFormatError(f"{source}: metadata has no image.width/image.height")
+    height = image["height"].as_int(low=1, high=ut.MAX_DIMENSION)
+    width = image["width"].as_int(low=1, high=ut.MAX_DIMENSION)
+    ut.check_dims((height, width), source=source, what="raw image", error=LfpFormatError,
+                  max_pixels=MAX_SENSOR_PIXELS)
+    return height, width
 
 
-def split_txt_metadata(doc: dict[str, Any]) -> tuple[dict, dict, dict]:
+def split_txt_metadata(doc: dict[str, Any], *, source=None) -> tuple[dict, dict, dict]:
     """Split a metadata document into ``(frame metadata, private metadata, extra)``.
 
     Accepts a white-image ``MOD_xxxx.TXT`` (``master.picture.frameArray[0].frame``), an LFP
@@ -260,6 +330,8 @@ def split_txt_metadata(doc: dict[str, Any]) -> tuple[dict, dict, dict]:
     ``extra`` holds ``derivation`` (the ``sha1-...`` of ``derivationArray[0]``, lower case,
     or None) and ``tags`` (``com.lytro.tags``).
     """
+    if not isinstance(doc, dict):
+        raise LfpFormatError(f"{source}: expected a JSON object, found {ut.show(doc)}")
     frame_entry = (_get(doc, "master", "picture", "frameArray", 0) or _get(doc, "picture", "frameArray", 0)
                    or _get(doc, "frames", 0))
     derivation = (_get(doc, "master", "picture", "derivationArray", 0) or _get(doc, "picture", "derivationArray", 0))
@@ -272,6 +344,9 @@ def split_txt_metadata(doc: dict[str, Any]) -> tuple[dict, dict, dict]:
     else:
         meta, private, tags = doc, {}, {}
     derivation = _norm_sha1(derivation) if isinstance(derivation, str) and derivation.lower().startswith("sha1-") else None
+    for name, value in (("frame metadata", meta), ("private metadata", private), ("com.lytro.tags", tags)):
+        if not isinstance(value, dict):
+            raise LfpFormatError(f"{source}: {name}: expected a JSON object, found {ut.show(value)}")
     return meta, private, {"derivation": derivation, "tags": tags}
 
 
@@ -306,16 +381,22 @@ def _read_raw_pair(path: Path) -> LytroCapture:
     if meta_path is None:
         raise MissingFileError(f"{path}: no metadata file next to the raw image (expected "
                                f"{path.with_suffix('.TXT').name} or {path.with_suffix('.json').name})")
-    doc = _parse_json(meta_path.read_bytes(), str(meta_path))
-    meta, private, extra = split_txt_metadata(doc)
+    doc = _parse_json(ut.read_bytes(meta_path, max_bytes=ut.MAX_JSON_BYTES, error=LfpFormatError,
+                                    what="metadata file"), str(meta_path))
+    meta, private, extra = split_txt_metadata(doc, source=meta_path)
     if private_path is not None:
-        private = _parse_json(private_path.read_bytes(), str(private_path))
+        private = _parse_json(ut.read_bytes(private_path, max_bytes=ut.MAX_JSON_BYTES, error=LfpFormatError,
+                                            what="metadata file"), str(private_path))
     fields = frame_fields(meta, private, source=meta_path)
     height, width = _size(meta, meta_path)
-    bits, endian = _packing(meta)
+    bits, endian = _packing(meta, meta_path)
     nbytes = path.stat().st_size
     if nbytes == height * width * 2 and bits != 16:  # third-party extractors write 16-bit words
         bits, endian = 16, "little"
+    expected = raw_byte_count(height, width, bits)
+    if nbytes != expected:  # checked before the file is read
+        raise LfpFormatError(f"{path}: wrong raw size: {meta_path.name} says {width} x {height} at {bits} bit "
+                             f"= {expected} bytes, the file has {nbytes}")
     raw = unpack_raw(path.read_bytes(), height, width, bits_per_pixel=bits, endianness=endian, source=path)
     return LytroCapture(raw=raw, metadata=meta, private_metadata=private, path=path,
                         geometry_hash=extra["derivation"], sha1_verified=None, **fields)
@@ -331,13 +412,14 @@ def _capture_from_container(c: LfpContainer) -> LytroCapture:
         raise LfpFormatError(f"{path}: missing metadata: the table of contents has no frame metadataRef")
     private = c.json("privateMetadataRef") if (c.has("privateMetadataRef") or c.frame().get("privateMetadata")) else {}
     fields = frame_fields(meta, private, source=path)
-    if not c.has("imageRef") or c.ref("imageRef") != c.frame().get("imageRef", "").lower():
+    frame_ref = c.frame().get("imageRef", "")
+    if not c.has("imageRef") or not isinstance(frame_ref, str) or c.ref("imageRef") != frame_ref.lower():
         raise LfpFormatError(f"{path}: missing raw section: the file has no raw sensor image "
                              "(frame imageRef absent or not in the file; a processed desktop LFP holds only "
                              "rendered images)")
     sec = c.section(c.ref("imageRef"))
     height, width = _size(meta, path)
-    bits, endian = _packing(meta)
+    bits, endian = _packing(meta, path)
     expected = raw_byte_count(height, width, bits)
     if sec.size != expected:
         raise LfpFormatError(f"{path}: wrong raw size: metadata says {width} x {height} at {bits} bit "
@@ -412,8 +494,11 @@ def describe_lytro(path: str | os.PathLike) -> dict[str, Any]:
             "embedded_images": len(c.images()),
             "embedded_image_kinds": sorted({im["representation"] for im in c.images()}),
             "has_raw": c.has("imageRef") and bool(frame.get("imageRef")),
-            "storage_files": len(c.toc.get("files", []) or []) if isinstance(c.toc, dict) else 0,
+            "storage_files": len(_storage_entries(c.toc, path)),
         })
+        from .extract import contents_summary, lfp_contents
+
+        out["holds"] = contents_summary(lfp_contents(c))
         if out["has_raw"]:
             cap = _capture_from_container(c)
         elif c.ref("metadataRef") and c.has("metadataRef") or isinstance(frame.get("metadata"), dict):
@@ -421,7 +506,9 @@ def describe_lytro(path: str | os.PathLike) -> dict[str, Any]:
             private = c.json("privateMetadataRef") if (c.has("privateMetadataRef")
                                                          or isinstance(frame.get("privateMetadata"), dict)) else {}
             fields = frame_fields(meta, private, source=path)
-            fields["width"], fields["height"] = _get(meta, "image", "width"), _get(meta, "image", "height")
+            dims = [_get(meta, "image", k) for k in ("width", "height")]
+            fields["width"], fields["height"] = (d if isinstance(d, int) and not isinstance(d, bool) else None
+                                                 for d in dims)
         out["frame_metadata"] = "inline" if isinstance(frame.get("metadata"), dict) else (
             "section" if c.has("metadataRef") else ("referenced but absent" if frame.get("metadataRef") else None))
     else:

@@ -29,6 +29,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from .. import _untrusted as ut
 from .._version import __version__
 from ..errors import InputError, LfpFormatError, MissingFileError, ShapeError
 from ..io import atomic_file
@@ -52,6 +53,8 @@ _SECTION_MAGIC = {b"\x89LFM\r\n\x1a\n": "LFM", b"\x89LFC\r\n\x1a\n": "LFC"}
 _KIND_MAGIC = {"LFM": b"\x89LFM\r\n\x1a\n\x00\x00\x00\x00", "LFC": b"\x89LFC\r\n\x1a\n\x00\x00\x00\x00"}
 _SECTION_HEADER = 12 + 4 + 45 + 35  # magic+pad, length, sha1 text, NUL padding
 _SHA1_RE = re.compile(rb"sha1-[0-9a-fA-F]{40}")
+#: Largest container lfproc reads (it is read whole); real Illum LFRs have about 55 MB.
+MAX_LFP_BYTES = 4 << 30
 
 
 @dataclass(frozen=True)
@@ -88,7 +91,7 @@ class LfpSection:
         return len(self.data)
 
     def json(self) -> dict[str, Any]:
-        """The payload parsed as JSON (:class:`LfpFormatError` when it is not JSON)."""
+        """The payload parsed as a JSON object (:class:`LfpFormatError` when it is not one)."""
         return _parse_json(self.data, f"section {self.name or self.sha1}")
 
 
@@ -167,6 +170,9 @@ class LfpContainer:
             inline = self.frame().get(ref_name[:-3])
             if isinstance(inline, dict):
                 return inline
+            if inline is not None:
+                raise LfpFormatError(f"{self.path}: field 'frame.{ref_name[:-3]}': expected an object, found "
+                                     f"{ut.show(inline)}")
         sec = self.section(ref_name)
         return _parse_json(sec.data, f"{self.path}: section {ref_name}")
 
@@ -200,13 +206,17 @@ class LfpContainer:
             sec = self.by_sha1(sha)
             if sec is None:
                 continue
-            rep = parent.get("representation") if isinstance(parent, dict) else None
+            parent = parent if isinstance(parent, dict) else {}
+            rep = parent.get("representation")
+            dims = [parent.get(k) for k in ("width", "height")]
+            dims = [d if isinstance(d, int) and not isinstance(d, bool) and 0 <= d <= ut.MAX_DIMENSION else None
+                    for d in dims]
             out.append({
                 "path": path,
                 "sha1": sec.sha1,
-                "representation": rep or _sniff(sec.data),
-                "width": parent.get("width") if isinstance(parent, dict) else None,
-                "height": parent.get("height") if isinstance(parent, dict) else None,
+                "representation": rep[:64] if isinstance(rep, str) and rep else _sniff(sec.data),
+                "width": dims[0],
+                "height": dims[1],
                 "size": sec.size,
             })
         return out
@@ -217,18 +227,29 @@ class LfpContainer:
         Keys are the stored names (``C:\\T1CALIB\\MOD_0000.RAW``).
         """
         out = {}
-        for i, entry in enumerate((self.toc or {}).get("files", []) or []):
-            if not isinstance(entry, dict) or "name" not in entry or "dataRef" not in entry:
-                raise LfpFormatError(f"{self.path}: storage entry files[{i}] has no name/dataRef")
-            sec = self.by_sha1(entry["dataRef"])
+        for i, entry in enumerate(_storage_entries(self.toc, self.path)):
+            node = ut.Node(entry, self.path, f"files[{i}]", LfpFormatError)
+            name = node["name"].as_str(max_len=1024, nonempty=True)
+            ref = node["dataRef"].as_str(max_len=64)
+            sec = self.by_sha1(ref)
             if sec is None:
-                raise LfpFormatError(f"{self.path}: missing section: files[{i}] ({entry['name']}) refers to "
-                                     f"{entry['dataRef']}, which no section has")
-            out[str(entry["name"])] = sec
+                raise LfpFormatError(f"{self.path}: missing section: files[{i}] ({ut.show(name)}) refers to "
+                                     f"{ut.show(ref)}, which no section has")
+            out[name] = sec
         return out
 
 
 # -- helpers --------------------------------------------------------------------------------
+def _storage_entries(toc: Any, path) -> list:
+    """``toc["files"]`` of a storage archive (``[]`` when absent); an error when not a list."""
+    if not isinstance(toc, dict) or toc.get("files") is None:
+        return []
+    files = toc["files"]
+    if not isinstance(files, list):
+        raise LfpFormatError(f"{path}: field 'files': expected a list of storage entries, found {ut.show(files)}")
+    return files
+
+
 def _norm_sha1(sha: str) -> str:
     sha = str(sha).strip()
     return "sha1-" + sha[5:].lower() if sha[:5].lower() == "sha1-" else sha.lower()
@@ -264,16 +285,18 @@ def _sniff(data: bytes) -> str:
 
 
 def _parse_json(data: bytes, what: str) -> dict[str, Any]:
-    text = data.decode("utf-8", errors="replace").strip("\x00").strip()
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError:
-        # Lytro TXT files may carry trailing junk after the closing brace.
-        try:
-            obj, _ = json.JSONDecoder().raw_decode(text)
-            return obj
-        except json.JSONDecodeError as exc:
-            raise LfpFormatError(f"{what}: not valid JSON ({exc.msg} at character {exc.pos})") from None
+    """A JSON object from Lytro bytes (size and nesting checked by :mod:`lfproc._untrusted`).
+
+    Undecodable bytes are replaced (real TXT files carry stray bytes after the closing
+    brace, and that trailing junk is ignored).
+    """
+    if len(data) > ut.MAX_JSON_BYTES:
+        raise LfpFormatError(f"{what}: JSON text of {len(data)} bytes exceeds the limit of {ut.MAX_JSON_BYTES}")
+    text = bytes(data).decode("utf-8", errors="replace")
+    obj = ut.parse_json(text, source=what, error=LfpFormatError, trailing="ignore", strip_nul=True)
+    if not isinstance(obj, dict):
+        raise LfpFormatError(f"{what}: expected a JSON object, found {ut.show(obj)}")
+    return obj
 
 
 def is_lfp(path: str | os.PathLike) -> bool:
@@ -313,7 +336,7 @@ def read_lfp(path: str | os.PathLike, *, verify: bool = True) -> LfpContainer:
     path = Path(path)
     if not path.is_file():
         raise MissingFileError(f"{path}: no such file")
-    buf = path.read_bytes()
+    buf = ut.read_bytes(path, max_bytes=MAX_LFP_BYTES, error=LfpFormatError, what="Lytro container")
     if len(buf) < 16:
         raise LfpFormatError(f"{path}: truncated file: {len(buf)} bytes, an LFP header needs 16")
     if buf[:12] != LFP_MAGIC:
@@ -375,7 +398,7 @@ def read_lfp(path: str | os.PathLike, *, verify: bool = True) -> LfpContainer:
     if isinstance(toc, dict):
         for p, sha, _parent in _walk_refs_with_parent(toc):
             refs[p] = sha
-        for i, entry in enumerate(toc.get("files", []) or []):
+        for i, entry in enumerate(_storage_entries(toc, path)):
             if isinstance(entry, dict) and isinstance(entry.get("dataRef"), str):
                 refs[f"files[{i}].dataRef"] = _norm_sha1(entry["dataRef"])
     # Name each section after the reference that names it (picture frame first).

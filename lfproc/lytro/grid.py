@@ -205,9 +205,18 @@ class LensletGrid:
         if doc.get("kind", "hex") != "hex":
             raise InputError(f"{where}: expected a hexagonal grid (kind 'hex'), got {doc.get('kind')!r}")
         try:
-            return cls(**{n: doc[n] for n in names})
-        except (TypeError, ValueError) as exc:
+            grid = cls(**{n: doc[n] for n in names})
+        except (TypeError, ValueError, OverflowError) as exc:
             raise InputError(f"{where}: {exc}") from None
+        h, w = grid.image_size
+        if max(grid.spacing_x_px, grid.spacing_y_px) > max(h, w):
+            raise InputError(f"{where}: lenslet spacing {grid.spacing_x_px:g} x {grid.spacing_y_px:g} px is larger "
+                             f"than the {w} x {h} image")
+        span = grid.spacing_x_px + grid.spacing_y_px
+        if not (-span <= grid.offset_x_px <= w + span and -span <= grid.offset_y_px <= h + span):
+            raise InputError(f"{where}: grid offset ({grid.offset_x_px:g}, {grid.offset_y_px:g}) px lies outside the "
+                             f"{w} x {h} image")
+        return grid
 
     @classmethod
     def from_lattice(cls, origin_xy, row_vector, *, image_size: tuple[int, int],

@@ -27,9 +27,11 @@ from typing import Any
 
 import numpy as np
 
+from .. import _untrusted as ut
 from .._util import progress
 from .._version import __version__
-from ..errors import FileFormatError, InputError, MissingFileError, NoWhiteImageError
+from ..errors import (CalibrationError, FileFormatError, InputError, MissingFileError, NoWhiteImageError,
+                      UnsafeFileError)
 from ..io import atomic_dir
 from .grid import ILLUM_SPACING_PX, F01_SPACING_PX, LensletGrid, estimate_grid
 
@@ -79,29 +81,49 @@ class WhiteEntry:
         return d
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any], *, where: str) -> "WhiteEntry":
+    def from_dict(cls, d: dict[str, Any] | ut.Node, *, where: str) -> "WhiteEntry":
+        """An entry of ``whites.json``; every field is checked (errors name the file and field)."""
+        n = d if isinstance(d, ut.Node) else ut.Node(d, where, "whites[?]", FileFormatError)
+        n.as_dict()
+        steps = dict(low=-(1 << 31), high=1 << 31)
+        level = dict(low=0, high=65535)
+        serial = n.get("serial")
+        serial = None if serial is None else (str(serial.value) if isinstance(serial.value, int)
+                                              and not isinstance(serial.value, bool) else serial.as_str(max_len=256))
+        grid_node = n["grid"]
+        grid_node.as_dict()
         try:
-            return cls(name=str(d["name"]), file=str(d["file"]), serial=d.get("serial"),
-                       camera_model=str(d["camera_model"]), zoom_step=d.get("zoom_step"),
-                       focus_step=d.get("focus_step"), exposure_s=d.get("exposure_s"),
-                       geometry_hash=d.get("geometry_hash"), black_level=float(d["black_level"]),
-                       white_level=float(d["white_level"]), cfa_pattern=str(d["cfa_pattern"]),
-                       responses=tuple(float(v) for v in d["responses"]),
-                       grid=LensletGrid.from_dict(d["grid"], where=f"{where} grid of {d.get('name')}"),
-                       mean_level=float(d.get("mean_level", 0.0)))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise FileFormatError(f"{where}: white-image entry {d.get('name', '?')!r} is incomplete ({exc})") from None
+            grid = LensletGrid.from_dict(grid_node.value, where=f"{where}: field {grid_node.path!r}")
+        except InputError as exc:
+            raise FileFormatError(str(exc)) from None
+        ut.check_dims(grid.image_size, source=where, what=f"field {grid_node.path + '.image_size'!r}",
+                      max_pixels=ut.MAX_PIXELS)
+        black = n["black_level"].as_float(**level)
+        white = n["white_level"].as_float(**level)
+        if white <= black:
+            raise n.fail(f"white_level {white:g} is not above black_level {black:g}")
+        return cls(name=n["name"].as_str(max_len=256, nonempty=True), file=n["file"].as_str(max_len=4096, nonempty=True),
+                   serial=serial, camera_model=n["camera_model"].as_str(choices=("B01", "F01")),
+                   zoom_step=n.opt_int("zoom_step", **steps), focus_step=n.opt_int("focus_step", **steps),
+                   exposure_s=n.opt_float("exposure_s", low=0, high=1e6),
+                   geometry_hash=n.opt_str("geometry_hash", max_len=64),
+                   black_level=black, white_level=white,
+                   cfa_pattern=n["cfa_pattern"].as_str(choices=("RGGB", "GRBG", "GBRG", "BGGR")),
+                   responses=tuple(n["responses"].as_floats(length=3, low=0, strict_low=True, high=1e6)),
+                   grid=grid, mean_level=n.opt_float("mean_level", 0.0, low=-1e6, high=1e6))
 
     def describe(self) -> str:
         return (f"{self.name} (serial {self.serial}, zoom {self.zoom_step}, focus {self.focus_step}, "
                 f"hash {self.geometry_hash or 'none'})")
 
     def load_raw(self, db_dir: Path) -> np.ndarray:
-        path = Path(db_dir) / self.file
+        """The raw white image (uint16, the grid's image size) from the database folder;
+        its ``file`` must lie inside ``db_dir``."""
+        index = Path(db_dir) / INDEX_NAME
+        path = ut.resolve_inside(db_dir, self.file, source=index, field=f"file of {self.name}")
         if not path.is_file():
-            raise MissingFileError(f"{path}: white image listed in {Path(db_dir) / INDEX_NAME} is missing")
-        with np.load(path, allow_pickle=False) as z:
-            return z["raw"]
+            raise MissingFileError(f"{path}: white image listed in {index} is missing")
+        return ut.read_npz(path, names=["raw"], expect={"raw": (tuple(self.grid.image_size), "uint16")})["raw"]
 
 
 @dataclass(frozen=True)
@@ -165,8 +187,15 @@ def build_white_db(caldata: str | os.PathLike, out_dir: str | os.PathLike, *, fo
             black = float(fr.black_level.get("gr", next(iter(fr.black_level.values())))) if fr.black_level else 0.0
             white = float(fr.white_level) if fr.white_level is not None else float(fr.raw.max())
             mean = float((fr.raw.mean(dtype=np.float64) - black) / max(white - black, 1.0))
-            grid = estimate_grid(fr.raw, approx_spacing_px=_approx_spacing(fr.camera_model))
-            fname = f"{fr.serial or 'unknown'}_{fr.name}.npz"
+            try:
+                grid = estimate_grid(fr.raw, approx_spacing_px=_approx_spacing(fr.camera_model))
+            except CalibrationError as exc:
+                raise CalibrationError(f"{fr.source or caldata}: {exc}") from None
+            # the serial comes from the calibration data: it must be a plain name (see caldata)
+            fname = ut.safe_filename(f"{fr.serial or 'unknown'}_{fr.name}.npz", what="white-image file name",
+                                     source=caldata)
+            if not ut.inside(tmp, tmp / fname):  # pragma: no cover - safe_filename already ensures it
+                raise UnsafeFileError(f"{caldata}: {fname} would be written outside {out_dir}")
             np.savez_compressed(tmp / fname, raw=np.asarray(fr.raw, dtype=np.uint16),
                                 metadata=np.array(json.dumps(fr.metadata)))
             entries.append(WhiteEntry(name=fr.name, file=fname, serial=fr.serial, camera_model=fr.camera_model,
@@ -192,14 +221,17 @@ def load_white_db(db_dir: str | os.PathLike) -> WhiteDatabase:
     if not index_path.is_file():
         raise MissingFileError(f"{index_path}: missing: {db_dir} is not a white-image database "
                                "(make one with 'lfproc whites')")
-    try:
-        index = json.loads(index_path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise FileFormatError(f"{index_path}: not valid JSON ({exc})") from None
-    if not isinstance(index, dict) or index.get("schema") != SCHEMA:
-        raise FileFormatError(f"{index_path}: expected schema {SCHEMA!r}, found {index.get('schema') if isinstance(index, dict) else type(index).__name__!r}")
-    entries = tuple(WhiteEntry.from_dict(d, where=str(index_path)) for d in index.get("whites", []))
-    return WhiteDatabase(path=db_dir, entries=entries, skipped=tuple(index.get("skipped", [])), index=index)
+    doc = ut.load_json(index_path)
+    if not doc.is_dict() or doc.value.get("schema") != SCHEMA:
+        found = doc.value.get("schema") if doc.is_dict() else doc.value
+        raise FileFormatError(f"{index_path}: expected schema {SCHEMA!r}, found {ut.show(found)}")
+    whites = doc.get("whites")
+    entries = tuple(WhiteEntry.from_dict(d, where=str(index_path)) for d in (whites.as_list() if whites else []))
+    for e in entries:  # entries must name files inside the database folder
+        ut.resolve_inside(db_dir, e.file, source=index_path, field=f"file of {e.name}")
+    skipped = doc.get("skipped")
+    skipped = tuple(s.value for s in skipped.as_list()) if skipped is not None else ()
+    return WhiteDatabase(path=db_dir, entries=entries, skipped=skipped, index=doc.value)
 
 
 def select_white(db: WhiteDatabase, *, serial: str | None, zoom_step: int | None, focus_step: int | None,

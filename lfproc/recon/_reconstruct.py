@@ -23,7 +23,21 @@ smooth noisy scene is best (tests/test_reconstruct.py; README), whereas ``1e-4``
 summed data term (100x less regularisation) overfits the noise. ``scale="global"`` uses one ``c`` and one weight scale for
 the whole capture instead (the 99.9th percentile of the usable ``T`` over the mean row
 transmittance, and the rms of all usable weights): what normalising the capture to its peak
-would do. The README gives the measured difference.
+would do. ``scale="noise"`` (the default) keeps the per-patch units of ``"patch"`` for the
+code but not its per-patch weighting of the data term: each patch solves
+``1/(2m) ||W (Phi_p D a - T_p)||^2 + (mu / c_p) ||a||_1`` with the raw weights ``W = 1/std(T)``:
+the data term is the chi-square of the patch (its residuals in units of their noise), the l1
+weight is relative to the patch's norm (a scale-free prior), and ``mu`` is a pure number (in
+``"patch"`` units: ``mu_p = mu m / (c_p omega_p)^2``). Bright, high-SNR patches then fit their
+data and dark, noisy ones are regularised more, in any capture. With ``"patch"`` a patch with a
+bright light on a dark background has a tiny data term (its ``c_p`` is the light's level, its
+weight rms the dark pixels'), and the lasso shrinks the light away (measured: street lamps
+lost, 15 dB PU21; README).
+
+Overlapping estimates are averaged (``overlap="mean"``, the paper's) or weighted per pixel
+(``"scale"``: by ``1 / c_p^2``, the inverse of a patch's error variance when its error is
+relative to its norm, so a dark pixel is taken from the patches without a bright light in them;
+``"window"``: by a centre-weighted ``sin^2`` window; ``"scale-window"``, the default: both).
 """
 
 from __future__ import annotations
@@ -41,14 +55,23 @@ from .._util import check_choice, progress
 from .._version import __version__
 from ..errors import InputError, ShapeError
 from ..lightfield import LightField
+from threadpoolctl import threadpool_limits
+
 from ._solvers import SOLVERS, BatchOperator, SharedOperator, admm, fista, omp
 
-__all__ = ["reconstruct", "DEFAULTS", "SCALES", "patch_count"]
+__all__ = ["reconstruct", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "patch_count"]
 
-SCALES = ("patch", "global")
+SCALES = ("patch", "global", "noise")
+OVERLAPS = ("mean", "scale", "window", "scale-window")
 #: Defaults of :func:`reconstruct` (the paper's settings where it gives them: method.md section 4).
-DEFAULTS = {"stride": 4, "mu": 1e-4, "tol": 2.0**-15, "max_iter": {"admm": 300, "fista": 1000, "omp": None},
-            "block_patches": 512, "scale": "patch"}
+#: Defaults of :func:`reconstruct`, measured on HDR-photo-textured light fields (README, benchmarks/
+#: reconstruct_quality.py): the chi-square data term with ``mu = 1`` (``scale="noise"``), overlaps weighted by scale and a centre
+#: window, ADMM stopped at a tolerance of 1e-2 or 50 iterations. The paper's settings are :data:`PAPER`.
+DEFAULTS = {"stride": 4, "mu": 1.0, "tol": {"admm": 1e-2, "fista": 2.0**-15, "omp": None},
+            "max_iter": {"admm": 50, "fista": 1000, "omp": None},
+            "block_patches": 512, "scale": "noise", "overlap": "scale-window"}
+#: The paper's settings (method.md section 4: mu 1e-4 on patches of unit norm, tolerance 2^-15, plain averages).
+PAPER = {"stride": 4, "mu": 1e-4, "tol": 2.0**-15, "max_iter": 300, "scale": "patch", "overlap": "mean"}
 #: Bytes of per-patch operators ``A_p`` materialised at once for non-periodic masks.
 _BATCH_OPERATOR_BYTES = 256 * 2**20
 
@@ -61,8 +84,11 @@ class _Settings:
     tol: float
     sparsity: int
     scale: str
+    overlap: str
     c_global: float
     w_global: float
+    c_median: float = 1.0
+    debias: int = 0
 
 
 def patch_count(size: tuple[int, int], patch: int, stride: int) -> int:
@@ -115,7 +141,9 @@ def _solve_group(op, y, w, rowsum, settings: _Settings, n: int) -> tuple[np.ndar
     yn = (y[rows] / cp[:, None]).astype(np.float32)
     wn = (w[rows] / om[:, None]).astype(np.float32)
     m = y.shape[1]  # mu weighs the data term's mean over the measurements (module notes)
-    if settings.scale == "patch":
+    if settings.scale == "noise":  # the raw chi-square data term (module notes)
+        mu = settings.mu * m / (cp * om) ** 2
+    elif settings.scale == "patch":
         mu = np.full(len(rows), settings.mu * m)
     else:  # one mu for the raw problem of every patch (module notes)
         mu = settings.mu * m * (settings.c_global / cp) * (settings.w_global / om) ** 2
@@ -125,13 +153,52 @@ def _solve_group(op, y, w, rowsum, settings: _Settings, n: int) -> tuple[np.ndar
         z, it = fista(sub, wn, yn, mu, max_iter=settings.max_iter, tol=settings.tol)
     else:
         z, it = omp(sub, wn, yn, settings.sparsity)
+    if settings.debias and settings.solver != "omp":
+        z = _debias(sub, wn, yn, z, settings.debias)
     codes[rows] = z
     iters[rows] = it
     return codes, np.where(ok, c_p, 0.0), iters
 
 
+def _debias(op, w, y, z, k_max: int) -> np.ndarray:
+    """Least-squares refit of every code on its ``k_max`` largest atoms (the found support, capped).
+
+    The lasso's codes are shrunk by the l1 weight; refitting the support by weighted least squares
+    removes that bias. The support of a noisy patch has more atoms than measurements, so it is
+    capped at ``k_max`` (a tiny ridge keeps the systems positive definite).
+    """
+    b_n, k_n = z.shape
+    k = int(min(k_max, k_n, w.shape[1]))
+    idx = np.argpartition(-np.abs(z), k - 1, axis=1)[:, :k]  # (B, k)
+    keep = np.take_along_axis(z, idx, axis=1) != 0
+    cols = op.columns(idx).astype(np.float64) * w[:, :, None].astype(np.float64)  # (B, m, k) of W A
+    cols *= keep[:, None, :]
+    gram = np.matmul(cols.transpose(0, 2, 1), cols)
+    ridge = 1e-8 * np.maximum(np.trace(gram, axis1=1, axis2=2), 1e-30) / k
+    gram[:, np.arange(k), np.arange(k)] += ridge[:, None]
+    rhs = np.matmul(cols.transpose(0, 2, 1), (w * y).astype(np.float64)[:, :, None])
+    with threadpool_limits(1):
+        sol = np.linalg.solve(gram, rhs)[:, :, 0] * keep
+    out = np.zeros_like(z)
+    np.put_along_axis(out, idx, sol.astype(np.float32), axis=1)
+    return out
+
+
 def _solve_block(task: dict, shared: dict) -> dict:
-    """Solve the patches of one block; return its accumulator and figures (runs in a worker or in process)."""
+    """Solve the patches of one block; return its accumulator and figures (runs in a worker or in process).
+
+    BLAS runs on one thread: the same sums whoever runs the block (so Dask and in-process outputs
+    are identical), and on a shared machine a two-thread GEMM spends most of its time waiting
+    for its other thread (median 590 us instead of 5-40 us for one batch's ``A V``, measured
+    at a load average of 15); cores are used by solving blocks in parallel instead.
+    """
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1):
+        return _solve_block_here(task, shared)
+
+
+def _solve_block_here(task: dict, shared: dict) -> dict:
     from ..camera.projection import PatchOperators
 
     atoms = shared["atoms"]
@@ -171,11 +238,40 @@ def _solve_block(task: dict, shared: dict) -> dict:
     rows = int(tops.max() - row0 + size)
     width = task["width"]
     acc = np.zeros((v_n, u_n, rows, width, c_n), dtype=np.float32)
+    weight = _overlap_weights(settings.overlap, codes_scale / settings.c_median, size)  # (B, P, P) or None
+    wacc = None if weight is None else np.zeros((rows, width), dtype=np.float32)
     patches = estimates.reshape(b_n, v_n, u_n, size, size, c_n)
     for b in range(b_n):  # fixed order: the block's patches as listed
         t, l = int(tops[b] - row0), int(lefts[b])
-        acc[:, :, t:t + size, l:l + size, :] += patches[b]
-    return {"row0": row0, "acc": acc, "empty": int((codes_scale == 0).sum()), "iterations": iters}
+        if weight is None:
+            acc[:, :, t:t + size, l:l + size, :] += patches[b]
+        else:
+            acc[:, :, t:t + size, l:l + size, :] += patches[b] * weight[b][:, :, None]
+            wacc[t:t + size, l:l + size] += weight[b]
+    return {"row0": row0, "acc": acc, "weight": wacc, "empty": int((codes_scale == 0).sum()), "iterations": iters}
+
+
+def _overlap_weights(overlap: str, scale: np.ndarray, size: int) -> np.ndarray | None:
+    """Per-pixel weights of every patch's estimate when overlaps are averaged (None: plain mean).
+
+    ``scale``: the patches' ``c_p`` over one constant of the capture (the same in every block).
+    """
+    if overlap == "mean":
+        return None
+    b_n = len(scale)
+    w = np.ones((b_n, size, size), dtype=np.float32)
+    if overlap in ("scale", "scale-window"):
+        # a patch's error is about relative to its own l2 norm c_p (the dictionary's coding error and the
+        # lasso's): inverse-variance weights 1 / c_p^2 let the patches whose scale matches a pixel win
+        good = scale > 0
+        inv = np.full(b_n, 1e-12)  # an empty patch (no usable measurement) counts only where nothing else does
+        inv[good] = np.minimum(1.0 / scale[good] ** 2, 1e12)
+        w *= inv.astype(np.float32)[:, None, None]
+    if overlap in ("window", "scale-window"):
+        x = (np.arange(size) + 0.5) / size
+        win = np.sin(np.pi * x) ** 2 + 1e-3  # centre-weighted: a patch's border pixels have the fewest measurements around them
+        w *= np.outer(win, win).astype(np.float32)[None]
+    return w
 
 
 def _load_inputs(capture, dictionary):
@@ -199,13 +295,16 @@ def reconstruct(
     stride: int = DEFAULTS["stride"],
     mu: float = DEFAULTS["mu"],
     max_iter: int | None = None,
-    tol: float = DEFAULTS["tol"],
+    tol: float | None = None,
     sparsity: int | None = None,
     scale: str = DEFAULTS["scale"],
     block_patches: int = DEFAULTS["block_patches"],
     workers: int | None = None,
     scheduler: str | None = None,
     progress_bar: bool | None = None,
+    threads: int | None = None,
+    overlap: str = DEFAULTS["overlap"],
+    debias: int = 0,
 ) -> LightField:
     """Reconstruct the HDR light field of a coded multi-ISO capture (method.md section 4).
 
@@ -225,16 +324,21 @@ def reconstruct(
         Patch spacing in pixels (1 .. patch size; 4 as the paper). Any stride works with the
         Bayer CFA: patch operators carry their CFA phase.
     mu : float
-        l1 weight, relative to a light-field patch of unit l2 norm with weights of mean
-        square one (module notes); the paper's 1e-4 by default. Ignored by ``omp``.
+        l1 weight (module notes): with ``scale="noise"`` (default 1, measured) ``mu / c_p``
+        against the chi-square data term averaged over the measurements; with
+        ``scale="patch"`` relative to a patch of unit norm with weights of mean square one
+        (the paper's 1e-4: :data:`PAPER`). Ignored by ``omp``.
     max_iter : int, optional
-        Iteration limit (default 300 for ADMM, 1000 for FISTA). Ignored by ``omp``.
-    tol : float
-        Stop a patch when the relative change of its code is at most ``tol`` (2^-15).
+        Iteration limit (default 50 for ADMM, 1000 for FISTA). Ignored by ``omp``.
+    tol : float, optional
+        Stop a patch when the relative change of its code (and, for ADMM, its primal residual)
+        is at most ``tol`` (default 1e-2 for ADMM, 2^-15 for FISTA; the paper's: 2^-15).
     sparsity : int, optional
         Atoms per patch for ``omp`` (default: the dictionary's training sparsity).
-    scale : {"patch", "global"}
-        Per-patch scale normalisation (default) or one scale for the capture (module notes).
+    scale : {"noise", "patch", "global"}
+        How HDR scale is handled (module notes): per-patch codes with the chi-square data term
+        (``"noise"``, default), per-patch codes and data term (``"patch"``, the first
+        implementation's), or one scale for the capture.
     block_patches : int
         About this many patches per block, the unit of work (memory is bounded by a block).
         The output depends on it only through float rounding in the batched products.
@@ -245,6 +349,14 @@ def reconstruct(
         with ``workers=None``: in this process. The output is identical either way.
     progress_bar : bool, optional
         Show patches/s and the remaining time (None: when stderr is a terminal).
+    threads : int, optional
+        In this process: blocks solved at once, each on one BLAS thread (default: the
+        number of CPUs available). The output does not depend on it.
+    overlap : {"scale-window", "scale", "window", "mean"}
+        How overlapping patch estimates are combined (module notes); ``"mean"`` is the paper's.
+    debias : int
+        Refit each ADMM/FISTA code by least squares on its ``debias`` largest atoms (0: off, the
+        default: measured to lose quality on noisy captures, README).
 
     Returns
     -------
@@ -270,8 +382,11 @@ def reconstruct(
     started = time.perf_counter()
     check_choice("solver", solver, SOLVERS)
     check_choice("scale", scale, SCALES)
+    check_choice("overlap", overlap, OVERLAPS)
     if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)):
         raise InputError(f"stride: expected a positive integer, got {stride!r}")
+    if tol is None:
+        tol = DEFAULTS["tol"][solver] or 0.0
     try:
         mu = float(mu)
         tol = float(tol)
@@ -287,6 +402,9 @@ def reconstruct(
     block_patches = _int_option("block_patches", block_patches)
     if workers is not None:
         workers = _int_option("workers", workers)
+    if threads is None:
+        threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    threads = _int_option("threads", threads)
     capture, dictionary = _load_inputs(capture, dictionary)
     v_n, u_n, size, _, c_n = dictionary.patch
     if (v_n, u_n) != tuple(capture.views) or c_n != 3:
@@ -314,8 +432,10 @@ def reconstruct(
     mean_rowsum = float(np.mean(capture.mask.codes)) * v_n * u_n
     c_global = math.sqrt(n) * float(np.percentile(np.abs(T[usable]), 99.9)) / max(mean_rowsum, 1e-12)
     w_global = float(np.sqrt(np.mean(W[usable].astype(np.float64) ** 2)))
-    settings = _Settings(solver=solver, mu=mu, max_iter=max_iter, tol=tol, sparsity=sparsity, scale=scale,
-                         c_global=max(c_global, 1e-30), w_global=max(w_global, 1e-30))
+    c_median = math.sqrt(n) * float(np.median(np.abs(T[usable]))) / max(mean_rowsum, 1e-12)
+    settings = _Settings(solver=solver, mu=mu, max_iter=max_iter, tol=tol, sparsity=sparsity, scale=scale, overlap=overlap,
+                         c_global=max(c_global, 1e-30), w_global=max(w_global, 1e-30),
+                         c_median=max(c_median, 1e-30), debias=_int_option("debias", debias, low=0))
 
     tops, lefts = patch_grid((h, w), size, stride)
     rows_per_block = max(1, block_patches // len(lefts))
@@ -355,6 +475,7 @@ def reconstruct(
 
     total = acc = None
     acc = np.zeros((v_n, u_n, h, w, c_n), dtype=np.float32)
+    wsum = np.zeros((h, w), dtype=np.float32) if overlap != "mean" else None
     empty = 0
     iterations: list[np.ndarray] = []
     bar = progress(total=len(grid_t), desc="reconstruct", unit="patch",
@@ -365,22 +486,24 @@ def reconstruct(
         r0 = result["row0"]
         part = result["acc"]
         acc[:, :, r0:r0 + part.shape[2]] += part
+        if wsum is not None:
+            wsum[r0:r0 + part.shape[2]] += result["weight"]
         empty += result["empty"]
         iterations.append(result["iterations"])
 
     use_dask = workers is not None or (scheduler is not None and scheduler != "synchronous")
     try:
         if not use_dask:
-            for task in tasks:
-                result = _solve_block(attach_operators(task), shared)
-                add(result)
-                bar.update(len(task["tops"]))
+            _run_threads(tasks, shared, attach_operators, add, bar, threads=threads)
         else:
             _run_dask(tasks, shared, attach_operators, add, bar, workers=workers, scheduler=scheduler)
     finally:
         bar.close()
 
-    count = _coverage(h, tops, size)[:, None] * _coverage(w, lefts, size)[None, :]
+    if wsum is None:
+        count = _coverage(h, tops, size)[:, None] * _coverage(w, lefts, size)[None, :]
+    else:
+        count = np.maximum(wsum, np.float32(1e-30))
     data = acc / count[None, None, :, :, None].astype(np.float32)
     negative = float((data < 0).mean())
     np.maximum(data, 0, out=data)
@@ -399,12 +522,17 @@ def reconstruct(
                        "atoms": dictionary.n_atoms, "sparsity": dictionary.sparsity},
         "stride": stride,
         "mu": mu,
-        "mu_meaning": "1/(2m)||W(Phi D b - T)||^2 + mu||b||_1 per patch, T scaled to a unit-l2 patch, W to mean "
-                      "square one" if scale == "patch" else "as 'patch' but with one scale for the whole capture",
+        "mu_meaning": {"patch": "1/(2m)||W(Phi D b - T)||^2 + mu||b||_1 per patch, T scaled to a unit-l2 patch, W to "
+                                "mean square one",
+                       "noise": "1/(2m)||W(Phi D a - T)||^2 + (mu/c_p)||a||_1 per patch, W = 1/std(T) (chi-square), "
+                                "c_p the patch's l2 norm",
+                       "global": "as 'patch' but with one scale for the whole capture"}[scale],
         "tol": tol,
         "max_iter": max_iter if solver != "omp" else None,
         "sparsity": sparsity if solver == "omp" else None,
         "scale": scale,
+        "overlap": overlap,
+        "debias": int(debias),
         "block_patches": block_patches,
         "patches": int(len(grid_t)),
         "operators": n_operators if n_operators is not None else int(len(grid_t)),
@@ -416,10 +544,34 @@ def reconstruct(
         "radiance_scale": radiance_scale,
         "capture_ground_truth": capture.ground_truth,
         "seconds": seconds,
-        "scheduler": "in-process" if not use_dask else (scheduler or f"local:{workers}"),
+        "scheduler": f"in-process:{threads} threads" if not use_dask else (scheduler or f"local:{workers}"),
     }
     return LightField(data=data, units=units, colour_space="camera-rgb" if radiance_scale is None else "linear-srgb",
                       source="lfproc.reconstruct", attrs={"reconstruction": record})
+
+
+def _run_threads(tasks, shared, attach_operators, add, bar, *, threads: int) -> None:
+    """Blocks on a pool of threads (numpy releases the GIL in BLAS and ufuncs), added in block order."""
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    if threads == 1:
+        for task in tasks:
+            add(_solve_block(attach_operators(task), shared))
+            bar.update(len(task["tops"]))
+        return
+    window: deque = deque()
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="lfproc-recon") as pool:
+        for task in tasks:
+            window.append((pool.submit(_solve_block, attach_operators(task), shared), len(task["tops"])))
+            while len(window) > threads:  # a bounded number of blocks in memory
+                future, count = window.popleft()
+                add(future.result())
+                bar.update(count)
+        while window:
+            future, count = window.popleft()
+            add(future.result())
+            bar.update(count)
 
 
 def _run_dask(tasks, shared, attach_operators, add, bar, *, workers, scheduler) -> None:
