@@ -82,7 +82,7 @@ PRESETS = {
         description="two small scenes in minutes: central 48 x 48 crop; every pattern x 1-3 shots at the reference "
                     "settings, the wider ISO sets and other noise levels at 2 shots, a saturation sweep, the baselines",
         crop=(48, 48), noise_levels=NOISE_LEVELS, iso_sets=ISO_SETS, full_grid=False,
-        exposures=(4.0, 32.0, 256.0), baseline_noise=("low",), mask_period=4, recon={"max_iter": 150}),
+        exposures=(4.0, 32.0, 256.0), baseline_noise=("low",), mask_period=4, recon={}),
     "paper": Preset(
         name="paper",
         description="the full grid at full size: pattern x shots x ISO set x noise, the saturation sweep, the "

@@ -479,6 +479,10 @@ def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path
     _plot_best_worst(rows, bench_dir, meta, paths[plots["best_worst"]])
 
     n_scenes = len({r["scene"] for r in rows})
+    first = rows[0]
+    recon_text = (f"solver {first.get('solver')}, mu {first.get('mu')}, at most {first.get('max_iter')} iterations, "
+                  f"scale `{first.get('scale')}`, overlaps `{first.get('overlap')}`"
+                  + (f" (options given: {meta['recon']})" if meta["recon"] else " (lfproc.recon defaults)"))
     crop = f"central {'x'.join(map(str, meta['crop']))} pixels of each view" if meta["crop"] else "none"
     mask = (f"period {meta['mask_period']} px (patches share one operator per phase)" if meta["mask_period"]
             else "not tiled (the paper's mask)")
@@ -499,8 +503,7 @@ def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path
         f"exposure {meta['exposure_s']} s; radiance scale automatic (the brightest expected signal just saturates "
         "ISO 100 at exposure 1).",
         f"- Dictionary `{meta['dictionary']}` (patch {' x '.join(map(str, meta['dictionary_patch']))}, "
-        f"{meta['dictionary_atoms']} atoms); reconstruction options {meta['recon'] or 'lfproc defaults'} "
-        "(ADMM, mu 1e-4, stride 4 unless given).",
+        f"{meta['dictionary_atoms']} atoms); reconstruction: {recon_text}.",
         f"- Reference settings of Tables I, III, IV: ISO set ({REF_ISOS}), noise `{REFERENCE['noise']}`, exposure 1.",
         f"- Bench seed {meta['seed']}; each cell's seed is in results.csv.",
         f"- Reconstruction time per cell (`seconds`, wall): total {_total(rows, 'seconds'):.0f} s, median "

@@ -42,7 +42,7 @@ COLUMNS = (
     "saturated_fraction", "cpu_seconds", "merge", "exposure", "relative_exposures", "isos_used", "pu2_psnr_db",
     "log_psnr_db", "mean_relative_error", "black_clipped_fraction", "sampling_rate_percent", "seed",
     "simulate_seconds", "iterations_mean", "empty_patches", "size", "views", "profile", "mask_period", "dictionary",
-    "solver", "mu", "max_iter", "lfproc_version", "cell_id",
+    "solver", "mu", "max_iter", "scale", "overlap", "lfproc_version", "cell_id",
 )
 _SCENE_CACHE: dict[tuple, Any] = {}
 
@@ -201,7 +201,8 @@ def run_job(spec: dict[str, Any], dictionary) -> list[dict[str, Any]]:
             "size": f"{lf.size[0]}x{lf.size[1]}", "views": f"{lf.views[0]}x{lf.views[1]}",
             "profile": capture.profile.name, "mask_period": preset.mask_period if preset.mask_period else "",
             "dictionary": spec["dictionary_id"], "solver": per[0]["solver"], "mu": per[0]["mu"],
-            "max_iter": per[0]["max_iter"], "lfproc_version": __version__, "cell_id": cid,
+            "max_iter": per[0]["max_iter"], "scale": per[0].get("scale"), "overlap": per[0].get("overlap"),
+            "lfproc_version": __version__, "cell_id": cid,
         }
         path = _cell_path(Path(spec["cells_dir"]), cid)
         with atomic_file(path, force=True) as tmp:
