@@ -12,7 +12,9 @@ Jobs run on Dask like the project's other batch commands (:mod:`lfproc.dataset`)
 ``LocalCluster`` of ``workers`` processes with one thread each (``processes=True``,
 ``dashboard_address=":0"``), or a running scheduler (``scheduler="tcp://..."``), or this
 process (``scheduler="synchronous"``). Each job's reconstruction runs single-threaded inside
-its worker; the results do not depend on where a job ran.
+its worker; the results do not depend on where a job ran. Workers read the scenes and write
+the cell files themselves: with a remote scheduler, the scenes and ``BENCH_DIR`` must be on a
+file system every worker sees at the same paths.
 """
 
 from __future__ import annotations
