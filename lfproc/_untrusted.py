@@ -32,17 +32,22 @@ JSON
   with size and nesting checked before parsing; ``load_json(path, ...)`` reads a file.
 * ``Node(value, source, error=...)``: typed access to a parsed value. ``node["a"]["b"]``
   (missing key -> error naming ``a.b``), ``node.get("a")`` (``None`` when missing or null),
-  ``node.at("a.b.0.c")``; conversions ``as_dict()``, ``as_list(max_len=)``, ``as_str(max_len=,
-  choices=, pattern=)``, ``as_int(low=, high=)``, ``as_float(low=, high=, strict_low=,
-  finite=)``, ``as_bool()``, ``as_floats(length=, ...)``; ``opt_int/opt_float/opt_str(key, ...)``
-  give ``None`` for a missing or null field. ``node.value`` is the raw value, ``node.path`` its
-  dotted name. Bools are never numbers; integral floats are accepted as ints.
+  ``node.has("a")``, ``node.at("a.b.0.c", default)``, ``node.first("a.b", "c.d")`` (the first
+  present), ``node.items()``; conversions ``as_dict()``, ``as_list(min_len=, max_len=)``,
+  ``as_str(max_len=, choices=, pattern=, nonempty=)``, ``as_int(low=, high=)``,
+  ``as_float(low=, high=, strict_low=, strict_high=, finite=, parse_str=)``, ``as_bool()``,
+  ``as_floats(length=, **checks)``, ``as_ints(...)``; ``opt_int/opt_float/opt_str/opt_bool(key,
+  default, **checks)`` give ``default`` for a missing or null field, ``opt_dict(key)`` an empty
+  object. ``node.fail(message)`` builds the error for a rule of your own. ``node.value`` is the
+  raw value, ``node.path`` its dotted name. Bools are never numbers; integral floats are
+  accepted as ints.
 
 Sizes and arrays
 
 * ``check_dims(shape, source=..., what=..., max_dim=, max_pixels=)``: positive ints within limits.
 * ``check_nbytes(shape, dtype, ...)``: bytes of an array from a header, against ``max_bytes``.
-* ``check_expansion(expanded, compressed, ...)``: the compression-bomb rule above.
+* ``expansion_limit(compressed)`` and ``check_expansion(expanded, compressed, ...)``: the
+  compression-bomb rule above.
 * ``read_npy(fileobj, size, ...)``: one ``.npy`` stream; its header (dtype, shape, order) is
   read and checked (no object dtypes, ``expect_shape``/``expect_dtype``, bytes = stream size)
   before the data are read.
@@ -114,6 +119,7 @@ __all__ = [
     "read_bytes",
     "check_dims",
     "check_nbytes",
+    "expansion_limit",
     "check_expansion",
     "read_capped",
     "read_npy",
