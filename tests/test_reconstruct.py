@@ -395,3 +395,35 @@ def test_two_shots_beat_one_on_a_textured_hdr_scene(shared_data):
             scores[shots] = evaluate(reconstruct(capture, dictionary), lf)["pu21_psnr_db"]
     assert scores[2] > scores[1] + 0.1, scores
     assert scores[1] > 18.5, scores
+
+
+def test_new_options_are_checked_and_recorded(smooth_capture, small_dictionary, tmp_path, capsys):
+    with pytest.raises(InputError, match="overlap"):
+        reconstruct(smooth_capture, small_dictionary, overlap="median")
+    with pytest.raises(InputError, match="scale"):
+        reconstruct(smooth_capture, small_dictionary, scale="log")
+    with pytest.raises(InputError, match="threads"):
+        reconstruct(smooth_capture, small_dictionary, threads=0)
+    with pytest.raises(InputError, match="debias"):
+        reconstruct(smooth_capture, small_dictionary, debias=-1)
+    # threads change nothing (one-thread BLAS per block, blocks added in order)
+    one = reconstruct(smooth_capture, small_dictionary, threads=1, block_patches=6)
+    two = reconstruct(smooth_capture, small_dictionary, threads=2, block_patches=6)
+    assert np.array_equal(one.data, two.data)
+    rec = one.attrs["reconstruction"]
+    assert (rec["scale"], rec["overlap"], rec["mu"], rec["max_iter"], rec["tol"]) == (
+        "noise", "scale-window", DEFAULTS["mu"], 50, 1e-2)
+
+
+def test_cli_paper_settings(files, capsys, tmp_path):
+    from lfproc.recon import PAPER
+
+    _, _, capture, dictionary = files
+    out = tmp_path / "paper.exr"
+    assert main(["reconstruct", str(capture), "-o", str(out), "--dictionary", str(dictionary), "--paper",
+                 "--max-iter", "40", "--json"]) == 0
+    capsys.readouterr()
+    rec = lfproc.read_lightfield(out).attrs["reconstruction"]
+    assert (rec["scale"], rec["overlap"], rec["mu"], rec["tol"]) == (PAPER["scale"], PAPER["overlap"], PAPER["mu"],
+                                                                     PAPER["tol"])
+    assert rec["max_iter"] == 40  # an explicit option wins over --paper

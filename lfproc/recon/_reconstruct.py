@@ -8,7 +8,8 @@ estimates summed into the block's own accumulator. Blocks are the same whatever 
 (this process or Dask workers), and the accumulators are added to the image in block order,
 so the output does not depend on how the blocks were scheduled.
 
-Scale handling (the data span 16 stops or more). Each patch ``p`` is solved in its own
+Scale handling (the data span 16 stops or more). With ``scale="patch"`` (the first
+implementation; the paper-faithful reading of its ``mu``) each patch ``p`` is solved in its own
 units: the measurements are divided by ``c_p = sqrt(n) * rms(T_i / r_i)`` over the usable
 measurements (``r_i`` the total mask transmittance of measurement ``i``: ``T_i / r_i`` is the
 radiance a flat patch would need; ``c_p`` is then the l2 norm of that flat patch, the norm
@@ -18,9 +19,9 @@ the ``m`` measurements: each patch solves
 ``1/(2m) ||W' (Phi_p D b - T_p / c_p)||^2 + mu ||b||_1``. ``mu`` is therefore relative to a
 light-field patch of unit l2 norm with weights of mean square one, the same for dark and
 bright patches, and does not change with the number of shots; the code is scaled back by
-``c_p``. With this reading the paper's ``mu = 1e-4`` is also where the reconstruction of a
-smooth noisy scene is best (tests/test_reconstruct.py; README), whereas ``1e-4`` against the
-summed data term (100x less regularisation) overfits the noise. ``scale="global"`` uses one ``c`` and one weight scale for
+``c_p``. With this reading the paper's ``mu = 1e-4`` works on a smooth noisy scene
+(tests/test_reconstruct.py), whereas ``1e-4`` against the summed data term (100x less
+regularisation) overfits the noise. ``scale="global"`` uses one ``c`` and one weight scale for
 the whole capture instead (the 99.9th percentile of the usable ``T`` over the mean row
 transmittance, and the rms of all usable weights): what normalising the capture to its peak
 would do. ``scale="noise"`` (the default) keeps the per-patch units of ``"patch"`` for the

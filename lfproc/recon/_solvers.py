@@ -7,8 +7,8 @@ Every solver works on a batch of ``B`` patches at once, each the problem
 with ``A_b = Phi_b D`` (``m x K``). The patch matrices come as a :class:`SharedOperator`
 (one ``A`` for the whole batch: patches of one phase of a periodic mask; the products are
 GEMMs ``X @ A.T`` and ``R @ A`` over the batch) or a :class:`BatchOperator` (one ``A_b`` per
-patch, batched matrix-vector products; non-periodic masks). States are ``(B, K)`` float32
-row-major arrays, small systems are solved in float64.
+patch, batched matrix-vector products; non-periodic masks). States are float32 (``(K, B)``
+columns in :func:`admm`), small systems are factorised in float64.
 
 Written by hand because no library solves many small weighted lasso problems that share
 (or do not share) a sensing matrix in one batch: scikit-learn, skglm and celer solve one
