@@ -427,3 +427,21 @@ def test_cli_paper_settings(files, capsys, tmp_path):
     assert (rec["scale"], rec["overlap"], rec["mu"], rec["tol"]) == (PAPER["scale"], PAPER["overlap"], PAPER["mu"],
                                                                      PAPER["tol"])
     assert rec["max_iter"] == 40  # an explicit option wins over --paper
+
+
+@pytest.mark.parametrize("kind", MASK_KINDS)
+def test_grouped_operator_product_equals_the_gather_form(kind):
+    """The non-periodic path's Phi_b D (one GEMM per patch pixel) against PatchOperators.times (a gather per view)."""
+    from lfproc.recon._reconstruct import _operator_times
+
+    size = (21, 19)
+    atoms = dct_dictionary((5, 5, 8, 8, 3), 150).atoms.astype(np.float32)
+    by_pixel = np.ascontiguousarray(atoms.reshape(25, 192, -1).transpose(1, 0, 2))
+    for cfa in ("RGGB", "GBRG"):
+        mask = make_mask(kind, shots=2, views=VIEWS, size=size, period=None, random_state=4)
+        tops, lefts = patch_grid(size, 8, 4)
+        ops = patch_operators(mask, views=VIEWS, cfa_pattern=cfa, tops=np.repeat(tops, len(lefts)),
+                              lefts=np.tile(lefts, len(tops)), size=8, sensor_size=size)
+        sel = np.arange(ops.n_operators)[1:]
+        np.testing.assert_allclose(_operator_times(ops, sel, atoms, by_pixel), ops.times(atoms, sel),
+                                   rtol=1e-5, atol=1e-6)
