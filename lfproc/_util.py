@@ -28,6 +28,7 @@ __all__ = [
     "to_jsonable",
     "file_sha256",
     "quiet",
+    "zip_first_member",
     "freeze",
     "frozen_array",
     "is_frozen",
@@ -278,3 +279,22 @@ def quiet():
         captured = tmp.read(1 << 16).decode("utf-8", errors="replace")
         tmp.close()
         lines.extend(line.strip() for line in (py_out.getvalue() + "\n" + captured).splitlines() if line.strip())
+
+
+def zip_first_member(path: str | os.PathLike) -> str | None:
+    """Name of the first member of a ZIP archive (lfproc's .npz files start with their JSON
+    header), or None when ``path`` is not a readable ZIP file."""
+    import zipfile
+
+    path = Path(path)
+    if not path.is_file():
+        return None
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(4) != b"PK\x03\x04":
+                return None
+        with zipfile.ZipFile(path) as zf:
+            infos = zf.infolist()
+            return infos[0].filename if infos else None
+    except (OSError, zipfile.BadZipFile):
+        return None

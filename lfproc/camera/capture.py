@@ -325,18 +325,9 @@ def _num(v: float):
 
 def is_capture_file(path: str | os.PathLike) -> bool:
     """True when ``path`` is a ZIP archive whose first member is the capture header."""
-    path = Path(path)
-    if not path.is_file():
-        return False
-    try:
-        with open(path, "rb") as fh:
-            if fh.read(4) != b"PK\x03\x04":
-                return False
-        with zipfile.ZipFile(path) as zf:
-            infos = zf.infolist()
-            return bool(infos) and infos[0].filename == HEADER_NAME
-    except (OSError, zipfile.BadZipFile):
-        return False
+    from .._util import zip_first_member
+
+    return zip_first_member(path) == HEADER_NAME
 
 
 #: Limits of capture files (checked on the header before any array is read).

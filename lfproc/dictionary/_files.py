@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from .._util import ReadOnlyState, frozen_array, to_jsonable
+from .._util import ReadOnlyState, frozen_array, to_jsonable, zip_first_member
 from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 from ..io import atomic_file
@@ -192,18 +192,7 @@ def is_dictionary_file(path: str | os.PathLike) -> bool:
     """True for a shipped name or a ZIP archive whose first member is the dictionary header."""
     if str(path) in SHIPPED and not Path(path).exists():
         return True
-    path = Path(path)
-    if not path.is_file():
-        return False
-    try:
-        with open(path, "rb") as fh:
-            if fh.read(4) != b"PK\x03\x04":
-                return False
-        with zipfile.ZipFile(path) as zf:
-            infos = zf.infolist()
-            return bool(infos) and infos[0].filename == HEADER_NAME
-    except (OSError, zipfile.BadZipFile):
-        return False
+    return zip_first_member(path) == HEADER_NAME
 
 
 def shipped_path(name: str) -> Path:
