@@ -238,6 +238,7 @@ def _rewrite(src, dst, *, header=None, atoms=None):
     ("huge", "field 'atoms'"),
     ("norm", "unit-norm"),
     ("truncated", "not an lfproc dictionary|corrupt"),
+    ("nested", "nest|deep|depth"),
 ])
 def test_dictionary_file_errors(tmp_path, case, match):
     src = save_dictionary(_small_dictionary(), tmp_path / "ok.npz", dtype="float32")
@@ -256,6 +257,9 @@ def test_dictionary_file_errors(tmp_path, case, match):
         _rewrite(src, dst, header={"atoms": 10**9})
     elif case == "norm":
         _rewrite(src, dst, atoms=atoms * 1.5)
+    elif case == "nested":  # JSON nested deeper than the reader accepts (not parsed: refused first)
+        with zipfile.ZipFile(dst, "w") as zf:
+            zf.writestr(HEADER_NAME, '{"schema": "lfproc.dictionary", "x": ' + "[" * 5000 + "]" * 5000 + "}")
     else:
         dst.write_bytes(src.read_bytes()[:300])
     with pytest.raises(FileFormatError, match=match) as info:

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _untrusted as ut
 from .._util import ReadOnlyState, frozen_array, to_jsonable, zip_first_member
 from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
@@ -272,20 +273,15 @@ def _read_member(zf: zipfile.ZipFile, name: str, limit: int, where: str) -> byte
         raise FileFormatError(f"{where}: member {name!r} expands to {info.file_size} bytes; expected at most {limit}")
     try:
         with zf.open(info) as fh:
-            data = fh.read(limit + 1)
+            data = ut.read_capped(fh, limit, source=where, what=f"member {name!r}")
     except (zipfile.BadZipFile, OSError, EOFError, zlib.error) as exc:
         raise FileFormatError(f"{where}: member {name!r} is corrupt ({exc})") from None
-    if len(data) > limit:
-        raise FileFormatError(f"{where}: member {name!r} expands beyond {limit} bytes")
     return data
 
 
 def _read_header(zf: zipfile.ZipFile, where: str) -> dict:
     raw = _read_member(zf, HEADER_NAME, 1 << 20, where)
-    try:
-        header = json.loads(raw.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
-        raise FileFormatError(f"{where}: header is not valid JSON ({str(exc)[:80]})") from None
+    header = ut.parse_json(raw, source=where, what="dictionary header", max_bytes=1 << 20)  # bounded size and depth
     if not isinstance(header, dict):
         raise FileFormatError(f"{where}: header: expected a JSON object")
     if header.get("schema") != SCHEMA:
