@@ -2,10 +2,11 @@
 
 Usage::
 
-    python benchmarks/reconstruct_quality.py [--size 128] [--scenes 4] [--data ../shared/data]
+    python benchmarks/reconstruct_quality.py [--size H [W]] [--scenes 4] [--data ../shared/data]
                                              [--json OUT.json] [--solver admm] [--max-iter N] [--tol T]
 
-The scenes are ``lfproc.synth`` light fields (5 x 5 views, ``--size`` pixels square) whose
+The scenes are ``lfproc.synth`` light fields (5 x 5 views of ``--size`` pixels; default
+434 x 625, the Lytro Illum's decoded views and the resolution of the paper's test light fields) whose
 textured surfaces carry HDR photographs of the shared data (``hdr/ScanLines_*.exr``,
 ``hdr_cc0/*.exr``); the shipped ``default`` dictionary was trained on procedural synthetic
 scenes only (its provenance: ``lfproc dictionary train --synthetic``), so it never saw them.
@@ -73,10 +74,10 @@ def ablation_settings() -> dict[str, dict]:
     }
 
 
-def scene(kind: str, texture: Path, seed: int, size: int):
+def scene(kind: str, texture: Path, seed: int, size: tuple[int, int]):
     from lfproc.synth import synthesize
 
-    return synthesize(kind, size=(size, size), views=5, textures=[texture], random_state=seed)
+    return synthesize(kind, size=tuple(size), views=5, textures=[texture], random_state=seed)
 
 
 def capture(lf, name: str, seed: int, *, mask_period: int | None = 4):
@@ -104,7 +105,8 @@ def main() -> None:
     from lfproc.recon import reconstruct
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--size", type=int, default=128)
+    parser.add_argument("--size", type=int, nargs="+", default=[434, 625], metavar="H [W]",
+                        help="view size in pixels (one number: square; default: 434 625, Lytro Illum)")
     parser.add_argument("--scenes", type=int, default=4, help=f"how many of the {len(SCENES)} scenes")
     parser.add_argument("--data", type=Path, default=Path(os.environ.get(
         "LFPROC_SHARED_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data")),
@@ -116,6 +118,9 @@ def main() -> None:
     parser.add_argument("--captures", default=",".join(CAPTURES), help="comma-separated subset of " + ", ".join(CAPTURES))
     parser.add_argument("--ablation", action="store_true", help="the paper's settings vs lfproc's defaults")
     args = parser.parse_args()
+    if len(args.size) not in (1, 2):
+        parser.error(f"--size: expected H or H W, got {len(args.size)} numbers")
+    args.size = (args.size[0], args.size[-1])
     if args.ablation:
         return ablation(args)
     os.environ.setdefault("LFPROC_PROGRESS", "0")
@@ -123,7 +128,7 @@ def main() -> None:
     dictionary = load_dictionary("default")
     names = [c.strip() for c in args.captures.split(",")]
     rows = []
-    print(f"| scene (5x5 x {args.size}x{args.size}) | stops | oracle (10 atoms) | "
+    print(f"| scene (5x5 x {args.size[0]}x{args.size[1]}) | stops | oracle (10 atoms) | "
           + " | ".join(names) + " |")
     print("|---|---|---|" + "---|" * len(names))
     for kind, texture, seed in SCENES[:args.scenes]:
@@ -168,7 +173,7 @@ def ablation(args) -> None:
     for kind, texture, seed in SCENES[:args.scenes]:
         lf = scene(kind, args.data / texture, seed, args.size)
         data.append((f"{kind} + {Path(texture).name}", lf, capture(lf, "2 random", seed)))
-    print(f"2 shots, random ISO, medium noise, 5x5 x {args.size}x{args.size}; PU21-PSNR dB / PU21-SSIM per scene "
+    print(f"2 shots, random ISO, medium noise, 5x5 x {args.size[0]}x{args.size[1]}; PU21-PSNR dB / PU21-SSIM per scene "
           "(" + "; ".join(name for name, _, _ in data) + ")")
     print("| settings | " + " | ".join(f"scene {i + 1}" for i in range(len(data))) + " | mean PSNR | mean SSIM | "
           "seconds per scene | iterations |")
