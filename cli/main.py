@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 import warnings
 from functools import partial
@@ -67,6 +68,14 @@ def _keep_warning(message, category, filename, lineno, file=None, line=None, *, 
         show(message, category, filename, lineno, file, line)
 
 
+def _silence_stdout() -> None:
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # stdout without a file descriptor (tests, IDEs)
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``lfproc`` with ``argv`` (default: ``sys.argv[1:]``); return the exit code."""
     parser = build_parser()
@@ -86,6 +95,11 @@ def main(argv: list[str] | None = None) -> int:
         for message in kept:
             print(f"lfproc {args.command}: warning: {message}", file=sys.stderr)
         return code
+    except BrokenPipeError:
+        # the reader of our output went away (``lfproc ... | head``): stop quietly, as other
+        # command-line tools do; stdout goes to devnull so the interpreter's final flush is quiet too
+        _silence_stdout()
+        return 1
     except (LfprocError, OSError) as exc:
         if args.debug:
             raise

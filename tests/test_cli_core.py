@@ -112,3 +112,22 @@ def test_convert_wrong_shape_folder(tmp_path, capsys):
     write_image(folder / "view_01_01.exr", np.ones((4, 3, 3)), force=True)
     code, _, err = run(capsys, "convert", str(folder), str(tmp_path / "o.exr"))
     assert code == 2 and "view size" in err and not (tmp_path / "o.exr").exists()
+
+
+def test_a_closed_pipe_ends_quietly(tmp_path):
+    """``lfproc info X | head -0``: the reader is gone before lfproc writes (a pipe whose read end
+    is closed: every write fails with EPIPE). No traceback, no 'error: Broken pipe' line."""
+    import os
+    import subprocess
+    import sys
+
+    write_lightfield(LightField(np.ones((5, 5, 4, 6, 3), np.float32)), tmp_path / "lf.exr")
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        proc = subprocess.run([sys.executable, "-c", "import sys; from lfproc.cli.main import main; "
+                               f"sys.exit(main(['info', {str(tmp_path / 'lf.exr')!r}]))"],
+                              stdout=w, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(w)
+    assert proc.stderr == "" and proc.returncode == 1
