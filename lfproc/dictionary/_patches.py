@@ -32,7 +32,7 @@ from .._util import check_random_state
 from ..errors import InputError, MissingFileError, ShapeError
 from ..lightfield import LightField
 
-__all__ = ["extract_patches", "training_patches", "collect_lightfields", "patch_grid", "NORMALISATIONS"]
+__all__ = ["extract_patches", "training_patches", "collect_lightfields", "NORMALISATIONS"]
 
 NORMALISATIONS = ("l2", "none")
 
@@ -74,21 +74,6 @@ def extract_patches(lf, patch, tops, lefts) -> np.ndarray:
     win = np.lib.stride_tricks.sliding_window_view(data, (p, p), axis=(2, 3))  # (V, U, H', W', C, P, P)
     out = win[:, :, tops, lefts]  # (V, U, N, C, P, P)
     return np.ascontiguousarray(out.transpose(2, 0, 1, 4, 5, 3), dtype=np.float32).reshape(len(tops), -1)
-
-
-def patch_grid(size: tuple[int, int], p: int, stride: int) -> tuple[np.ndarray, np.ndarray]:
-    """Top-left corners of patches on a grid of ``stride`` covering ``size`` (the last row and
-    column of patches are moved to touch the border)."""
-    h, w = size
-
-    def axis(n):
-        starts = list(range(0, max(n - p, 0) + 1, stride))
-        if starts[-1] != n - p:
-            starts.append(n - p)
-        return np.asarray(starts)
-
-    ty, tx = np.meshgrid(axis(h), axis(w), indexing="ij")
-    return ty.ravel(), tx.ravel()
 
 
 def _flat_or_empty(x: np.ndarray, flat_cv: float) -> tuple[np.ndarray, np.ndarray]:

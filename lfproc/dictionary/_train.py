@@ -36,7 +36,7 @@ from ._dct import dct_dictionary
 from ._files import Dictionary, load_dictionary
 from ._ksvd import ksvd
 from ._omp import gram_matrix, omp_codes
-from ._patches import extract_patches, patch_grid, training_patches
+from ._patches import extract_patches, training_patches
 
 __all__ = ["Preset", "PRESETS", "synthetic_lightfields", "train_dictionary", "evaluate_dictionary", "approximate"]
 
@@ -187,7 +187,9 @@ def approximate(dictionary: Dictionary, lf, *, sparsity: int | None = None, stri
     if stride < 1 or stride > p:
         raise InputError(f"stride: expected 1..{p} (the patch size), got {stride}")
     h, w = data.shape[2:4]
-    tops, lefts = patch_grid((h, w), p, stride)
+    from ..camera.projection import patch_grid  # the reconstruction's grid: same patches
+
+    tops, lefts = (a.ravel() for a in np.meshgrid(*patch_grid((h, w), p, stride), indexing="ij"))
     acc = np.zeros((v, u, h, w, c), dtype=np.float64)
     count = np.zeros((h, w), dtype=np.float64)
     gram = gram_matrix(d.atoms)
