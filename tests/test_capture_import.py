@@ -167,7 +167,11 @@ def bad_inputs(files, tmp_path, dng_writer):
     wrong_size = dng_writer(d / "small.dng", np.full((H, W - 8), 100, np.uint16), cfa_pattern="GRBG")
     np.save(d / "flat_codes.npy", np.full((2, 4, 4), 0.5, np.float32))
     (d / "text.dng").write_text("not a raw file")
-    return {"wrong_size": wrong_size, "bad_codes": d / "flat_codes.npy", "text": d / "text.dng"}
+    with open(d / "huge_codes.npy", "wb") as fh:  # a header announcing 8 TB over 64 bytes of data
+        np.lib.format.write_array_header_1_0(fh, {"descr": "<f8", "fortran_order": False, "shape": (10**6, 10**6)})
+        fh.write(bytes(64))
+    return {"wrong_size": wrong_size, "bad_codes": d / "flat_codes.npy", "text": d / "text.dng",
+            "huge_codes": d / "huge_codes.npy"}
 
 
 def _argv(files, out, **change):
@@ -191,6 +195,8 @@ def _argv(files, out, **change):
      r"text.dng: not a raw file rawpy can read"),
     ("mask codes of the wrong shape", lambda f, b: {"--mask": str(b["bad_codes"])},
      r"flat_codes.npy: mask codes \(random\): expected 6 dimensions, got shape \(2, 4, 4\)"),
+    ("mask codes announcing 8 TB", lambda f, b: {"--mask": str(b["huge_codes"])},
+     r"huge_codes.npy: mask codes of shape \(1000000, 1000000\) \(float64\) needs 8000000000000 bytes, above the limit"),
     ("mask codes for another sensor", lambda f, b: {"--mask-period": None},
      r"codes.npy: random mask: codes cover \(4, 4\) pixels, the sensor is \(40, 48\)"),
     ("missing mask file", lambda f, b: {"--mask": str(f["dir"] / "none.npy")}, r"none.npy: no such mask code file"),
