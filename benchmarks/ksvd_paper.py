@@ -6,7 +6,7 @@ synthetic scenes (the ``paper`` preset's training set) and are written to a ``.n
 first (in a separate process), so the training process streams them from disk as it would in
 a real run; its peak resident memory is what the training needs.
 
-    python benchmarks/ksvd_paper.py --work /tmp/ksvd-paper          # full size (~1 h on 2 cores)
+    python benchmarks/ksvd_paper.py --work /tmp/ksvd-paper          # full size (~50 min, 10 GB of RAM, 7.3 GB of disk)
     python benchmarks/ksvd_paper.py --work /tmp/k --patches 30000   # a tenth, for a quick look
 """
 

@@ -62,7 +62,7 @@ from ._solvers import SOLVERS, BatchOperator, SharedOperator, admm, fista, omp
 
 __all__ = ["reconstruct", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "patch_count"]
 
-SCALES = ("patch", "global", "noise")
+SCALES = ("patch", "global", "noise", "universal")
 OVERLAPS = ("mean", "scale", "window", "scale-window")
 #: Defaults of :func:`reconstruct` (the paper's settings where it gives them: method.md section 4).
 #: Defaults of :func:`reconstruct`, measured on HDR-photo-textured light fields (README, benchmarks/
@@ -144,6 +144,9 @@ def _solve_group(op, y, w, rowsum, settings: _Settings, n: int) -> tuple[np.ndar
     m = y.shape[1]  # mu weighs the data term's mean over the measurements (module notes)
     if settings.scale == "noise":  # the raw chi-square data term (module notes)
         mu = settings.mu * m / (cp * om) ** 2
+    elif settings.scale == "universal":  # chi-square data term, l1 weight at the noise level of A^T W^2 T
+        s_n = np.sqrt(sub.colnorm2(wn * wn).astype(np.float64).mean(axis=1))  # rms_j ||W' A_j||
+        mu = settings.mu * math.sqrt(2.0 * math.log(k_n)) * s_n / (om * cp)
     elif settings.scale == "patch":
         mu = np.full(len(rows), settings.mu * m)
     else:  # one mu for the raw problem of every patch (module notes)
@@ -560,6 +563,8 @@ def reconstruct(
                                 "mean square one",
                        "noise": "1/(2m)||W(Phi D a - T)||^2 + (mu/c_p)||a||_1 per patch, W = 1/std(T) (chi-square), "
                                 "c_p the patch's l2 norm",
+                       "universal": "1/2||W(Phi D a - T)||^2 + mu sqrt(2 ln K) s_p ||a||_1 per patch, W = 1/std(T), "
+                                    "s_p = rms_j ||W Phi D_j|| (the noise level of Phi D^T W^2 T)",
                        "global": "as 'patch' but with one scale for the whole capture"}[scale],
         "tol": tol,
         "max_iter": max_iter if solver != "omp" else None,
