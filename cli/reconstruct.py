@@ -24,16 +24,19 @@ def register(sub, common) -> None:
                    help="admm (default; batched, one factor per operator phase), fista, or omp (fast greedy mode)")
     p.add_argument("--stride", type=int, default=4, help="patch spacing in pixels, 1..patch size (default 4)")
     p.add_argument("--mu", type=float, default=None,
-                   help="l1 weight relative to the patch's norm against the chi-square data term (default 1); with "
-                        "--scale patch relative to a unit-norm patch (the paper's: 1e-4)")
-    p.add_argument("--max-iter", type=int, default=None, help="iteration limit (default 50 ADMM, 1000 FISTA)")
+                   help="l1 weight in units of the noise level of the patch's correlations with the atoms (default "
+                        "0.25); with --scale noise relative to the patch's norm; with --scale patch relative to a "
+                        "unit-norm patch (the paper's: 1e-4)")
+    p.add_argument("--max-iter", type=int, default=None, help="iteration limit (default 100 ADMM, 1000 FISTA)")
     p.add_argument("--tol", type=float, default=None,
-                   help="relative change that stops a patch (default 1e-2 ADMM, 2^-15 = 3.0517578125e-05 FISTA; "
+                   help="relative change that stops a patch (default 1e-3 ADMM, 2^-15 = 3.0517578125e-05 FISTA; "
                         "the paper's: --tol 3.0517578125e-05 --max-iter 300)")
     p.add_argument("--sparsity", type=int, default=None, help="atoms per patch for omp (default: the dictionary's)")
-    p.add_argument("--scale", default="noise", metavar="noise|patch|global",
-                   help="HDR scale: per-patch codes with the chi-square data term (default), per-patch codes and "
-                        "data term (the paper-faithful reading), or one scale for the capture")
+    p.add_argument("--scale", default=None, metavar="universal|noise|patch|global",
+                   help="HDR scale: the chi-square data term with the l1 weight at its noise level (universal, "
+                        "default), the chi-square data term with the l1 weight relative to the patch's norm (noise), "
+                        "per-patch codes and data term (patch: the paper-faithful reading), or one scale for the "
+                        "capture (global)")
     p.add_argument("--overlap", default="scale-window", metavar="scale-window|scale|window|mean",
                    help="how overlapping patch estimates are combined (default scale-window; the paper's: mean)")
     p.add_argument("--paper", action="store_true",
@@ -69,10 +72,10 @@ def run(args) -> int:
     options = {k: base[k] for k in ("mu", "tol", "max_iter") if k in base}
     options.update(given)
     if args.paper:
-        scale = args.scale if args.scale != "noise" else PAPER["scale"]
+        scale = args.scale or PAPER["scale"]
         overlap = args.overlap if args.overlap != "scale-window" else PAPER["overlap"]
     else:
-        scale, overlap = args.scale, args.overlap
+        scale, overlap = args.scale or DEFAULTS["scale"], args.overlap
     options.update(solver=args.solver, stride=args.stride, sparsity=args.sparsity, scale=scale, overlap=overlap,
                    workers=args.workers, scheduler=args.scheduler, threads=args.threads)
     if args.per_shot is not None:

@@ -24,7 +24,7 @@ bright patches, and does not change with the number of shots; the code is scaled
 regularisation) overfits the noise. ``scale="global"`` uses one ``c`` and one weight scale for
 the whole capture instead (the 99.9th percentile of the usable ``T`` over the mean row
 transmittance, and the rms of all usable weights): what normalising the capture to its peak
-would do. ``scale="noise"`` (the default) keeps the per-patch units of ``"patch"`` for the
+would do. ``scale="noise"`` (the previous default) keeps the per-patch units of ``"patch"`` for the
 code but not its per-patch weighting of the data term: each patch solves
 ``1/(2m) ||W (Phi_p D a - T_p)||^2 + (mu / c_p) ||a||_1`` with the raw weights ``W = 1/std(T)``:
 the data term is the chi-square of the patch (its residuals in units of their noise), the l1
@@ -33,7 +33,15 @@ weight is relative to the patch's norm (a scale-free prior), and ``mu`` is a pur
 data and dark, noisy ones are regularised more, in any capture. With ``"patch"`` a patch with a
 bright light on a dark background has a tiny data term (its ``c_p`` is the light's level, its
 weight rms the dark pixels'), and the lasso shrinks the light away (measured: street lamps
-lost, 15 dB PU21; README).
+lost, 15 dB PU21; README). But its shrinkage of a patch goes as ``mu / SNR^2`` with the
+*per-measurement* SNR: a dark patch of 5 electrons per pixel (SNR ~1.5 each, ~20 for the patch's
+mean over 128 measurements) was shrunk to zero, and the dark half of a 24-stop scene came out
+black (README). ``scale="universal"`` (the default) sets the l1 weight where the noise is: the
+raw problem ``1/2 ||W (Phi_p D a - T_p)||^2 + lambda_p ||a||_1`` with
+``lambda_p = mu sqrt(2 ln K) s_p``, ``s_p = rms_j ||W Phi_p d_j||`` the standard deviation of the
+noise in an atom's correlation ``d_j^T Phi_p^T W^2 T_p`` (``mu = 1`` is Donoho and Johnstone's
+universal threshold; 0.25 measured best). An atom then enters when its correlation stands out
+of the noise of the *whole* patch, so the shrinkage goes as ``1 / SNR`` of the patch, not of a pixel.
 
 Overlapping estimates are averaged (``overlap="mean"``, the paper's) or weighted per pixel
 (``"scale"``: by ``1 / c_p^2``, the inverse of a patch's error variance when its error is
@@ -64,13 +72,13 @@ __all__ = ["reconstruct", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "patch_coun
 
 SCALES = ("patch", "global", "noise", "universal")
 OVERLAPS = ("mean", "scale", "window", "scale-window")
-#: Defaults of :func:`reconstruct` (the paper's settings where it gives them: method.md section 4).
 #: Defaults of :func:`reconstruct`, measured on HDR-photo-textured light fields (README, benchmarks/
-#: reconstruct_quality.py): the chi-square data term with ``mu = 1`` (``scale="noise"``), overlaps weighted by scale and a centre
-#: window, ADMM stopped at a tolerance of 1e-2 or 50 iterations. The paper's settings are :data:`PAPER`.
-DEFAULTS = {"stride": 4, "mu": 1.0, "tol": {"admm": 1e-2, "fista": 2.0**-15, "omp": None},
-            "max_iter": {"admm": 50, "fista": 1000, "omp": None},
-            "block_patches": 512, "scale": "noise", "overlap": "scale-window"}
+#: reconstruct_quality.py, tuned on scenes other than the README's): the chi-square data term with the
+#: l1 weight at 0.25 of its universal noise level (``scale="universal"``), overlaps weighted by scale and
+#: a centre window, ADMM stopped at a tolerance of 1e-3 or 100 iterations. The paper's settings are :data:`PAPER`.
+DEFAULTS = {"stride": 4, "mu": 0.25, "tol": {"admm": 1e-3, "fista": 2.0**-15, "omp": None},
+            "max_iter": {"admm": 100, "fista": 1000, "omp": None},
+            "block_patches": 512, "scale": "universal", "overlap": "scale-window"}
 #: The paper's settings (method.md section 4: mu 1e-4 on patches of unit norm, tolerance 2^-15, plain averages).
 PAPER = {"stride": 4, "mu": 1e-4, "tol": 2.0**-15, "max_iter": 300, "scale": "patch", "overlap": "mean"}
 #: Bytes of per-patch operators ``A_p`` materialised at once for non-periodic masks.
@@ -358,21 +366,24 @@ def reconstruct(
         Patch spacing in pixels (1 .. patch size; 4 as the paper). Any stride works with the
         Bayer CFA: patch operators carry their CFA phase.
     mu : float
-        l1 weight (module notes): with ``scale="noise"`` (default 1, measured) ``mu / c_p``
-        against the chi-square data term averaged over the measurements; with
+        l1 weight (module notes): with ``scale="universal"`` (default 0.25, measured)
+        ``mu sqrt(2 ln K) s_p`` against the chi-square data term, ``s_p`` the rms of the weighted
+        atoms' norms (the noise level of their correlations with the data); with
+        ``scale="noise"`` ``mu / c_p`` against the chi-square data term averaged over the measurements; with
         ``scale="patch"`` relative to a patch of unit norm with weights of mean square one
         (the paper's 1e-4: :data:`PAPER`). Ignored by ``omp``.
     max_iter : int, optional
-        Iteration limit (default 50 for ADMM, 1000 for FISTA). Ignored by ``omp``.
+        Iteration limit (default 100 for ADMM, 1000 for FISTA). Ignored by ``omp``.
     tol : float, optional
         Stop a patch when the relative change of its code (and, for ADMM, its primal residual)
-        is at most ``tol`` (default 1e-2 for ADMM, 2^-15 for FISTA; the paper's: 2^-15).
+        is at most ``tol`` (default 1e-3 for ADMM, 2^-15 for FISTA; the paper's: 2^-15).
     sparsity : int, optional
         Atoms per patch for ``omp`` (default: the dictionary's training sparsity).
-    scale : {"noise", "patch", "global"}
-        How HDR scale is handled (module notes): per-patch codes with the chi-square data term
-        (``"noise"``, default), per-patch codes and data term (``"patch"``, the first
-        implementation's), or one scale for the capture.
+    scale : {"universal", "noise", "patch", "global"}
+        How HDR scale is handled (module notes): the chi-square data term with the l1 weight at
+        its noise level (``"universal"``, default), the chi-square data term with the l1 weight
+        relative to the patch's norm (``"noise"``, the previous default), per-patch codes and data
+        term (``"patch"``, the first implementation's), or one scale for the capture.
     block_patches : int
         About this many patches per block, the unit of work (memory is bounded by a block).
         The output depends on it only through float rounding in the batched products.
