@@ -62,13 +62,16 @@ def ablation_settings() -> dict[str, dict]:
     from lfproc.recon import PAPER
 
     early = dict(tol=1e-2, max_iter=50)
+    noise = dict(scale="noise", mu=1.0, **early)  # the previous defaults' scale
     return {
         "paper (per-patch data term, mu 1e-4, tol 2^-15, 300 it., mean)": dict(PAPER),
         "paper, stopped at tol 1e-2 / 50 it.": dict(PAPER, **early),
-        "+ chi-square data term, mu 1 (scale=noise)": dict(PAPER, **early, scale="noise", mu=1.0),
-        "+ overlaps weighted by 1/c_p^2 (overlap=scale)": dict(PAPER, **early, scale="noise", mu=1.0, overlap="scale"),
-        "+ centre window = lfproc defaults (overlap=scale-window)": {},
-        "defaults, tol 1e-3 / 100 it.": dict(tol=1e-3, max_iter=100),
+        "+ chi-square data term, mu 1 (scale=noise)": dict(PAPER, **noise),
+        "+ overlaps weighted by 1/c_p^2 (overlap=scale)": dict(PAPER, **noise, overlap="scale"),
+        "+ centre window (overlap=scale-window) = the previous defaults": dict(noise),
+        "+ l1 weight at the noise level, mu 0.25 (scale=universal), 50 it.": dict(early, scale="universal", mu=0.25),
+        "+ tol 1e-3 / 100 it. = lfproc defaults": {},
+        "defaults, 150 it.": dict(max_iter=150),
         "defaults + least-squares debias on 30 atoms": dict(debias=30),
         "defaults with omp (10 atoms)": dict(solver="omp"),
     }
@@ -117,6 +120,8 @@ def main() -> None:
     parser.add_argument("--tol", type=float, default=None)
     parser.add_argument("--captures", default=",".join(CAPTURES), help="comma-separated subset of " + ", ".join(CAPTURES))
     parser.add_argument("--ablation", action="store_true", help="the paper's settings vs lfproc's defaults")
+    parser.add_argument("--settings", default=None,
+                        help="with --ablation: comma-separated row numbers (1-based) of the ablation to run")
     args = parser.parse_args()
     if len(args.size) not in (1, 2):
         parser.error(f"--size: expected H or H W, got {len(args.size)} numbers")
@@ -169,6 +174,9 @@ def ablation(args) -> None:
     warnings.simplefilter("ignore")
     dictionary = load_dictionary("default")
     settings = ablation_settings()
+    if args.settings:
+        chosen = [int(i) for i in args.settings.split(",")]
+        settings = {k: v for i, (k, v) in enumerate(settings.items(), 1) if i in chosen}
     data = []
     for kind, texture, seed in SCENES[:args.scenes]:
         lf = scene(kind, args.data / texture, seed, args.size)
