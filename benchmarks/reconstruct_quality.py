@@ -115,6 +115,8 @@ def main() -> None:
         "LFPROC_SHARED_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data")),
                         help="the shared data folder (default $LFPROC_SHARED_DATA or ../shared/data)")
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--dictionary", default="default",
+                        help="dictionary: the shipped 'default' or a .npz (e.g. a natural one, README)")
     parser.add_argument("--solver", default="admm")
     parser.add_argument("--max-iter", type=int, default=None)
     parser.add_argument("--tol", type=float, default=None)
@@ -130,7 +132,7 @@ def main() -> None:
         return ablation(args)
     os.environ.setdefault("LFPROC_PROGRESS", "0")
     warnings.simplefilter("ignore")  # saturation warnings of the brightest scenes: expected, reported by the capture
-    dictionary = load_dictionary("default")
+    dictionary = load_dictionary(args.dictionary)
     names = [c.strip() for c in args.captures.split(",")]
     rows = []
     print(f"| scene (5x5 x {args.size[0]}x{args.size[1]}) | stops | oracle (10 atoms) | "
@@ -172,7 +174,7 @@ def ablation(args) -> None:
 
     os.environ.setdefault("LFPROC_PROGRESS", "0")
     warnings.simplefilter("ignore")
-    dictionary = load_dictionary("default")
+    dictionary = load_dictionary(args.dictionary)
     settings = ablation_settings()
     if args.settings:
         chosen = [int(i) for i in args.settings.split(",")]

@@ -104,7 +104,8 @@ def run_train(args) -> int:
     d = train_dictionary(lfs, preset=args.preset, synthetic=args.synthetic, patch=patch, atoms=args.atoms,
                          sparsity=args.sparsity, iterations=args.iterations, patches=args.patches,
                          normalise=args.normalise, seed=args.seed, checkpoint=checkpoint, scheduler=args.scheduler,
-                         command=_command(args))
+                         command=_command(args),
+                         sources=[f"{f} ({lf.source})" if lf.source else str(f) for f, lf in zip(files, lfs)])
     save_dictionary(d, args.output, dtype=args.dtype, force=args.force)
     if args.checkpoint is None:
         shutil.rmtree(checkpoint, ignore_errors=True)

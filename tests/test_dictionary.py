@@ -335,6 +335,19 @@ def _cli(argv, capsys):
     return code, out, err
 
 
+def test_cli_training_files_are_named_in_the_provenance(tmp_path, capsys):
+    """A file's path is recorded, with the light field's own source (here lfproc synth's scene)."""
+    lf_path = tmp_path / "scene.exr"
+    assert main(["synth", "-o", str(lf_path), "--scene", "layers", "--size", "48", "48", "--seed", "4"]) == 0
+    capsys.readouterr()
+    out = tmp_path / "f.npz"
+    code, _, err = _cli(["dictionary", "train", str(lf_path), "--preset", "tiny", "--atoms", "60", "--patches", "300",
+                         "--iterations", "1", "-o", str(out)], capsys)
+    assert code == 0, err
+    code, stdout, _ = _cli(["dictionary", "info", str(out), "--json"], capsys)
+    assert json.loads(stdout)["data"]["files"] == [f"{lf_path} (synth:layers)"]
+
+
 def test_cli_train_info_eval_preview(tmp_path, capsys):
     lf_path = tmp_path / "scene.exr"
     assert main(["synth", "-o", str(lf_path), "--scene", "window", "--size", "32", "32", "--seed", "2"]) == 0

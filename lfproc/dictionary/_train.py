@@ -107,6 +107,7 @@ def train_dictionary(
     checkpoint=None,
     scheduler: str | None = None,
     command: str | None = None,
+    sources: Sequence[str] | None = None,
 ) -> Dictionary:
     """Train a dictionary with K-SVD on HDR light fields (see the module documentation).
 
@@ -129,6 +130,8 @@ def train_dictionary(
         Dask scheduler address for the sparse-coding step.
     command : str, optional
         The command line, recorded in the file.
+    sources : sequence of str, optional
+        Names of ``lightfields`` recorded in the file (default: each light field's ``source``).
 
     Returns
     -------
@@ -143,7 +146,9 @@ def train_dictionary(
     if isinstance(seed, bool) or int(seed) != seed or seed < 0:
         raise InputError(f"seed: expected a non-negative integer, got {seed!r}")
     lfs = list(lightfields or [])
-    data_desc: dict[str, Any] = {"files": _describe_sources(lfs)}
+    if sources is not None and len(sources) != len(lfs):
+        raise InputError(f"sources: expected one name per light field ({len(lfs)}), got {len(sources)}")
+    data_desc: dict[str, Any] = {"files": list(map(str, sources)) if sources is not None else _describe_sources(lfs)}
     if synthetic:
         lfs += list(progress(synthetic_lightfields(p.synthetic_scenes, views=patch[:2], size=p.synthetic_size,
                                                    seed=seed), total=p.synthetic_scenes, desc="synthetic scenes"))
