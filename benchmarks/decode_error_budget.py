@@ -96,7 +96,6 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--demosaic", default="opencv-ea", choices=("opencv-ea", "malvar2004", "bilinear"))
     args = ap.parse_args(argv)
-    import cv2
 
     from lfproc.lytro.decode import _sample_views, decode_lenslet, demosaic, hex_to_square
     from lfproc.lytro.grid import estimate_grid

@@ -31,7 +31,6 @@ def register(sub, common) -> None:
 
 def run(args) -> int:
     from lfproc.dataset import build_dataset
-    from lfproc.errors import InputError
 
     if args.workers is not None:
         import os

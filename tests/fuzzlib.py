@@ -19,13 +19,11 @@ the same input.
 
 from __future__ import annotations
 
-import contextlib
 import copy
 import gzip
 import hashlib
 import io
 import json
-import math
 import os
 import random
 import shutil

@@ -16,7 +16,7 @@ import pytest
 
 from lfproc.cli.main import main
 from lfproc.dictionary import (Dictionary, batch_omp, dct_dictionary, evaluate_dictionary, extract_patches, ksvd,
-                               load_dictionary, omp_codes, save_dictionary, train_dictionary, training_patches)
+                               load_dictionary, save_dictionary, train_dictionary, training_patches)
 from lfproc.dictionary._files import HEADER_NAME
 from lfproc.errors import FileFormatError, InputError, LfprocError, ShapeError
 from lfproc.synth import synthesize

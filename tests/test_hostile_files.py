@@ -4,12 +4,10 @@ line naming the file, no traceback and no output left behind."""
 
 from __future__ import annotations
 
-import gzip
 import io
 import json
 import os
 import sys
-import tarfile
 import tracemalloc
 import zipfile
 from pathlib import Path
@@ -22,7 +20,7 @@ import fuzzlib  # noqa: E402
 
 from lfproc.calib import load_profile, save_profile  # noqa: E402
 from lfproc.cli.main import main  # noqa: E402
-from lfproc.errors import LfprocError, UnsafeFileError  # noqa: E402
+from lfproc.errors import UnsafeFileError  # noqa: E402
 from lfproc.lytro import WhiteFrame, white_metadata, write_caldata_tar  # noqa: E402
 from lfproc.lytro.caldata import read_caldata  # noqa: E402
 from lfproc.lytro.whites import load_white_db  # noqa: E402

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import lfproc
-from lfproc.camera.capture import Capture, load_capture
+from lfproc.camera.capture import load_capture
 from lfproc.camera.projection import MASK_KINDS, build_operator, make_mask, patch_grid, patch_operators
 from lfproc.camera.simulate import auto_radiance_scale, simulate_capture
 from lfproc.cli.main import main

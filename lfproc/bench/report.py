@@ -295,11 +295,17 @@ def _plot_noise(rows, path: Path) -> None:
         if sum(math.isfinite(y) for y in ys) >= 2:
             ax.plot(x, ys, style, color="k", label=f"bracketing 4, {merge}")
     ax.set_xticks(x, NOISE_LEVELS)
-    ax.set_xlabel("noise level (paper Table VI)")
+    _finish(fig, ax, path, xlabel="noise level (paper Table VI)", legend_size=7,
+            title="Quality vs noise level (mean over scenes)")
+
+
+def _finish(fig, ax, path: Path, *, xlabel: str, title: str, legend_size: int) -> None:
+    """Label a PU21-PSNR plot, add grid and legend, and save it."""
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("PU21-PSNR (dB)")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    ax.set_title("Quality vs noise level (mean over scenes)")
+    ax.legend(fontsize=legend_size)
+    ax.set_title(title)
     fig.tight_layout()
     _save(fig, path)
 
@@ -331,13 +337,8 @@ def _plot_saturation(rows, path: Path) -> None:
     ax.axvline(100 * _SAT_LIMIT, color="grey", ls="--", lw=1)
     ax.text(100 * _SAT_LIMIT, ax.get_ylim()[0], " 15 %", color="grey", va="bottom", fontsize=8)
     ax.set_xscale("log")  # cells with no saturated measurement are drawn at 0.01 %
-    ax.set_xlabel("saturated measurements (%)")
-    ax.set_ylabel("PU21-PSNR (dB)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=6)
-    ax.set_title("Quality vs saturated fraction as ISO steps widen (joint, dual ISO)")
-    fig.tight_layout()
-    _save(fig, path)
+    _finish(fig, ax, path, xlabel="saturated measurements (%)", legend_size=6,
+            title="Quality vs saturated fraction as ISO steps widen (joint, dual ISO)")
 
 
 def _plot_measurements(rows, path: Path) -> None:
@@ -358,13 +359,8 @@ def _plot_measurements(rows, path: Path) -> None:
         if any(math.isfinite(y) for y in ys):
             ax.plot(shots, ys, style, color=colour, label=label, ms=7)
     ax.set_xticks([1, 2, 3, 4])
-    ax.set_xlabel("sensor images (measurements = images x H x W)")
-    ax.set_ylabel("PU21-PSNR (dB)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    ax.set_title("Joint multi-ISO vs bracketing at equal numbers of measurements")
-    fig.tight_layout()
-    _save(fig, path)
+    _finish(fig, ax, path, xlabel="sensor images (measurements = images x H x W)", legend_size=7,
+            title="Joint multi-ISO vs bracketing at equal numbers of measurements")
 
 
 def _tonemap(rgb: np.ndarray, white: float) -> np.ndarray:

@@ -54,7 +54,7 @@ from .._version import __version__
 from .iso import DEFAULT_ISOS, ISO_PATTERNS, iso_pattern
 from .capture import MAX_SHOTS, Capture, _num, _warn_saturation, file_sha256, observations
 from ..calib import load_profile
-from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
+from ..errors import InputError, ShapeError
 from ..lightfield import LightField, clean_nonfinite
 from .projection import MASK_KINDS, build_operator, make_mask
 from .sensor import expose

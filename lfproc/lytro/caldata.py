@@ -37,7 +37,7 @@ import numpy as np
 
 from .. import _untrusted as ut
 from .._version import __version__
-from ..errors import InputError, LfpFormatError, MissingFileError, ShapeError, UnsafeFileError
+from ..errors import InputError, LfpFormatError, MissingFileError, ShapeError
 from ..io import atomic_file
 from .capture import _get, _packing, _size, frame_fields, split_txt_metadata
 from .container import _parse_json, is_lfp, read_lfp, sha1_ref

@@ -55,7 +55,6 @@ import math
 import os
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -521,7 +520,6 @@ def reconstruct(
                                                              "shots", "channels", "periodic")}
         return task
 
-    total = acc = None
     acc = np.zeros((v_n, u_n, h, w, c_n), dtype=np.float32)
     wsum = np.zeros((h, w), dtype=np.float32) if overlap != "mean" else None
     empty = 0
