@@ -72,40 +72,45 @@ def _check_headers(path: Path, parts) -> None:
                               f"(limit {limit}); the file is corrupt or hostile")
 
 
+def _guarded(open_file, path: Path, what: str):
+    """``(open_file(), the library's captured message lines)``; any failure becomes one
+    :class:`FileFormatError` line naming the file, ``what`` failed and the library's first error."""
+    with quiet() as lines:
+        try:
+            value = open_file()
+        except Exception as exc:  # the bindings raise plain RuntimeError/ValueError/UnicodeError on any failure
+            failed = exc
+        else:
+            failed = None
+    if failed is None:
+        return value, lines
+    detail = _first_error(lines, path) or str(failed)
+    raise FileFormatError(f"{path}: {what} ({detail[:200]})")
+
+
 def open_exr(path: str | os.PathLike, *, header_only: bool = False):
     """An ``OpenEXR.File`` whose headers were checked (sizes, parts, channel sampling) before
     any pixels were read; :class:`FileFormatError` naming parts the library cannot decode."""
     import OpenEXR
 
     path = Path(path)
-    with quiet() as lines:
-        try:
-            head = OpenEXR.File(str(path), header_only=True)
-            parts = list(head.parts)
-        except Exception as exc:  # the bindings raise plain RuntimeError/ValueError/UnicodeError on any failure
-            failed = exc
-        else:
-            failed = None
-    if failed is not None:
-        detail = _first_error(lines, path) or str(failed)
-        raise FileFormatError(f"{path}: not a readable OpenEXR file ({detail[:200]})")
+    def read_head():
+        head = OpenEXR.File(str(path), header_only=True)
+        return head, list(head.parts)
+
+    (head, parts), _ = _guarded(read_head, path, "not a readable OpenEXR file")
     if not parts:
         raise FileFormatError(f"{path}: the OpenEXR file has no parts")
     _check_headers(path, parts)
     if header_only:
         return head
     names = [p.name() or f"#{i}" for i, p in enumerate(parts)]
-    with quiet() as lines:
-        try:
-            f = OpenEXR.File(str(path), separate_channels=True)
-            got = [p.name() or f"#{i}" for i, p in enumerate(f.parts)]
-        except Exception as exc:
-            failed = exc
-        else:
-            failed = None
-    if failed is not None:
-        detail = _first_error(lines, path) or str(failed)
-        raise FileFormatError(f"{path}: OpenEXR could not decode the pixels ({detail[:200]})")
+
+    def read_pixels():
+        f = OpenEXR.File(str(path), separate_channels=True)
+        return f, [p.name() or f"#{i}" for i, p in enumerate(f.parts)]
+
+    (f, got), lines = _guarded(read_pixels, path, "OpenEXR could not decode the pixels")
     if len(got) != len(names):
         lost = [n for n in names if n not in got] or [f"{len(names) - len(got)} of {len(names)} parts"]
         detail = _first_error(lines, path)
