@@ -123,6 +123,14 @@ def _series(rows, metric, method, pattern, shots, merge="", digits=2) -> str:
                            digits) for s in shots)
 
 
+def _joint_row(rows, pattern, label) -> list[str]:
+    """A table row of the joint method with one ISO pattern, 1 ; 2 ; 3 shots, beside the paper's figures."""
+    shots = (1, 2, 3)
+    return [label, _series(rows, "pu21_psnr_db", "joint", pattern, shots),
+            _series(rows, "pu21_ssim", "joint", pattern, shots, digits=4),
+            _paper(("joint", pattern), "psnr", 2), _paper(("joint", pattern), "ssim", 4)]
+
+
 def _paper(key, what, digits) -> str:
     p = PAPER.get(key)
     if p is None:
@@ -551,10 +559,7 @@ def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path
     body = [["dual ISO rows (100, 1600)", _series(rows, "pu21_psnr_db", "dual-iso", "dual", shots3),
              _series(rows, "pu21_ssim", "dual-iso", "dual", shots3, digits=4),
              _paper(("dual-iso", "dual"), "psnr", 2), _paper(("dual-iso", "dual"), "ssim", 4)]]
-    for pattern in ("random", "row"):
-        body.append([f"joint, {pattern} ISO ({REF_ISOS})", _series(rows, "pu21_psnr_db", "joint", pattern, shots3),
-                     _series(rows, "pu21_ssim", "joint", pattern, shots3, digits=4),
-                     _paper(("joint", pattern), "psnr", 2), _paper(("joint", pattern), "ssim", 4)])
+    body += [_joint_row(rows, pattern, f"joint, {pattern} ISO ({REF_ISOS})") for pattern in ("random", "row")]
     lines += [_table(["method", "PU21-PSNR (dB)", "PU21-SSIM", "paper PU2-PSNR", "paper PU2-SSIM"], body), ""]
 
     lines += ["## Table IV: exposure bracketing", "",
@@ -570,10 +575,7 @@ def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path
                      _series(rows, "pu21_ssim", method, "global", b3, merge, digits=4),
                      _paper(("bracketing", "global"), "psnr", 2) if merge == "debevec" else "-",
                      _paper(("bracketing", "global"), "ssim", 3) if merge == "debevec" else "-"])
-    for pattern in ("random", "row"):
-        body.append([f"joint, {pattern} ISO (1 ; 2 ; 3 shots)", _series(rows, "pu21_psnr_db", "joint", pattern, shots3),
-                     _series(rows, "pu21_ssim", "joint", pattern, shots3, digits=4),
-                     _paper(("joint", pattern), "psnr", 2), _paper(("joint", pattern), "ssim", 4)])
+    body += [_joint_row(rows, pattern, f"joint, {pattern} ISO (1 ; 2 ; 3 shots)") for pattern in ("random", "row")]
     lines += [_table(["method", "PU21-PSNR (dB)", "PU21-SSIM", "paper PU2-PSNR", "paper PU2-SSIM"], body), ""]
 
     # ISO sets and saturation
