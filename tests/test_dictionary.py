@@ -348,6 +348,12 @@ def test_cli_training_files_are_named_in_the_provenance(tmp_path, capsys):
     assert json.loads(stdout)["data"]["files"] == [f"{lf_path} (synth:layers)"]
 
 
+def test_train_sources_must_name_every_light_field():
+    lf = np.ones((5, 5, 16, 16, 3), np.float32)
+    with pytest.raises(InputError, match=r"sources: expected one name per light field \(1\), got 2"):
+        train_dictionary([lf], preset="tiny", sources=["a.exr", "b.exr"])
+
+
 def test_cli_train_info_eval_preview(tmp_path, capsys):
     lf_path = tmp_path / "scene.exr"
     assert main(["synth", "-o", str(lf_path), "--scene", "window", "--size", "32", "32", "--seed", "2"]) == 0
