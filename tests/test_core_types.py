@@ -149,6 +149,24 @@ def test_operator_is_immutable_and_restrict_shares_its_weights():
     assert (own.weights == 0.5).all()
 
 
+def test_patch_operators_and_fixed_pattern_maps_are_read_only():
+    from lfproc.camera.projection import patch_operators
+    from lfproc.camera.sensor import fixed_pattern_correction
+
+    cap = _capture()
+    ops = patch_operators(cap.mask, views=(3, 3), cfa_pattern="RGGB", tops=np.array([0, 4]),
+                          lefts=np.array([0, 2]), size=4)
+    for arr in (ops.cols, ops.vals, ops.index, ops.positions):
+        with pytest.raises(ValueError, match="read-only"):
+            arr.flat[0] = 1
+    assert all(is_frozen(a) for a in (ops.cols, ops.vals, ops.index, ops.positions))
+    fp = fixed_pattern_correction(replace(load_profile("paper-low"), prnu=0.01, dsnu_e=0.5), (8, 10), iso=400)
+    for arr in (fp.gain, fp.offset_e, fp.gain_var, fp.offset_var_e2):
+        with pytest.raises(ValueError, match="read-only"):
+            arr[0, 0] = 0
+    assert 0.9 < fp.gain.mean() < 1.1 and fp.offset_e.std() > 0  # the maps were drawn, not left at their defaults
+
+
 def test_profile_bias_frames_and_isos_are_read_only():
     p = load_profile("paper-low")
     frame = np.full((4, 4), 64.0)

@@ -636,6 +636,11 @@ class PatchOperators:
     channels: int
     periodic: bool
 
+    def __post_init__(self):
+        # read-only like every array lfproc hands out (a copy only when the caller kept a writable reference)
+        for name in ("cols", "vals", "index", "positions"):
+            object.__setattr__(self, name, frozen_array(getattr(self, name)))
+
     @property
     def n_operators(self) -> int:
         return int(self.vals.shape[0])
@@ -766,7 +771,8 @@ def patch_operators(mask: MaskCode, *, views: tuple[int, int], cfa_pattern: str,
     pix = ii[:, None] * size + ii[None, :]
     col = (view[None, None, None, :] * size * size + pix[None, :, :, None]) * 3 + colour[..., None]  # (G, sz, sz, VU)
     col = np.broadcast_to(col[:, None], (g_n, s_n, size, size, nv * nu)).reshape(g_n, -1, nv * nu)
-    return PatchOperators(cols=np.ascontiguousarray(col, dtype=np.int32),
-                          vals=np.ascontiguousarray(vals, dtype=np.float32),
-                          index=index.astype(np.intp), positions=positions.astype(np.intp), size=size,
+    return PatchOperators(cols=freeze(np.array(col, dtype=np.int32)),
+                          vals=freeze(np.array(vals, dtype=np.float32)),
+                          index=freeze(np.array(index, dtype=np.intp)),
+                          positions=freeze(np.array(positions, dtype=np.intp)), size=size,
                           views=(nv, nu), shots=s_n, channels=3, periodic=periodic)

@@ -96,6 +96,11 @@ class FixedPattern:
     gain_source: str = "none"
     offset_source: str = "none"
 
+    def __post_init__(self):
+        # read-only like every array lfproc hands out (a copy only when the caller kept a writable reference)
+        for name in ("gain", "offset_e", "gain_var", "offset_var_e2"):
+            object.__setattr__(self, name, frozen_array(getattr(self, name), dtype=np.float64))
+
     @property
     def shape(self) -> tuple[int, ...]:
         return tuple(self.gain.shape)
@@ -147,7 +152,8 @@ def _fixed_pattern_maps(profile, shape: tuple[int, int], iso, *, simulate: bool)
             used.append(key)
         if used:
             offset_src = "bias_frames (ISO " + ", ".join(map(str, used)) + ")"
-    return FixedPattern(gain=gain, offset_e=offset, gain_var=gain_var, offset_var_e2=offset_var,
+    return FixedPattern(gain=freeze(np.array(gain, dtype=np.float64)), offset_e=freeze(offset),
+                        gain_var=freeze(gain_var), offset_var_e2=freeze(offset_var),
                         gain_source=gain_src, offset_source=offset_src)
 
 
