@@ -66,7 +66,7 @@ def main() -> None:
     args = parser.parse_args()
     scenes = TUNE_SCENES if args.scenes == "tune" else [SCENES[int(i)] for i in args.scenes.split(",")]
     configs = README_CONFIGS if args.configs is None else json.loads(args.configs)
-    capture_options = dict(CAPTURES["2 random"], profile="paper-medium", mask_period=4, **json.loads(args.capture))
+    capture_options = {**CAPTURES["2 random"], "profile": "paper-medium", "mask_period": 4, **json.loads(args.capture)}
     os.environ.setdefault("LFPROC_PROGRESS", "0")
     warnings.simplefilter("ignore")  # saturation warnings of the brightest scenes: expected
     data = []

@@ -205,22 +205,8 @@ def admm_patch(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: floa
     at no cost. ``z <- soft(a + u, mu / rho)``; ``u <- u + a - z``. A patch stops when
     ``||z_k - z_{k-1}|| <= tol ||z_k||`` and ``||a_k - z_k|| <= tol ||z_k||``.
 
-    Parameters
-    ----------
-    op : SharedOperator or BatchOperator
-    w, y : ndarray of shape (B, m)
-        Weights and measurements.
-    mu : float or ndarray of shape (B,)
-        l1 weight (per patch).
-    max_iter : int
-    tol : float
-    rho : ndarray of shape (B,), optional
-        Initial penalty per patch; default :func:`auto_rho`.
-
-    Returns
-    -------
-    codes : ndarray of shape (B, K), float32 (the sparse iterate ``z``)
-    iterations : ndarray of shape (B,), int32
+    Parameters and returns as :func:`admm` (without ``alpha`` and ``chunk``), except ``rho``:
+    the initial penalty per patch in the data's units, default :func:`auto_rho`.
     """
     w = np.asarray(w, dtype=np.float32)
     y = np.asarray(y, dtype=np.float32)
