@@ -149,6 +149,8 @@ def test_cli_reuses_a_capture_files_mask_and_a_random_layout_by_seed(files, tmp_
     assert (back.mask.kind, back.mask.period, back.mask.shift) == ("shifted", 4, 1)
     np.testing.assert_array_equal(back.mask.codes, sim.mask.codes)
     assert back.parameters["mask_source"] == str(donor)
+    # the layout is recorded as the simulator records it, with the seed that redraws it
+    assert back.iso_pattern == {**sim.iso_pattern, "seed": 5} == {"kind": "random", "isos": list(ISOS), "seed": 5}
     _same_observations(back, sim)
 
 

@@ -802,21 +802,16 @@ def capture_from_raw(
     mask, views, mask_source = _mask_from(mask, views=views)
     iso_info: dict[str, Any] = {"kind": "given"}
     if isinstance(iso_layout, (str, os.PathLike)):
-        from .iso import ISO_PATTERNS, iso_pattern
+        from .iso import ISO_PATTERNS, describe_iso_pattern, iso_pattern
 
         name = str(iso_layout)
         if name in ISO_PATTERNS and isos is None:
             raise InputError(f"iso_layout {name!r}: pass isos= (the ISO values of the pattern)")
         iso_map = iso_pattern(iso_layout, size=dn.shape[1:], isos=isos if isos is not None else (100,),
                               block_px=block_px, random_state=random_state)
-        if name in ISO_PATTERNS:
-            iso_info = {"kind": name, "isos": [_num(v) for v in isos]}
-            if name == "block":
-                iso_info["block_px"] = int(block_px)
-            if name == "random":
-                iso_info["seed"] = random_state if isinstance(random_state, (int, np.integer)) else None
-        else:
-            iso_info = {"kind": "file", "path": name}
+        seed = random_state if isinstance(random_state, (int, np.integer)) else None
+        iso_info = describe_iso_pattern(name, isos if name in ISO_PATTERNS else np.unique(iso_map),
+                                        block_px=block_px, seed=None if seed is None else int(seed))
     else:
         iso_map = np.asarray(iso_layout, dtype=np.float32)
     parameters: dict[str, Any] = {

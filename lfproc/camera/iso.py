@@ -20,7 +20,7 @@ import numpy as np
 from .._util import check_random_state
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 
-__all__ = ["ISO_PATTERNS", "DEFAULT_ISOS", "iso_pattern"]
+__all__ = ["ISO_PATTERNS", "DEFAULT_ISOS", "iso_pattern", "describe_iso_pattern"]
 
 ISO_PATTERNS = ("random", "row", "block", "dual")
 DEFAULT_ISOS = (100, 400, 800, 1600)
@@ -106,3 +106,22 @@ def iso_pattern(
         g = math.ceil(math.sqrt(isos.size))
         index = (((rows // b) % g) * g + (cols // b) % g) % isos.size
     return isos[index].astype(np.float32)
+
+
+def describe_iso_pattern(kind: str | os.PathLike, isos: Sequence[float], *, block_px: int = 4,
+                         seed=None) -> dict:
+    """The record of an ISO layout a capture keeps (``iso_pattern`` of its file).
+
+    ``{"kind", "isos"}`` for a named pattern (with ``block_px`` for ``block`` and, when given, the
+    ``seed`` of ``random``), ``{"kind": "file", "path", "isos"}`` for a file.
+    """
+    name = str(kind)
+    values = [int(v) if float(v).is_integer() else float(v) for v in isos]
+    if name not in ISO_PATTERNS:
+        return {"kind": "file", "path": name, "isos": values}
+    info: dict = {"kind": name, "isos": values}
+    if name == "block":
+        info["block_px"] = int(block_px)
+    if name == "random" and seed is not None:
+        info["seed"] = seed
+    return info

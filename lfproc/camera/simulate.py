@@ -51,7 +51,7 @@ import numpy as np
 
 from .._util import check_choice, check_count, check_positive, check_random_state, freeze
 from .._version import __version__
-from .iso import DEFAULT_ISOS, ISO_PATTERNS, iso_pattern
+from .iso import DEFAULT_ISOS, ISO_PATTERNS, describe_iso_pattern, iso_pattern
 from .capture import MAX_SHOTS, Capture, _num, _warn_saturation, file_sha256, observations
 from ..calib import load_profile
 from ..errors import InputError, ShapeError
@@ -266,12 +266,7 @@ def simulate_capture(
         used = np.unique(one)
         _check_isos(profile, used)
         iso_maps = np.broadcast_to(one, (shots, h, w)).copy()
-        name = str(iso_pattern_kind) if str(iso_pattern_kind) in ISO_PATTERNS else "file"
-        iso_info = {"kind": name, "isos": [_num(v) for v in used]}
-        if name == "block":
-            iso_info["block_px"] = int(block_px)
-        if name == "file":
-            iso_info["path"] = str(iso_pattern_kind)
+        iso_info = describe_iso_pattern(iso_pattern_kind, used, block_px=block_px)
         rel = [1.0] * shots if relative_exposures is None else [float(r) for r in relative_exposures]
     if len(rel) != shots:
         raise InputError(f"relative exposures: expected {shots} values (one per shot), got {len(rel)}")
