@@ -37,8 +37,10 @@ def register(sub, common) -> None:
                         "default), the chi-square data term with the l1 weight relative to the patch's norm (noise), "
                         "per-patch codes and data term (patch: the paper-faithful reading), or one scale for the "
                         "capture (global)")
-    p.add_argument("--overlap", default="scale-window", metavar="scale-window|scale|window|mean",
-                   help="how overlapping patch estimates are combined (default scale-window; the paper's: mean)")
+    p.add_argument("--overlap", default=None, metavar="scale-window-fit|scale-window|scale|window|mean",
+                   help="how overlapping patch estimates are weighted: by the patch's scale, a centre window and "
+                        "the patch's fit (scale-window-fit, default), fewer of these, or plain averages (mean: the "
+                        "paper's)")
     p.add_argument("--paper", action="store_true",
                    help="the paper's settings: --scale patch --overlap mean --mu 1e-4 --tol 2^-15 --max-iter 300 "
                         "(options given explicitly win)")
@@ -72,10 +74,9 @@ def run(args) -> int:
     options = {k: base[k] for k in ("mu", "tol", "max_iter") if k in base}
     options.update(given)
     if args.paper:
-        scale = args.scale or PAPER["scale"]
-        overlap = args.overlap if args.overlap != "scale-window" else PAPER["overlap"]
+        scale, overlap = args.scale or PAPER["scale"], args.overlap or PAPER["overlap"]
     else:
-        scale, overlap = args.scale or DEFAULTS["scale"], args.overlap
+        scale, overlap = args.scale or DEFAULTS["scale"], args.overlap or DEFAULTS["overlap"]
     options.update(solver=args.solver, stride=args.stride, sparsity=args.sparsity, scale=scale, overlap=overlap,
                    workers=args.workers, scheduler=args.scheduler, threads=args.threads)
     if args.per_shot is not None:

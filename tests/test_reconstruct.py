@@ -413,8 +413,33 @@ def test_new_options_are_checked_and_recorded(smooth_capture, small_dictionary, 
     assert np.array_equal(one.data, two.data)
     rec = one.attrs["reconstruction"]
     assert (rec["scale"], rec["overlap"], rec["mu"], rec["max_iter"], rec["tol"]) == (
-        "universal", "scale-window", 0.25, 100, 1e-3)
+        "universal", "scale-window-fit", 0.25, 100, 1e-3)
     assert DEFAULTS["mu"] == 0.25
+
+
+def test_fit_weights_use_the_reduced_chi_square_of_each_patch():
+    """The overlap weight of a patch falls as 1 / (reduced chi-square) once its fit is worse than the noise.
+
+    Statistics: with every code shrunk to zero (a huge l1 weight) the residual is the data, here pure
+    noise of the weights' standard deviation, so the reduced chi-square is 1 within sqrt(2/m)."""
+    from lfproc.recon._reconstruct import _overlap_weights, _Settings, _solve_group
+    from lfproc.recon._solvers import SharedOperator
+
+    rng = np.random.default_rng(3)
+    m, k, n = 2000, 40, 64
+    op = SharedOperator(rng.standard_normal((m, k)).astype(np.float32))
+    sigma = rng.uniform(0.5, 2.0, (3, m))
+    y = (sigma * rng.standard_normal((3, m)) + 1e-3).astype(np.float32)
+    settings = _Settings(solver="admm", mu=1e9, max_iter=20, tol=1e-3, sparsity=5, scale="noise",
+                         overlap="scale-window-fit", c_global=1.0, w_global=1.0)
+    codes, _, _, chi2 = _solve_group(op, y, (1 / sigma).astype(np.float32), np.ones((1, m)), settings, n)
+    assert not codes.any()
+    np.testing.assert_allclose(chi2, 1.0, atol=4 * np.sqrt(2 / m))
+    # known answer: equal scales, fits of 0.5, 1 and 4 times the noise -> weights 1 : 1 : 1/4 at every pixel
+    w = _overlap_weights("scale-window-fit", np.ones(3), 4, np.array([0.5, 1.0, 4.0]))
+    np.testing.assert_allclose(w[1] / w[0], 1.0)
+    np.testing.assert_allclose(w[2] / w[0], 0.25, rtol=1e-6)
+    assert _overlap_weights("scale-window", np.ones(3), 4).shape == (3, 4, 4)
 
 
 def test_a_dark_floor_beside_a_bright_light_is_not_shrunk_away():

@@ -46,7 +46,10 @@ of the noise of the *whole* patch, so the shrinkage goes as ``1 / SNR`` of the p
 Overlapping estimates are averaged (``overlap="mean"``, the paper's) or weighted per pixel
 (``"scale"``: by ``1 / c_p^2``, the inverse of a patch's error variance when its error is
 relative to its norm, so a dark pixel is taken from the patches without a bright light in them;
-``"window"``: by a centre-weighted ``sin^2`` window; ``"scale-window"``, the default: both).
+``"window"``: by a centre-weighted ``sin^2`` window; ``"scale-window"``: both;
+``"scale-window-fit"``, the default: both and ``1 / max(1, chi2_p / m_p)``, so a patch that
+fits its own measurements worse than their noise (reduced chi-square above 1: an edge the
+dictionary does not represent, a light the lasso cut) counts less where others overlap it).
 """
 
 from __future__ import annotations
@@ -70,14 +73,14 @@ from ._solvers import SOLVERS, BatchOperator, SharedOperator, admm, fista, omp
 __all__ = ["reconstruct", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "patch_count"]
 
 SCALES = ("patch", "global", "noise", "universal")
-OVERLAPS = ("mean", "scale", "window", "scale-window")
+OVERLAPS = ("mean", "scale", "window", "scale-window", "scale-window-fit")
 #: Defaults of :func:`reconstruct`, measured on HDR-photo-textured light fields (README, benchmarks/
 #: reconstruct_quality.py, tuned on scenes other than the README's): the chi-square data term with the
-#: l1 weight at 0.25 of its universal noise level (``scale="universal"``), overlaps weighted by scale and
-#: a centre window, ADMM stopped at a tolerance of 1e-3 or 100 iterations. The paper's settings are :data:`PAPER`.
+#: l1 weight at 0.25 of its universal noise level (``scale="universal"``), overlaps weighted by scale, a
+#: centre window and the fit, ADMM stopped at a tolerance of 1e-3 or 100 iterations. The paper's settings are :data:`PAPER`.
 DEFAULTS = {"stride": 4, "mu": 0.25, "tol": {"admm": 1e-3, "fista": 2.0**-15, "omp": None},
             "max_iter": {"admm": 100, "fista": 1000, "omp": None},
-            "block_patches": 512, "scale": "universal", "overlap": "scale-window"}
+            "block_patches": 512, "scale": "universal", "overlap": "scale-window-fit"}
 #: The paper's settings (method.md section 4: mu 1e-4 on patches of unit norm, tolerance 2^-15, plain averages).
 PAPER = {"stride": 4, "mu": 1e-4, "tol": 2.0**-15, "max_iter": 300, "scale": "patch", "overlap": "mean"}
 #: Bytes of per-patch operators ``A_p`` materialised at once for non-periodic masks.
@@ -129,8 +132,9 @@ def _gather(array: np.ndarray, tops: np.ndarray, lefts: np.ndarray, size: int) -
     return np.ascontiguousarray(out.transpose(1, 0, 2, 3).reshape(len(tops), -1))
 
 
-def _solve_group(op, y, w, rowsum, settings: _Settings, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Codes of one batch sharing an operator type; returns (codes (B, K), scale c_p (B,), iterations (B,))."""
+def _solve_group(op, y, w, rowsum, settings: _Settings, n: int):
+    """Codes of one batch sharing an operator type; returns (codes (B, K), scale c_p (B,), iterations (B,),
+    reduced chi-square of the fit (B,))."""
     usable = w > 0
     m_use = usable.sum(axis=1)
     flat = np.where(usable, y / np.maximum(rowsum, 1e-12), 0.0).astype(np.float64)
@@ -141,8 +145,9 @@ def _solve_group(op, y, w, rowsum, settings: _Settings, n: int) -> tuple[np.ndar
     b_n, k_n = len(y), op.shape[1]
     codes = np.zeros((b_n, k_n), dtype=np.float32)
     iters = np.zeros(b_n, dtype=np.int32)
+    chi2 = np.ones(b_n)
     if not ok.any():
-        return codes, np.where(ok, c_p, 0.0), iters
+        return codes, np.where(ok, c_p, 0.0), iters, chi2
     rows = np.flatnonzero(ok)
     sub = op if ok.all() else op.subset(rows)
     cp, om = c_p[rows], omega[rows]
@@ -168,7 +173,10 @@ def _solve_group(op, y, w, rowsum, settings: _Settings, n: int) -> tuple[np.ndar
         z = _debias(sub, wn, yn, z, settings.debias)
     codes[rows] = z
     iters[rows] = it
-    return codes, np.where(ok, c_p, 0.0), iters
+    if "fit" in settings.overlap.split("-"):  # reduced chi-square of the patch's fit (module notes)
+        res = (sub.fwd(z) - yn).astype(np.float64) * (w[rows] * cp[:, None])
+        chi2[rows] = (res * res).sum(axis=1) / m_use[rows]
+    return codes, np.where(ok, c_p, 0.0), iters, chi2
 
 
 def _debias(op, w, y, z, k_max: int) -> np.ndarray:
@@ -253,6 +261,7 @@ def _solve_block_here(task: dict, shared: dict) -> dict:
     b_n = len(tops)
     codes_scale = np.zeros(b_n)
     iters = np.zeros(b_n, dtype=np.int32)
+    chi2 = np.ones(b_n)
     estimates = np.zeros((b_n, n), dtype=np.float32)
     if shared["periodic"]:
         index = task["phase"]
@@ -260,7 +269,7 @@ def _solve_block_here(task: dict, shared: dict) -> dict:
             sel = np.flatnonzero(index == g)
             op = SharedOperator(shared["A"][g], shared["gram"][g])
             rowsum = shared["rowsum"][g][None, :]
-            codes, cp, it = _solve_group(op, y_all[sel], w_all[sel], rowsum, settings, n)
+            codes, cp, it, chi2[sel] = _solve_group(op, y_all[sel], w_all[sel], rowsum, settings, n)
             estimates[sel] = (codes @ atoms.T) * cp[:, None].astype(np.float32)
             codes_scale[sel], iters[sel] = cp, it
     else:
@@ -272,14 +281,14 @@ def _solve_block_here(task: dict, shared: dict) -> dict:
             A = _operator_times(ops, sel, atoms, shared.get("atoms_by_pixel"))
             op = BatchOperator(A)
             rowsum = ops.row_sums()[sel]
-            codes, cp, it = _solve_group(op, y_all[sel], w_all[sel], rowsum, settings, n)
+            codes, cp, it, chi2[sel] = _solve_group(op, y_all[sel], w_all[sel], rowsum, settings, n)
             estimates[sel] = (codes @ atoms.T) * cp[:, None].astype(np.float32)
             codes_scale[sel], iters[sel] = cp, it
             del A, op
     rows = int(tops.max() - row0 + size)
     width = task["width"]
     acc = np.zeros((v_n, u_n, rows, width, c_n), dtype=np.float32)
-    weight = _overlap_weights(settings.overlap, codes_scale / settings.c_median, size)  # (B, P, P) or None
+    weight = _overlap_weights(settings.overlap, codes_scale / settings.c_median, size, chi2)  # (B, P, P) or None
     wacc = None if weight is None else np.zeros((rows, width), dtype=np.float32)
     patches = estimates.reshape(b_n, v_n, u_n, size, size, c_n)
     for b in range(b_n):  # fixed order: the block's patches as listed
@@ -292,23 +301,27 @@ def _solve_block_here(task: dict, shared: dict) -> dict:
     return {"row0": row0, "acc": acc, "weight": wacc, "empty": int((codes_scale == 0).sum()), "iterations": iters}
 
 
-def _overlap_weights(overlap: str, scale: np.ndarray, size: int) -> np.ndarray | None:
+def _overlap_weights(overlap: str, scale: np.ndarray, size: int, chi2=None) -> np.ndarray | None:
     """Per-pixel weights of every patch's estimate when overlaps are averaged (None: plain mean).
 
-    ``scale``: the patches' ``c_p`` over one constant of the capture (the same in every block).
+    ``scale``: the patches' ``c_p`` over one constant of the capture (the same in every block);
+    ``chi2``: the reduced chi-square of every patch's fit (used by ``"...-fit"``).
     """
     if overlap == "mean":
         return None
     b_n = len(scale)
     w = np.ones((b_n, size, size), dtype=np.float32)
-    if overlap in ("scale", "scale-window"):
+    parts = overlap.split("-")
+    if "scale" in parts:
         # a patch's error is about relative to its own l2 norm c_p (the dictionary's coding error and the
         # lasso's): inverse-variance weights 1 / c_p^2 let the patches whose scale matches a pixel win
         good = scale > 0
         inv = np.full(b_n, 1e-12)  # an empty patch (no usable measurement) counts only where nothing else does
         inv[good] = np.minimum(1.0 / scale[good] ** 2, 1e12)
         w *= inv.astype(np.float32)[:, None, None]
-    if overlap in ("window", "scale-window"):
+    if "fit" in parts:
+        w *= (1.0 / np.maximum(chi2, 1.0)).astype(np.float32)[:, None, None]
+    if "window" in parts:
         x = (np.arange(size) + 0.5) / size
         win = np.sin(np.pi * x) ** 2 + 1e-3  # centre-weighted: a patch's border pixels have the fewest measurements around them
         w *= np.outer(win, win).astype(np.float32)[None]
@@ -396,7 +409,7 @@ def reconstruct(
     threads : int, optional
         In this process: blocks solved at once, each on one BLAS thread (default: the
         number of CPUs available). The output does not depend on it.
-    overlap : {"scale-window", "scale", "window", "mean"}
+    overlap : {"scale-window-fit", "scale-window", "scale", "window", "mean"}
         How overlapping patch estimates are combined (module notes); ``"mean"`` is the paper's.
     debias : int
         Refit each ADMM/FISTA code by least squares on its ``debias`` largest atoms (0: off, the
