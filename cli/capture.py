@@ -18,6 +18,7 @@ import sys
 import warnings
 from pathlib import Path
 
+from lfproc.camera.iso import DEFAULT_BLOCK_PX
 from lfproc.errors import InputError, LfprocWarning
 
 from ._common import add_json, add_output, emit, parse_floats
@@ -50,7 +51,7 @@ def register(sub, common) -> None:
     i.add_argument("--iso-layout", required=True, metavar="row|block|dual|random|FILE",
                    help="per-pixel ISO layout of the sensor, or an ISO map file (.npy or 16-bit image)")
     i.add_argument("--isos", default=None, help="ISO set of a named layout, comma-separated (e.g. 100,400,800,1600)")
-    i.add_argument("--block-px", type=int, default=4, help="block side in pixels for --iso-layout block (even)")
+    i.add_argument("--block-px", type=int, default=DEFAULT_BLOCK_PX, help=f"block side in pixels for --iso-layout block (even; default {DEFAULT_BLOCK_PX})")
     i.add_argument("--seed", type=int, default=None, help="seed of --iso-layout random (the sensor's layout)")
     i.add_argument("--profile", required=True, help="camera profile: shipped name or JSON file (lfproc calibrate)")
     i.add_argument("--exposures-s", required=True, metavar="T[,T...]",

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from lfproc.camera.iso import DEFAULT_BLOCK_PX
+
 from ._common import add_json, add_output, emit, parse_floats
 
 
@@ -24,7 +26,7 @@ def register(sub, common) -> None:
     p.add_argument("--iso-pattern", default="random", metavar="random|row|block|dual|FILE",
                    help="per-pixel ISO layout, or a .npy/16-bit image of ISO values (default random)")
     p.add_argument("--isos", default="100,400,800,1600", help="ISO set, comma-separated (default 100,400,800,1600)")
-    p.add_argument("--block-px", type=int, default=4, help="block side in pixels for --iso-pattern block (even)")
+    p.add_argument("--block-px", type=int, default=DEFAULT_BLOCK_PX, help=f"block side in pixels for --iso-pattern block (even; default {DEFAULT_BLOCK_PX})")
     p.add_argument("--shots", type=int, default=None, help="number of shots (default 1; bracketing 2)")
     p.add_argument("--exposure-s", type=float, default=0.004, help="exposure time of a shot in seconds")
     p.add_argument("--gamma", type=float, default=None, help="power-law sensor response (default: the profile's)")

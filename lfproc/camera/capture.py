@@ -54,6 +54,7 @@ from .._version import __version__
 from ..calib import load_profile
 from ..errors import FileFormatError, InputError, LfprocError, MissingFileError, ShapeError
 from ..io import atomic_file
+from .iso import DEFAULT_BLOCK_PX
 from .projection import CFA_PATTERNS, MASK_KINDS, MaskCode, ProjectionOperator, build_operator, decode_levels, encode_levels, sampling_rate
 from .sensor import Observation, calibrated_observation
 
@@ -729,7 +730,7 @@ def capture_from_raw(
     gamma: float | None = None,
     bias_dn=None,
     isos: Sequence[float] | None = None,
-    block_px: int = 4,
+    block_px: int = DEFAULT_BLOCK_PX,
     random_state=None,
 ) -> Capture:
     """Build a capture from real sensor images (one per shot), a mask description, an ISO layout and a profile.

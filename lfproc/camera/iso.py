@@ -6,6 +6,12 @@ in 2-row units, so a Bayer quad shares one ISO, as in Magic Lantern's dual ISO),
 ``g x g`` arrangement of blocks, ``g = ceil(sqrt(n))``), ``dual`` (the row pattern with the
 lowest and the highest ISO of the set: (100, 1600) for the default set), or a file (``.npy``
 or a single-channel integer image, values = ISO).
+
+The paper does not give its block size. :data:`DEFAULT_BLOCK_PX` is 8, the side of a
+reconstruction patch: then, as in the paper, a patch sees one to four of the ISOs and the block
+pattern is a different acquisition from rows. Blocks of 2 or 4 pixels hold every ISO in every
+8 x 8 patch, like rows and random pixels, and reconstruct like them (README: 2 and 4 px tie or
+beat rows, 8 px and more fall 2-4 dB behind, as the paper's blocks do on each of its scenes).
 """
 
 from __future__ import annotations
@@ -20,10 +26,12 @@ import numpy as np
 from .._util import check_random_state
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 
-__all__ = ["ISO_PATTERNS", "DEFAULT_ISOS", "iso_pattern", "describe_iso_pattern"]
+__all__ = ["ISO_PATTERNS", "DEFAULT_ISOS", "DEFAULT_BLOCK_PX", "iso_pattern", "describe_iso_pattern"]
 
 ISO_PATTERNS = ("random", "row", "block", "dual")
 DEFAULT_ISOS = (100, 400, 800, 1600)
+#: Side of the ``block`` pattern's blocks in pixels (module notes).
+DEFAULT_BLOCK_PX = 8
 
 
 def _load_iso_file(path: Path, size: tuple[int, int]) -> np.ndarray:
@@ -60,7 +68,7 @@ def iso_pattern(
     *,
     size: tuple[int, int],
     isos: Sequence[float] = DEFAULT_ISOS,
-    block_px: int = 4,
+    block_px: int = DEFAULT_BLOCK_PX,
     random_state=None,
 ) -> np.ndarray:
     """ISO of every sensor pixel for a named pattern or a file (see the module documentation).
@@ -108,7 +116,7 @@ def iso_pattern(
     return isos[index].astype(np.float32)
 
 
-def describe_iso_pattern(kind: str | os.PathLike, isos: Sequence[float], *, block_px: int = 4,
+def describe_iso_pattern(kind: str | os.PathLike, isos: Sequence[float], *, block_px: int = DEFAULT_BLOCK_PX,
                          seed=None) -> dict:
     """The record of an ISO layout a capture keeps (``iso_pattern`` of its file).
 

@@ -51,7 +51,7 @@ import numpy as np
 
 from .._util import check_choice, check_count, check_positive, check_random_state, freeze
 from .._version import __version__
-from .iso import DEFAULT_ISOS, ISO_PATTERNS, describe_iso_pattern, iso_pattern
+from .iso import DEFAULT_BLOCK_PX, DEFAULT_ISOS, ISO_PATTERNS, describe_iso_pattern, iso_pattern
 from .capture import MAX_SHOTS, Capture, _num, _warn_saturation, file_sha256, observations
 from ..calib import load_profile
 from ..errors import InputError, ShapeError
@@ -154,7 +154,7 @@ def simulate_capture(
     mask: str = "random",
     mask_period: int | None = None,
     mask_shift: int = 1,
-    block_px: int = 4,
+    block_px: int = DEFAULT_BLOCK_PX,
     baseline: str | None = None,
     relative_exposures: Sequence[float] | None = None,
     radiance_scale: float | None = None,
