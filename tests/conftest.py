@@ -55,6 +55,31 @@ def run_lfproc():
     return run
 
 
+@pytest.fixture(scope="session")
+def kill_when():
+    """Run a command in its own process group and SIGKILL the whole group (the run and any Dask
+    workers) as soon as ``ready()`` is true, or at ``timeout_s``; returns the exit code."""
+    import signal
+    import subprocess
+    import time
+
+    def run(cmd: list[str], ready, *, timeout_s: float = 120, env: dict | None = None, poll_s: float = 0.02) -> int:
+        env = dict(os.environ, LFPROC_PROGRESS="0", MPLBACKEND="Agg", **(env or {}))
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                                env=env)
+        try:
+            deadline = time.monotonic() + timeout_s
+            while time.monotonic() < deadline and proc.poll() is None and not ready():
+                time.sleep(poll_s)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+        return proc.returncode
+
+    return run
+
+
 # -- genuine raw files for the import tests ------------------------------------------------------
 
 _CFA_CODES = {"R": 0, "G": 1, "B": 2}

@@ -4,11 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import signal
-import subprocess
 import sys
-import time
 import warnings
 
 import numpy as np
@@ -250,29 +246,12 @@ def _cell_files(out):
             if not p.name.startswith(".")}
 
 
-def _run_and_kill(cmd, out, *, after_cells: int, timeout_s: float) -> None:
-    """Run ``cmd`` in its own process group; SIGKILL the group once ``after_cells`` cell files exist."""
-    env = dict(os.environ, LFPROC_PROGRESS="0", MPLBACKEND="Agg")
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
-                            env=env)
-    try:
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline and proc.poll() is None:
-            if (out / "cells").is_dir() and len(_cell_files(out)) >= after_cells:
-                break
-            time.sleep(0.01)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=30)
-
-
-def test_bench_quick_killed_then_resumed(tiny_inputs, capsys):
+def test_bench_quick_killed_then_resumed(tiny_inputs, capsys, kill_when):
     root, scenes, dictionary = tiny_inputs
     out = root / "run"
     cmd = [sys.executable, "-m", "lfproc.cli.main", "bench", *map(str, scenes), "-o", str(out), "--preset", "quick",
            "--dictionary", str(dictionary), "--scheduler", "synchronous"]
-    _run_and_kill(cmd, out, after_cells=10, timeout_s=120)
+    kill_when(cmd, lambda: (out / "cells").is_dir() and len(_cell_files(out)) >= 10, timeout_s=120, poll_s=0.01)
     done_at_kill = _cell_files(out)
     assert 10 <= len(done_at_kill) < 70, "the run should have been killed part-way"
     assert not (out / "results.csv").exists()

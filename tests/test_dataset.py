@@ -6,10 +6,8 @@ import csv
 import hashlib
 import json
 import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -52,22 +50,10 @@ def _record_mtimes(out):
 
 
 
-def _run_and_kill_after_first_scene(cmd: list[str], out, *, timeout_s: float) -> None:
-    """Run ``cmd`` in its own process group and SIGKILL the whole group (the run and its Dask
-    workers) as soon as ``out/done`` holds a done-record (or at the timeout)."""
-    env = dict(os.environ, LFPROC_PROGRESS="0")
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
-                            env=env)
-    try:
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline and proc.poll() is None:
-            if (out / "done").is_dir() and list((out / "done").glob("*.json")):
-                break
-            time.sleep(0.02)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=30)
+def _first_scene_done(out):
+    """Ready test for ``kill_when``: ``out/done`` holds a done-record."""
+    return lambda: (out / "done").is_dir() and any((out / "done").glob("*.json"))
+
 
 def test_build_failure_reported_then_resumed(scenes, tmp_path):
     broken = scenes / "zbroken"
@@ -122,12 +108,12 @@ def test_build_failure_reported_then_resumed(scenes, tmp_path):
     assert len(read_manifest(out)) == 4
 
 
-def test_cli_dataset_build_killed_then_resumed(scenes, tmp_path, capsys):
+def test_cli_dataset_build_killed_then_resumed(scenes, tmp_path, capsys, kill_when):
     _make_scene(scenes / "scene3", seed=3)
     out = tmp_path / "dataset"
     cmd = [sys.executable, "-m", "lfproc.cli.main", "dataset", "build", str(scenes), "-o", str(out),
            "--workers", "1", "--profile", "illum"]
-    _run_and_kill_after_first_scene(cmd, out, timeout_s=120)
+    kill_when(cmd, _first_scene_done(out), timeout_s=120)
     done_at_kill = _record_mtimes(out)
     assert 1 <= len(done_at_kill) < 4, "the run should have been killed after its first scene"
     # run again through the CLI (Dask local cluster): finishes the rest, keeps the done scenes
@@ -210,7 +196,7 @@ def _scene_mtimes(out, names):
     return {str(p.relative_to(out)): p.stat().st_mtime_ns for p in files}
 
 
-def test_cli_dataset_build_virtual_illum_killed_then_resumed(tmp_path, capsys):
+def test_cli_dataset_build_virtual_illum_killed_then_resumed(tmp_path, capsys, kill_when):
     names = ["v0", "v1", "v2"]
     scenes = _virtual_illum_scenes(tmp_path / "scenes", tmp_path, len(names))
     capsys.readouterr()
@@ -220,7 +206,7 @@ def test_cli_dataset_build_virtual_illum_killed_then_resumed(tmp_path, capsys):
            "--workers", "1"]
     # first run: a local Dask cluster of one worker (scenes one after the other), killed as soon as the
     # first done-record appears
-    _run_and_kill_after_first_scene(cmd, out, timeout_s=60)
+    kill_when(cmd, _first_scene_done(out), timeout_s=60)
     done_at_kill = sorted(p.stem for p in (out / "done").glob("*.json"))
     assert 1 <= len(done_at_kill) < len(names), f"the run should have been killed after its first scene: {done_at_kill}"
     assert not (out / "manifest.json").exists()  # the killed run never reached its manifest

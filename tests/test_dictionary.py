@@ -5,10 +5,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import signal
 import subprocess
 import sys
-import time
 import zipfile
 
 import numpy as np
@@ -407,19 +405,13 @@ def test_cli_dictionary_errors(tmp_path, capsys, argv, match):
     assert not (tmp_path / "x.npz").exists()
 
 
-def test_cli_train_killed_then_resumed_gives_the_uninterrupted_dictionary(tmp_path):
+def test_cli_train_killed_then_resumed_gives_the_uninterrupted_dictionary(tmp_path, kill_when):
     base = [sys.executable, "-m", "lfproc.cli.main", "dictionary", "train", "--synthetic", "--preset", "tiny",
             "--atoms", "150", "--patches", "1500", "--iterations", "4", "--seed", "9"]
     env = {**os.environ, "LFPROC_PROGRESS": "0", "OPENBLAS_NUM_THREADS": "1"}
     killed = tmp_path / "k.npz"
-    proc = subprocess.Popen(base + ["-o", str(killed)], env=env, start_new_session=True)
     ckpt = tmp_path / "k.npz.ckpt" / "ksvd-checkpoint.npz"
-    deadline = time.monotonic() + 120
-    while not ckpt.exists() and proc.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.05)
-    if proc.poll() is None:
-        os.killpg(proc.pid, signal.SIGKILL)
-    proc.wait()
+    kill_when(base + ["-o", str(killed)], ckpt.exists, timeout_s=120, env={"OPENBLAS_NUM_THREADS": "1"}, poll_s=0.05)
     assert ckpt.exists() and not killed.exists(), "the run should have been killed after its first iteration"
     subprocess.run(base + ["-o", str(killed)], env=env, check=True)
     straight = tmp_path / "s.npz"
