@@ -283,6 +283,20 @@ def test_bench_quick_killed_then_resumed(tiny_inputs, capsys, kill_when):
     assert again["computed"] == 0 and again["cached"] == 70
 
 
+def test_cells_made_with_other_library_defaults_are_not_reused(tiny_inputs, monkeypatch):
+    """A cell's identity includes lfproc's reconstruction defaults and block size, so an upgrade that
+    changes them recomputes the cells instead of reporting results of the old defaults."""
+    import lfproc.bench.run as bench_run
+
+    root, scenes, dictionary = tiny_inputs
+    out = root / "defaults"
+    first = run_bench(scenes[:1], out, dictionary=dictionary, scheduler="synchronous", report=False)
+    assert first["computed"] == first["cells"] > 0
+    monkeypatch.setattr(bench_run, "RECON_DEFAULTS", {**bench_run.RECON_DEFAULTS, "overlap": "mean"})
+    changed = run_bench(scenes[:1], out, dictionary=dictionary, scheduler="synchronous", report=False)
+    assert changed["cached"] == 0 and changed["computed"] == first["cells"]
+
+
 # -- bad input -------------------------------------------------------------------------------------------
 
 def _one_error_line(capsys) -> str:

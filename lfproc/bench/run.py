@@ -34,6 +34,8 @@ import numpy as np
 from .._util import file_sha256, progress, to_jsonable
 from .._version import __version__
 from ..errors import InputError, OutputExistsError, SaturationWarning, ShapeError
+from ..camera.iso import DEFAULT_BLOCK_PX
+from ..recon import DEFAULTS as RECON_DEFAULTS
 from .grid import Cell, Job, Preset, cell_id, cell_seed, get_preset, grid_cells, group_jobs
 
 __all__ = ["run_bench", "load_scene", "run_job", "read_cells", "COLUMNS", "BenchScene"]
@@ -315,6 +317,9 @@ def run_bench(
     clean_stale(cells_dir)  # temporaries of killed runs (entries of live processes are left alone)
 
     recon = {**preset.recon, **(recon_options or {})}
+    # the library defaults a cell relies on: a later lfproc with other defaults recomputes the cell
+    # instead of reusing a result made with the old ones
+    defaults = {"recon": RECON_DEFAULTS, "block_px": DEFAULT_BLOCK_PX}
     dict_id = _dictionary_id(dictionary, source)
     by_name = {s.name: s for s in bench_scenes}
     cells = grid_cells(preset, [s.name for s in bench_scenes])
@@ -322,7 +327,8 @@ def run_bench(
     for c in cells:
         s = by_name[c.scene]
         context = {"scene_sha256": s.sha256, "crop": s.crop, "dictionary": dict_id, "recon": recon,
-                   "mask_period": preset.mask_period, "exposure_s": preset.exposure_s, "seed": int(seed)}
+                   "mask_period": preset.mask_period, "exposure_s": preset.exposure_s, "seed": int(seed),
+                   "defaults": defaults}
         ids[c] = cell_id(c, context)
     jobs = group_jobs(cells)
     # a job whose cells are partly done (killed between its cells) computes only the missing ones
