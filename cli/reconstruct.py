@@ -25,7 +25,7 @@ def register(sub, common) -> None:
     p.add_argument("--stride", type=int, default=4, help="patch spacing in pixels, 1..patch size (default 4)")
     p.add_argument("--mu", type=float, default=None,
                    help="l1 weight in units of the noise level of the patch's correlations with the atoms (default "
-                        "0.25); with --scale noise relative to the patch's norm; with --scale patch relative to a "
+                        "0.5); with --scale noise relative to the patch's norm; with --scale patch relative to a "
                         "unit-norm patch (the paper's: 1e-4)")
     p.add_argument("--max-iter", type=int, default=None, help="iteration limit (default 100 ADMM, 1000 FISTA)")
     p.add_argument("--tol", type=float, default=None,
@@ -41,8 +41,12 @@ def register(sub, common) -> None:
                    help="how overlapping patch estimates are weighted: by the patch's scale, a centre window and "
                         "the patch's fit (scale-window-fit, default), fewer of these, or plain averages (mean: the "
                         "paper's)")
+    p.add_argument("--variance", default=None, metavar="local|measurement",
+                   help="the signal in each measurement's photon-noise variance (its weight): its neighbours' (local, "
+                        "default) or its own value (measurement: the plug-in, biased low)")
     p.add_argument("--paper", action="store_true",
-                   help="the paper's settings: --scale patch --overlap mean --mu 1e-4 --tol 2^-15 --max-iter 300 "
+                   help="the paper's settings: --scale patch --overlap mean --variance measurement --mu 1e-4 "
+                        "--tol 2^-15 --max-iter 300 "
                         "(options given explicitly win)")
     p.add_argument("--threads", type=int, default=None, help="blocks solved at once in this process (default: CPUs)")
     p.add_argument("--per-shot", default=None, metavar="debevec|ml", dest="per_shot",
@@ -69,15 +73,13 @@ def run(args) -> int:
     dictionary = load_dictionary(args.dictionary)
     from lfproc.recon import DEFAULTS, PAPER
 
-    base = PAPER if args.paper else {"mu": DEFAULTS["mu"]}
-    given = {k: v for k, v in (("mu", args.mu), ("tol", args.tol), ("max_iter", args.max_iter)) if v is not None}
-    options = {k: base[k] for k in ("mu", "tol", "max_iter") if k in base}
-    options.update(given)
-    if args.paper:
-        scale, overlap = args.scale or PAPER["scale"], args.overlap or PAPER["overlap"]
-    else:
-        scale, overlap = args.scale or DEFAULTS["scale"], args.overlap or DEFAULTS["overlap"]
-    options.update(solver=args.solver, stride=args.stride, sparsity=args.sparsity, scale=scale, overlap=overlap,
+    base = PAPER if args.paper else DEFAULTS  # options given explicitly win
+    # tol and max_iter: the paper's numbers, or None for the library's per-solver defaults
+    options = {"mu": base["mu"], "tol": PAPER["tol"] if args.paper else None,
+               "max_iter": PAPER["max_iter"] if args.paper else None}
+    options.update({k: v for k, v in (("mu", args.mu), ("tol", args.tol), ("max_iter", args.max_iter)) if v is not None})
+    options.update({k: getattr(args, k) or base[k] for k in ("scale", "overlap", "variance")})
+    options.update(solver=args.solver, stride=args.stride, sparsity=args.sparsity,
                    workers=args.workers, scheduler=args.scheduler, threads=args.threads)
     if args.per_shot is not None:
         from lfproc.bench import reconstruct_per_shot

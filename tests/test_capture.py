@@ -251,3 +251,59 @@ def test_describe_counts_a_hand_made_capture(tmp_path):
     assert info["saturated_fraction"] == 1 / 16 and info["black_clipped_fraction"] == 2 / 16
     assert info["per_iso"] == {"400": {"fraction": 1.0, "saturated_fraction": 1 / 16, "black_clipped_fraction": 2 / 16}}
     assert (info["dn_min"], info["dn_max"]) == (0, 4095) and info["sampling_rate_percent"] == pytest.approx(100 / 75)
+
+
+# -- the photon-noise signal of the weights (variance_from="local") -------------------------------
+
+def _flat_capture(level, *, noise=True, seed=5, size=64):
+    lf = np.full((5, 5, size, size, 3), level, np.float32)
+    return simulate_capture(lf, profile="paper-medium", iso_pattern_kind="random", shots=2, mask_period=4,
+                            radiance_scale=1.0, noise=noise, random_state=seed)
+
+
+def test_local_signal_leaves_the_measurement_out_and_knows_a_flat_scene():
+    """Known answer: on a flat, noise-free scene every measurement is its total mask transmittance
+    times the radiance, and so is its neighbours' estimate; the estimate of a pixel does not move
+    when that pixel's own value does (leave-one-out), a same-colour neighbour's does."""
+    from dataclasses import replace
+
+    from lfproc.camera.capture import local_signal
+    from lfproc.camera.projection import transmittance_map
+
+    cap = _flat_capture(4000.0, noise=False)  # ~200 electrons: the codes' quantisation is ~1 %
+    obs = observations(cap, warn_saturation=False)
+    est = local_signal(cap, obs)
+    r = transmittance_map(cap.mask, views=cap.views, cfa_pattern=cap.cfa_pattern, size=cap.size)
+    inner = np.s_[:, 4:-4, 4:-4]
+    np.testing.assert_allclose(obs.radiance[inner], (r * 4000.0)[inner], rtol=0.02)
+    np.testing.assert_allclose(est[inner], (r * 4000.0)[inner], rtol=0.01)  # 8 neighbours average the quantisation
+    bumped = obs.radiance.copy()
+    bumped[0, 20, 20] *= 3
+    est2 = local_signal(cap, replace(obs, radiance=bumped))
+    assert est2[0, 20, 20] == est[0, 20, 20]
+    assert est2[0, 22, 20] > est[0, 22, 20] and est2[0, 21, 20] == est[0, 21, 20]  # same colour / other colour
+
+
+def test_local_variance_weights_are_unbiased_where_the_plug_in_is_low():
+    """Statistics against the noise model: the inverse-variance weighted mean of the radiance of a flat
+    scene at a few electrons per measurement is unbiased with the neighbours' signal in the variance
+    (within 1 %; measured 0.996 of the truth), and low with the plug-in (each measurement's own value:
+    Neyman's chi-square bias; measured 0.853)."""
+    from lfproc.camera.projection import transmittance_map
+
+    cap = _flat_capture(150.0)  # ~ 8 electrons per measurement
+    r = transmittance_map(cap.mask, views=cap.views, cfa_pattern=cap.cfa_pattern, size=cap.size)
+    means = {}
+    for how in ("local", "measurement"):
+        obs = observations(cap, warn_saturation=False, variance_from=how)
+        w2 = obs.weight.astype(np.float64) ** 2 * r**2  # the weights of L = T / r
+        means[how] = float((w2 * obs.radiance / r).sum() / w2.sum())
+    electrons = float(np.median(observations(cap, warn_saturation=False).radiance)) * cap.exposures_s[0]
+    assert 3 < electrons < 20, electrons
+    assert abs(means["local"] / 150.0 - 1) < 0.01, means
+    assert means["measurement"] / 150.0 < 0.95, means
+
+
+def test_local_variance_refuses_an_estimate():
+    with pytest.raises(InputError, match="variance_from='local' computes its own signal"):
+        observations(_flat_capture(100.0), variance_from="local", radiance_estimate=np.ones((2, 64, 64)))

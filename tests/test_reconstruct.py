@@ -407,14 +407,16 @@ def test_new_options_are_checked_and_recorded(smooth_capture, small_dictionary, 
         reconstruct(smooth_capture, small_dictionary, threads=0)
     with pytest.raises(InputError, match="debias"):
         reconstruct(smooth_capture, small_dictionary, debias=-1)
+    with pytest.raises(InputError, match="variance"):
+        reconstruct(smooth_capture, small_dictionary, variance="estimate")
     # threads change nothing (one-thread BLAS per block, blocks added in order)
     one = reconstruct(smooth_capture, small_dictionary, threads=1, block_patches=6)
     two = reconstruct(smooth_capture, small_dictionary, threads=2, block_patches=6)
     assert np.array_equal(one.data, two.data)
     rec = one.attrs["reconstruction"]
-    assert (rec["scale"], rec["overlap"], rec["mu"], rec["max_iter"], rec["tol"]) == (
-        "universal", "scale-window-fit", 0.25, 100, 1e-3)
-    assert DEFAULTS["mu"] == 0.25
+    assert (rec["scale"], rec["overlap"], rec["variance"], rec["mu"], rec["max_iter"], rec["tol"]) == (
+        "universal", "scale-window-fit", "local", 0.5, 100, 1e-3)
+    assert DEFAULTS["mu"] == 0.5
 
 
 def test_fit_weights_use_the_reduced_chi_square_of_each_patch():
@@ -444,9 +446,11 @@ def test_fit_weights_use_the_reduced_chi_square_of_each_patch():
 
 def test_a_dark_floor_beside_a_bright_light_is_not_shrunk_away():
     """Known answer: a flat floor of level 1 beside a light 12 stops brighter, about 5 electrons per
-    pixel and shot on the floor. The default scale ("universal": the l1 weight at the noise level of
-    the whole patch) keeps the floor (measured 0.80 of its level); the previous default ("noise":
-    shrinkage ~ mu / SNR^2 of a single measurement) lost most of it (measured 0.37)."""
+    pixel and shot on the floor. The defaults keep the floor (measured 0.92 of its level). The
+    plug-in photon variance (``variance="measurement"``, the defaults of the previous stop) weighs
+    the measurements that fell low more and brings it to 0.80, the light to 0.27 of its level
+    (0.58 with the defaults); the scale of the stop before ("noise": shrinkage ~ mu / SNR^2 of a
+    single measurement) lost most of the floor (0.39)."""
     import warnings
 
     from lfproc.camera.capture import observations
@@ -459,10 +463,15 @@ def test_a_dark_floor_beside_a_bright_light_is_not_shrunk_away():
                                    iso_pattern_kind="random", mask_period=4, random_state=3)
         electrons = observations(capture).radiance[:, :30, :30].mean() * capture.exposures_s[0]
         assert 3 < electrons < 8
-        floor = reconstruct(capture).data[:, :, 4:30, 4:30].mean()
-        old = reconstruct(capture, scale="noise", mu=1.0, max_iter=50, tol=1e-2).data[:, :, 4:30, 4:30].mean()
-    assert 0.7 < floor < 1.1, floor
-    assert old < 0.5, old
+        out = reconstruct(capture)
+        plug_in = reconstruct(capture, variance="measurement", mu=0.25)
+        old = reconstruct(capture, scale="noise", mu=1.0, max_iter=50, tol=1e-2, variance="measurement")
+    floor = out.data[:, :, 4:30, 4:30].mean()
+    assert 0.85 < floor < 1.1, floor
+    assert plug_in.data[:, :, 4:30, 4:30].mean() < floor - 0.05
+    assert old.data[:, :, 4:30, 4:30].mean() < 0.5
+    light = out.data[:, :, 41:45, 41:45].mean() / 2.0**12
+    assert light > 1.5 * plug_in.data[:, :, 41:45, 41:45].mean() / 2.0**12 and light < 1.1, light
 
 
 def test_cli_paper_settings(files, capsys, tmp_path):

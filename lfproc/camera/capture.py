@@ -65,6 +65,7 @@ __all__ = [
     "Capture",
     "load_capture",
     "is_capture_file",
+    "local_signal",
     "capture_from_raw",
     "read_sensor_frame",
     "observations",
@@ -549,7 +550,9 @@ def observations(capture: Capture, *, warn_saturation: bool = True, **options) -
         :data:`lfproc.errors.SATURATION_WARNING_FRACTION` of the pixels are saturated.
     **options
         Passed to :func:`lfproc.camera.sensor.calibrated_observation` (``saturation_margin_dn``,
-        ``variance_from``, ``radiance_estimate`` of shape (S, H, W)...).
+        ``variance_from``, ``radiance_estimate`` of shape (S, H, W)...). ``variance_from="local"``
+        (capture level only) takes the photon-noise signal of every measurement from its
+        neighbours instead of itself (:func:`local_signal`).
 
     Returns
     -------
@@ -560,6 +563,13 @@ def observations(capture: Capture, *, warn_saturation: bool = True, **options) -
     if not isinstance(capture, Capture):
         raise InputError(f"observations: expected a Capture, got {type(capture).__name__}")
     estimate = options.pop("radiance_estimate", None)
+    if options.get("variance_from") == "local":
+        if estimate is not None:
+            raise InputError("observations: variance_from='local' computes its own signal; drop radiance_estimate")
+        plug_in = observations(capture, warn_saturation=False,
+                               **{k: v for k, v in options.items() if k != "variance_from"})
+        estimate = local_signal(capture, plug_in)
+        options["variance_from"] = "estimate"
     per_shot = []
     for s in range(capture.shots):
         kw = dict(options)
@@ -579,6 +589,42 @@ def observations(capture: Capture, *, warn_saturation: bool = True, **options) -
     if warn_saturation:
         _warn_saturation(capture, stacklevel=4)
     return obs
+
+
+def local_signal(capture: Capture, obs: Observation, *, radius: int = 1) -> np.ndarray:
+    """A leave-one-out local estimate of every measurement's expected ``T`` (e-/s), ``(S, H, W)``.
+
+    The photon-noise variance of ``T`` needs the expected signal. ``T`` itself (the plug-in)
+    gives a measurement that fell low a smaller variance, so a larger weight, and every weighted
+    fit comes out low: by about one electron per pixel (Neyman's chi-square), 6-15 % of the local
+    means in textured regions of the README's scenes, black where the scene has a few electrons
+    per pixel. Here measurement ``i`` gets ``r_i sum_j T_j / sum_j r_j`` over the usable
+    measurements ``j != i`` of the same shot and Bayer colour in the ``(2 radius + 1)^2``
+    neighbourhood of its colour plane (``r``: the pixel's total mask transmittance,
+    :func:`lfproc.camera.projection.transmittance_map`), which does not depend on its own noise;
+    where it has no usable neighbour it keeps its own ``T``. Negative ``T`` count as 0.
+    """
+    from scipy.ndimage import uniform_filter
+
+    from .projection import transmittance_map
+
+    T = np.maximum(obs.radiance.astype(np.float64), 0.0)
+    use = obs.weight > 0
+    r = transmittance_map(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern, size=T.shape[1:])
+    out = T.copy()
+    k = 2 * int(radius) + 1
+    for s in range(T.shape[0]):
+        for a in (0, 1):  # the four Bayer colour planes
+            for b in (0, 1):
+                plane = np.s_[s, a::2, b::2]
+                t = np.where(use[plane], T[plane], 0.0)
+                rr = np.where(use[plane], r[plane], 0.0)
+                st = uniform_filter(t, k, mode="constant") * (k * k) - t  # neighbours' sums, the pixel left out
+                sr = uniform_filter(rr, k, mode="constant") * (k * k) - rr
+                ok = sr > 1e-6 * max(float(rr.max()), 1e-30)
+                est = out[plane]
+                est[ok] = r[plane][ok] * np.maximum(st[ok], 0.0) / sr[ok]
+    return out
 
 
 def _warn_saturation(capture: Capture, *, stacklevel: int) -> None:

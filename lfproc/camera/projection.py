@@ -59,6 +59,7 @@ __all__ = [
     "PatchOperators",
     "patch_operators",
     "patch_grid",
+    "transmittance_map",
 ]
 
 MASK_KINDS = ("random", "shifted")
@@ -699,6 +700,25 @@ def _mask_values(mask: MaskCode, rows: np.ndarray, cols: np.ndarray, colour: np.
     if mask.period is not None:
         r, c = r % mask.period, c % mask.period
     return mask.codes[:, r, c, colour[None, None]]
+
+
+def transmittance_map(mask: MaskCode, *, views: tuple[int, int], cfa_pattern: str, size: tuple[int, int],
+                      rows_per_chunk: int = 64) -> np.ndarray:
+    """Total mask transmittance over the views at every sensor pixel, ``(S, H, W)`` float64.
+
+    The row sums of ``Phi``: a measurement of a light field that is constant over the views and
+    the pixel's colour is that value times this. Computed from the codes in row chunks, never
+    from the expanded ``(S, V, U, H, W)`` weights.
+    """
+    h, w = _pair(size, "size")
+    colour = cfa_index_map(cfa_pattern, (h, w))
+    out = np.empty((mask.shots, h, w), dtype=np.float64)
+    cols = np.arange(w)
+    for top in range(0, h, rows_per_chunk):
+        rows = np.arange(top, min(h, top + rows_per_chunk))
+        rr, cc = np.broadcast_arrays(rows[:, None], cols[None, :])
+        out[:, rows] = _mask_values(mask, rr, cc, colour[rows], views).sum(axis=(1, 2), dtype=np.float64)
+    return freeze(out)
 
 
 def patch_operators(mask: MaskCode, *, views: tuple[int, int], cfa_pattern: str, tops, lefts, size: int,

@@ -7,7 +7,7 @@ share one patch operator per phase (:func:`lfproc.camera.projection.patch_operat
 solvers' work is matrix-matrix products; blocks of patches run in this process or on Dask.
 """
 
-from ._reconstruct import DEFAULTS, OVERLAPS, PAPER, SCALES, patch_count, reconstruct
+from ._reconstruct import DEFAULTS, OVERLAPS, PAPER, SCALES, VARIANCES, patch_count, reconstruct
 from ._solvers import SOLVERS
 
-__all__ = ["reconstruct", "patch_count", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "SOLVERS"]
+__all__ = ["reconstruct", "patch_count", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "VARIANCES", "SOLVERS"]

@@ -40,8 +40,15 @@ black (README). ``scale="universal"`` (the default) sets the l1 weight where the
 raw problem ``1/2 ||W (Phi_p D a - T_p)||^2 + lambda_p ||a||_1`` with
 ``lambda_p = mu sqrt(2 ln K) s_p``, ``s_p = rms_j ||W Phi_p d_j||`` the standard deviation of the
 noise in an atom's correlation ``d_j^T Phi_p^T W^2 T_p`` (``mu = 1`` is Donoho and Johnstone's
-universal threshold; 0.25 measured best). An atom then enters when its correlation stands out
+universal threshold; 0.5 measured best). An atom then enters when its correlation stands out
 of the noise of the *whole* patch, so the shrinkage goes as ``1 / SNR`` of the patch, not of a pixel.
+
+The weights ``W = 1/std(T)`` need each measurement's expected signal for its photon noise.
+``variance="measurement"`` (the previous default) plugs in ``T`` itself: a measurement that fell
+low gets a smaller variance and a larger weight, so every weighted fit is biased low (by about
+one electron per measurement: local means 6-15 % low in textured regions, lights 20 % low, dark
+floors black; README). ``variance="local"`` (the default) takes the signal from the measurement's
+same-colour neighbours (:func:`lfproc.camera.capture.local_signal`), independent of its own noise.
 
 Overlapping estimates are averaged (``overlap="mean"``, the paper's) or weighted per pixel
 (``"scale"``: by ``1 / c_p^2``, the inverse of a patch's error variance when its error is
@@ -70,19 +77,23 @@ from threadpoolctl import threadpool_limits
 
 from ._solvers import SOLVERS, BatchOperator, SharedOperator, admm, fista, omp
 
-__all__ = ["reconstruct", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "patch_count"]
+__all__ = ["reconstruct", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "VARIANCES", "patch_count"]
 
 SCALES = ("patch", "global", "noise", "universal")
 OVERLAPS = ("mean", "scale", "window", "scale-window", "scale-window-fit")
+VARIANCES = ("local", "measurement")
 #: Defaults of :func:`reconstruct`, measured on HDR-photo-textured light fields (README, benchmarks/
 #: reconstruct_quality.py, tuned on scenes other than the README's): the chi-square data term with the
-#: l1 weight at 0.25 of its universal noise level (``scale="universal"``), overlaps weighted by scale, a
-#: centre window and the fit, ADMM stopped at a tolerance of 1e-3 or 100 iterations. The paper's settings are :data:`PAPER`.
-DEFAULTS = {"stride": 4, "mu": 0.25, "tol": {"admm": 1e-3, "fista": 2.0**-15, "omp": None},
+#: l1 weight at 0.5 of its universal noise level (``scale="universal"``), weights from a photon-noise variance
+#: of the neighbours' signal (``variance="local"``), overlaps weighted by scale, a centre window and the fit,
+#: ADMM stopped at a tolerance of 1e-3 or 100 iterations. The paper's settings are :data:`PAPER`.
+DEFAULTS = {"stride": 4, "mu": 0.5, "tol": {"admm": 1e-3, "fista": 2.0**-15, "omp": None},
             "max_iter": {"admm": 100, "fista": 1000, "omp": None},
-            "block_patches": 512, "scale": "universal", "overlap": "scale-window-fit"}
-#: The paper's settings (method.md section 4: mu 1e-4 on patches of unit norm, tolerance 2^-15, plain averages).
-PAPER = {"stride": 4, "mu": 1e-4, "tol": 2.0**-15, "max_iter": 300, "scale": "patch", "overlap": "mean"}
+            "block_patches": 512, "scale": "universal", "overlap": "scale-window-fit", "variance": "local"}
+#: The paper's settings (method.md section 4: mu 1e-4 on patches of unit norm, tolerance 2^-15, plain averages;
+#: the paper weighs measurements by their noise model, which its text does not detail: the plug-in here).
+PAPER = {"stride": 4, "mu": 1e-4, "tol": 2.0**-15, "max_iter": 300, "scale": "patch", "overlap": "mean",
+         "variance": "measurement"}
 #: Bytes of per-patch operators ``A_p`` materialised at once for non-periodic masks.
 _BATCH_OPERATOR_BYTES = 256 * 2**20
 
@@ -359,6 +370,7 @@ def reconstruct(
     threads: int | None = None,
     overlap: str = DEFAULTS["overlap"],
     debias: int = 0,
+    variance: str = DEFAULTS["variance"],
 ) -> LightField:
     """Reconstruct the HDR light field of a coded multi-ISO capture (method.md section 4).
 
@@ -378,7 +390,7 @@ def reconstruct(
         Patch spacing in pixels (1 .. patch size; 4 as the paper). Any stride works with the
         Bayer CFA: patch operators carry their CFA phase.
     mu : float
-        l1 weight (module notes): with ``scale="universal"`` (default 0.25, measured)
+        l1 weight (module notes): with ``scale="universal"`` (default 0.5, measured)
         ``mu sqrt(2 ln K) s_p`` against the chi-square data term, ``s_p`` the rms of the weighted
         atoms' norms (the noise level of their correlations with the data); with
         ``scale="noise"`` ``mu / c_p`` against the chi-square data term averaged over the measurements; with
@@ -414,6 +426,10 @@ def reconstruct(
     debias : int
         Refit each ADMM/FISTA code by least squares on its ``debias`` largest atoms (0: off, the
         default: measured to lose quality on noisy captures, README).
+    variance : {"local", "measurement"}
+        The signal in the photon-noise variance of every measurement, hence its weight: from its
+        neighbours (``"local"``, the default: :func:`lfproc.camera.capture.local_signal`) or its own
+        value (``"measurement"``, the plug-in, which biases the fit low; module notes).
 
     Returns
     -------
@@ -439,6 +455,7 @@ def reconstruct(
     started = time.perf_counter()
     check_choice("solver", solver, SOLVERS)
     check_choice("scale", scale, SCALES)
+    check_choice("variance", variance, VARIANCES)
     check_choice("overlap", overlap, OVERLAPS)
     if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)):
         raise InputError(f"stride: expected a positive integer, got {stride!r}")
@@ -478,7 +495,7 @@ def reconstruct(
         sparsity = dictionary.sparsity
     sparsity = _int_option("sparsity", sparsity)
 
-    obs = observations(capture)
+    obs = observations(capture, variance_from=variance)
     T = np.ascontiguousarray(obs.radiance, dtype=np.float32)
     W = np.ascontiguousarray(obs.weight, dtype=np.float32)
     usable = W > 0
@@ -593,6 +610,7 @@ def reconstruct(
         "sparsity": sparsity if solver == "omp" else None,
         "scale": scale,
         "overlap": overlap,
+        "variance": variance,
         "debias": int(debias),
         "block_patches": block_patches,
         "patches": int(len(grid_t)),
