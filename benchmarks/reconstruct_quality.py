@@ -15,7 +15,8 @@ Every scene is captured (``lfproc.camera.simulate.simulate_capture``, profile
 
 * ``2 random``: 2 shots, random ISO pattern (the issue's main case);
 * ``1 random``: 1 shot, random ISO pattern;
-* ``2 row`` and ``2 block``: 2 shots, row and block ISO patterns;
+* ``2 row`` and ``2 block``: 2 shots, row and block ISO patterns (blocks of 8 pixels, the
+  default; ``2 block 4px``: of 4);
 
 and reconstructed with lfproc's defaults (``lfproc.reconstruct(capture)``). Printed per scene:
 PU21-PSNR / PU21-SSIM against the ground truth (``lfproc.metrics.evaluate``), the seconds,
@@ -53,7 +54,8 @@ CAPTURES = {
     "2 random": dict(shots=2, iso_pattern_kind="random"),
     "1 random": dict(shots=1, iso_pattern_kind="random"),
     "2 row": dict(shots=2, iso_pattern_kind="row"),
-    "2 block": dict(shots=2, iso_pattern_kind="block"),
+    "2 block": dict(shots=2, iso_pattern_kind="block"),  # blocks of DEFAULT_BLOCK_PX = 8 pixels
+    "2 block 4px": dict(shots=2, iso_pattern_kind="block", block_px=4),
 }
 
 
@@ -62,15 +64,19 @@ def ablation_settings() -> dict[str, dict]:
     from lfproc.recon import PAPER
 
     early = dict(tol=1e-2, max_iter=50)
-    noise = dict(scale="noise", mu=1.0, **early)  # the previous defaults' scale
+    old = dict(mu=0.25, overlap="scale-window", variance="measurement")  # the defaults of stop 3
+    noise = dict(scale="noise", mu=1.0, variance="measurement", **early)  # the scale of stop 2
     return {
         "paper (per-patch data term, mu 1e-4, tol 2^-15, 300 it., mean)": dict(PAPER),
         "paper, stopped at tol 1e-2 / 50 it.": dict(PAPER, **early),
         "+ chi-square data term, mu 1 (scale=noise)": dict(PAPER, **noise),
         "+ overlaps weighted by 1/c_p^2 (overlap=scale)": dict(PAPER, **noise, overlap="scale"),
-        "+ centre window (overlap=scale-window) = the previous defaults": dict(noise),
-        "+ l1 weight at the noise level, mu 0.25 (scale=universal), 50 it.": dict(early, scale="universal", mu=0.25),
-        "+ tol 1e-3 / 100 it. = lfproc defaults": {},
+        "+ centre window (overlap=scale-window) = the defaults of stop 2": dict(noise, overlap="scale-window"),
+        "+ l1 weight at the noise level, mu 0.25 (scale=universal), 50 it.": dict(old, **early),
+        "+ tol 1e-3 / 100 it. = the defaults of stop 3": dict(old),
+        "+ overlaps weighted by the fit (overlap=scale-window-fit)": dict(old, overlap="scale-window-fit"),
+        "+ photon variance from the neighbours (variance=local)": dict(mu=0.25),
+        "+ mu 0.5 = lfproc defaults": {},
         "defaults, 150 it.": dict(max_iter=150),
         "defaults + least-squares debias on 30 atoms": dict(debias=30),
         "defaults with omp (10 atoms)": dict(solver="omp"),

@@ -36,17 +36,27 @@ from reconstruct_quality import CAPTURES, SCENES  # noqa: E402  (the evaluation 
 
 TUNE_SCENES = [("layers", "hdr/ScanLines_Cannon.exr", 21), ("window", "hdr_cc0/city.exr", 22),
                ("lamps", "hdr_cc0/sunset.exr", 23)]
-#: The settings compared in README ("Choosing the new defaults").
+#: The settings compared in README ("Choosing the new defaults"); ``_OLD``: the weights and overlaps of
+#: the earlier stops (plug-in photon variance, no fit weights).
+_OLD = {"overlap": "scale-window", "variance": "measurement"}
 README_CONFIGS = [
-    {"scale": "noise", "mu": 1.0, "max_iter": 50, "tol": 1e-2},
-    {"scale": "noise", "mu": 0.1, "max_iter": 50, "tol": 1e-2},
-    {"scale": "noise", "mu": 0.1, "max_iter": 150, "tol": 1e-3},
-    {"scale": "universal", "mu": 1.0, "max_iter": 50, "tol": 1e-2},
-    {"scale": "universal", "mu": 0.5, "max_iter": 50, "tol": 1e-2},
-    {"scale": "universal", "mu": 0.25, "max_iter": 50, "tol": 1e-2},
-    {"scale": "universal", "mu": 0.5, "max_iter": 150, "tol": 1e-3},
-    {},
-    {"max_iter": 150},
+    {"scale": "noise", "mu": 1.0, "max_iter": 50, "tol": 1e-2, **_OLD},
+    {"scale": "noise", "mu": 0.1, "max_iter": 50, "tol": 1e-2, **_OLD},
+    {"scale": "noise", "mu": 0.1, "max_iter": 150, "tol": 1e-3, **_OLD},
+    {"scale": "universal", "mu": 1.0, "max_iter": 50, "tol": 1e-2, **_OLD},
+    {"scale": "universal", "mu": 0.5, "max_iter": 50, "tol": 1e-2, **_OLD},
+    {"scale": "universal", "mu": 0.25, "max_iter": 50, "tol": 1e-2, **_OLD},
+    {"scale": "universal", "mu": 0.5, "max_iter": 150, "tol": 1e-3, **_OLD},
+    {"mu": 0.25, **_OLD},  # the defaults of the previous stop
+    {"mu": 0.25, "max_iter": 150, **_OLD},
+    {"mu": 0.18, **_OLD},
+    {"mu": 0.125, **_OLD},
+    {"mu": 0.25, "max_iter": 300, "tol": 1e-4, **_OLD},
+    {"mu": 0.25, "debias": 30, **_OLD},
+    {"mu": 0.25, "variance": "measurement"},  # + fit weights
+    {"mu": 0.25},  # + the neighbours' photon variance
+    {"mu": 0.35},
+    {},  # mu 0.5: the defaults
 ]
 
 
