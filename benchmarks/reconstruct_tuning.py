@@ -49,9 +49,9 @@ README_CONFIGS = [
     {"scale": "universal", "mu": 0.5, "max_iter": 150, "tol": 1e-3, **_OLD},
     {"mu": 0.25, **_OLD},  # the defaults of the previous stop
     {"mu": 0.25, "max_iter": 150, **_OLD},
+    {"mu": 0.25, "max_iter": 300, "tol": 1e-4, **_OLD},
     {"mu": 0.18, **_OLD},
     {"mu": 0.125, **_OLD},
-    {"mu": 0.25, "max_iter": 300, "tol": 1e-4, **_OLD},
     {"mu": 0.25, "debias": 30, **_OLD},
     {"mu": 0.25, "variance": "measurement"},  # + fit weights
     {"mu": 0.25},  # + the neighbours' photon variance
