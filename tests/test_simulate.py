@@ -47,6 +47,10 @@ def test_iso_pattern_layouts(tmp_path):
     np.testing.assert_array_equal(dual[:, 0], [100, 100, 1600, 1600] * 2)
     block = iso_pattern("block", size=(8, 8), isos=ISOS, block_px=2)
     np.testing.assert_array_equal(block[::2, ::2], [[100, 400, 100, 400], [800, 1600, 800, 1600]] * 2)
+    # default blocks of 8 pixels (DEFAULT_BLOCK_PX): an 8 x 8 patch on the block grid sees one ISO
+    wide = iso_pattern("block", size=(16, 16), isos=ISOS)
+    np.testing.assert_array_equal(wide[::8, ::8], [[100, 400], [800, 1600]])
+    assert (wide[:8, :8] == 100).all() and len(np.unique(wide[4:12, 4:12])) == 4
     rnd = iso_pattern("random", size=(200, 200), isos=ISOS, random_state=0)
     values, counts = np.unique(rnd, return_counts=True)
     np.testing.assert_array_equal(values, ISOS)
