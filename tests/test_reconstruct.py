@@ -371,9 +371,9 @@ def test_api_bad_options(smooth_capture, small_dictionary):
 def test_two_shots_beat_one_on_a_textured_hdr_scene(shared_data):
     """The shipped dictionary (trained on procedural scenes only) on a scene textured with an HDR photograph.
 
-    Measured with the defaults (scale "universal", mu 0.25, 100 iterations): 2 shots 21.85 dB, 1 shot 21.68 dB
-    PU21-PSNR at 96 x 96 (64 x 64: 19.77 / 19.70; 128 x 128: 22.93 / 22.74; at the Lytro size the README's
-    table). The ISO pattern's effect (random/row vs block) is within the capture-to-capture spread at this
+    Measured with the defaults (scale "universal", mu 0.5, 100 iterations, photon variance from the
+    neighbours): 2 shots 21.76 dB, 1 shot 21.46 dB PU21-PSNR at 96 x 96 (with the defaults of the previous
+    stop 21.85 / 21.68; at the Lytro size the README's table). The ISO pattern's effect (random/row vs block) is within the capture-to-capture spread at this
     size and is not asserted (README).
     """
     import warnings
