@@ -300,7 +300,7 @@ def _bad_capture_all_saturated(capture_path, root):
     return path
 
 
-@pytest.mark.parametrize("case", ["views", "colours", "weights", "stride", "solver", "corrupt-capture",
+@pytest.mark.parametrize("case", ["views", "colours", "weights", "stride", "solver", "variance", "corrupt-capture",
                                   "corrupt-dictionary", "missing-default"])
 def test_bad_input_gets_one_line_and_exit_2(files, capsys, case, tmp_path):
     root, _, capture, dictionary = files
@@ -312,6 +312,7 @@ def test_bad_input_gets_one_line_and_exit_2(files, capsys, case, tmp_path):
         "weights": "weight zero",
         "stride": "stride",
         "solver": "solver",
+        "variance": "variance: expected one of local, measurement; got 'bogus'",
         "corrupt-capture": "capture",
         "corrupt-dictionary": "bad.npz",
         "missing-default": "default",
@@ -328,6 +329,8 @@ def test_bad_input_gets_one_line_and_exit_2(files, capsys, case, tmp_path):
         args += ["--stride", "9"]
     elif case == "solver":
         args += ["--solver", "lbfgs"]
+    elif case == "variance":
+        args += ["--variance", "bogus"]
     elif case == "corrupt-capture":
         bad = tmp_path / "bad.capture.npz"
         bad.write_bytes(b"PK\x03\x04" + b"\x00" * 100)
