@@ -506,7 +506,11 @@ def reconstruct(
     mean_rowsum = float(np.mean(capture.mask.codes)) * v_n * u_n
     c_global = math.sqrt(n) * float(np.percentile(np.abs(T[usable]), 99.9)) / max(mean_rowsum, 1e-12)
     w_global = float(np.sqrt(np.mean(W[usable].astype(np.float64) ** 2)))
-    c_median = math.sqrt(n) * float(np.median(np.abs(T[usable]))) / max(mean_rowsum, 1e-12)
+    # the constant the overlap weights' patch scales are divided by (the same in every block); from the
+    # non-zero measurements: on a noise-free sensor most of a dark scene's measurements are exactly 0, and a
+    # zero median made every 1 / c_p^2 weight underflow to 0 and the output black
+    lit = np.abs(T[usable & (T != 0)])
+    c_median = math.sqrt(n) * (float(np.median(lit)) if lit.size else 1.0) / max(mean_rowsum, 1e-12)
     settings = _Settings(solver=solver, mu=mu, max_iter=max_iter, tol=tol, sparsity=sparsity, scale=scale, overlap=overlap,
                          c_global=max(c_global, 1e-30), w_global=max(w_global, 1e-30),
                          c_median=max(c_median, 1e-30), debias=_int_option("debias", debias, low=0))
