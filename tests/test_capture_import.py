@@ -172,8 +172,13 @@ def bad_inputs(files, tmp_path, dng_writer):
     with open(d / "huge_codes.npy", "wb") as fh:  # a header announcing 8 TB over 64 bytes of data
         np.lib.format.write_array_header_1_0(fh, {"descr": "<f8", "fortran_order": False, "shape": (10**6, 10**6)})
         fh.write(bytes(64))
+    iso = np.full((40, 48), 400.0)
+    iso[3, 5] = np.nan
+    np.save(d / "nan_iso.npy", iso)
+    iso[3, 5] = 123.0
+    np.save(d / "odd_iso.npy", iso)
     return {"wrong_size": wrong_size, "bad_codes": d / "flat_codes.npy", "text": d / "text.dng",
-            "huge_codes": d / "huge_codes.npy"}
+            "huge_codes": d / "huge_codes.npy", "nan_iso": d / "nan_iso.npy", "odd_iso": d / "odd_iso.npy"}
 
 
 def _argv(files, out, **change):
@@ -207,6 +212,9 @@ def _argv(files, out, **change):
     ("named layout without ISOs", lambda f, b: {"--isos": None}, r"--iso-layout row: --isos is required"),
     ("random layout without seed", lambda f, b: {"--iso-layout": "random"}, r"--iso-layout random: --seed is required"),
     ("ISO not in the profile", lambda f, b: {"--isos": "100,123"}, r"ISO 123 is not in camera profile 'dng-sensor'"),
+    ("ISO map file with NaN", lambda f, b: {"--iso-layout": str(b["nan_iso"]), "--isos": None}, r"nan_iso.npy: ISO map with 1 NaN or Inf values; expected an ISO number per pixel"),
+    ("ISO map file with an unknown ISO", lambda f, b: {"--iso-layout": str(b["odd_iso"]), "--isos": None},
+     r"ISO 123 is not in camera profile 'dng-sensor'"),
     ("exposures count", lambda f, b: {"--exposures-s": "0.004,0.008,0.01"},
      r"--exposures-s: expected 1 or 2 exposure times \(one per RAW\), got 3"),
     ("bad exposure", lambda f, b: {"--exposures-s": "0.004,-1"}, r"exposures_s: expected positive finite seconds"),

@@ -10,7 +10,7 @@ import pytest
 from lfproc.calib import load_profile
 from lfproc.camera.capture import load_capture, observations
 from lfproc.cli.main import main
-from lfproc.errors import InputError, ProfileError
+from lfproc.errors import FileFormatError, InputError, ProfileError
 from lfproc.io import write_image, write_lightfield
 from lfproc.lightfield import LightField
 from lfproc.camera.simulate import (
@@ -64,6 +64,9 @@ def test_iso_pattern_layouts(tmp_path):
         iso_pattern("block", size=(8, 8), block_px=3)
     with pytest.raises(Exception, match=r"ISO map of shape \(8, 8\); expected the sensor size \(4, 4\)"):
         iso_pattern(tmp_path / "iso.npy", size=(4, 4))
+    np.save(tmp_path / "zero.npy", np.where(block == 800, 0, block))
+    with pytest.raises(FileFormatError, match=r"zero.npy: ISO map with values <= 0 \(smallest 0\); expected positive"):
+        iso_pattern(tmp_path / "zero.npy", size=(8, 8))
 
 
 # -- simulation, baselines, scale -----------------------------------------------------------------

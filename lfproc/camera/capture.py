@@ -54,7 +54,7 @@ from .._version import __version__
 from ..calib import load_profile
 from ..errors import FileFormatError, InputError, LfprocError, MissingFileError, ShapeError
 from ..io import atomic_file
-from .iso import DEFAULT_BLOCK_PX
+from .iso import DEFAULT_BLOCK_PX, _num
 from .projection import CFA_PATTERNS, MASK_KINDS, MaskCode, ProjectionOperator, build_operator, decode_levels, encode_levels, sampling_rate
 from .sensor import Observation, calibrated_observation
 
@@ -319,10 +319,6 @@ def _member(name: str) -> zipfile.ZipInfo:
     info.external_attr = 0o644 << 16  # a regular file, rw-r--r--
     info.create_system = 3  # Unix, whatever the writing machine
     return info
-
-
-def _num(v: float):
-    return int(v) if float(v).is_integer() else float(v)
 
 
 def is_capture_file(path: str | os.PathLike) -> bool:

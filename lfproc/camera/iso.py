@@ -34,6 +34,11 @@ DEFAULT_ISOS = (100, 400, 800, 1600)
 DEFAULT_BLOCK_PX = 8
 
 
+def _num(v: float):
+    """An ISO (or any figure) as a plain int when it is whole, else a float (for JSON records)."""
+    return int(v) if float(v).is_integer() else float(v)
+
+
 def _load_iso_file(path: Path, size: tuple[int, int]) -> np.ndarray:
     if not path.is_file():
         raise MissingFileError(f"{path}: no such ISO map file (or use one of {', '.join(ISO_PATTERNS)})")
@@ -59,6 +64,11 @@ def _load_iso_file(path: Path, size: tuple[int, int]) -> np.ndarray:
     values = np.asarray(values, dtype=np.float64)
     if values.shape != tuple(size):
         raise ShapeError(f"{path}: ISO map of shape {values.shape}; expected the sensor size {tuple(size)}")
+    bad = int(np.count_nonzero(~np.isfinite(values)))
+    if bad:
+        raise FileFormatError(f"{path}: ISO map with {bad} NaN or Inf values; expected an ISO number per pixel")
+    if (values <= 0).any():
+        raise FileFormatError(f"{path}: ISO map with values <= 0 (smallest {values.min():g}); expected positive ISOs")
     return values
 
 
@@ -124,7 +134,7 @@ def describe_iso_pattern(kind: str | os.PathLike, isos: Sequence[float], *, bloc
     ``seed`` of ``random``), ``{"kind": "file", "path", "isos"}`` for a file.
     """
     name = str(kind)
-    values = [int(v) if float(v).is_integer() else float(v) for v in isos]
+    values = [_num(v) for v in isos]
     if name not in ISO_PATTERNS:
         return {"kind": "file", "path": name, "isos": values}
     info: dict = {"kind": name, "isos": values}

@@ -51,8 +51,8 @@ import numpy as np
 
 from .._util import check_choice, check_count, check_positive, check_random_state, freeze
 from .._version import __version__
-from .iso import DEFAULT_BLOCK_PX, DEFAULT_ISOS, ISO_PATTERNS, describe_iso_pattern, iso_pattern
-from .capture import MAX_SHOTS, Capture, _num, _warn_saturation, file_sha256, observations
+from .iso import DEFAULT_BLOCK_PX, DEFAULT_ISOS, ISO_PATTERNS, _num, describe_iso_pattern, iso_pattern
+from .capture import MAX_SHOTS, Capture, _warn_saturation, file_sha256, observations
 from ..calib import load_profile
 from ..errors import InputError, ShapeError
 from ..lightfield import LightField, clean_nonfinite
