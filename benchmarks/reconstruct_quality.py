@@ -49,6 +49,8 @@ SCENES = [
     ("checker", "hdr/ScanLines_StillLife.exr", 15),
     ("window", "hdr_cc0/studio.exr", 16),
 ]
+#: The shared data folder (the HDR photographs of the scenes).
+DATA = Path(os.environ.get("LFPROC_SHARED_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data"))
 #: name -> simulate_capture options
 CAPTURES = {
     "2 random": dict(shots=2, iso_pattern_kind="random"),
@@ -117,8 +119,7 @@ def main() -> None:
     parser.add_argument("--size", type=int, nargs="+", default=[434, 625], metavar="H [W]",
                         help="view size in pixels (one number: square; default: 434 625, Lytro Illum)")
     parser.add_argument("--scenes", type=int, default=4, help=f"how many of the {len(SCENES)} scenes")
-    parser.add_argument("--data", type=Path, default=Path(os.environ.get(
-        "LFPROC_SHARED_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data")),
+    parser.add_argument("--data", type=Path, default=DATA,
                         help="the shared data folder (default $LFPROC_SHARED_DATA or ../shared/data)")
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--dictionary", default="default",

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from reconstruct_quality import CAPTURES, SCENES  # noqa: E402  (the evaluation scenes and captures)
+from reconstruct_quality import CAPTURES, DATA, SCENES, scene  # noqa: E402  (the evaluation scenes and captures)
 
 TUNE_SCENES = [("layers", "hdr/ScanLines_Cannon.exr", 21), ("window", "hdr_cc0/city.exr", 22),
                ("lamps", "hdr_cc0/sunset.exr", 23)]
@@ -47,7 +47,7 @@ README_CONFIGS = [
     {"scale": "universal", "mu": 0.5, "max_iter": 50, "tol": 1e-2, **_OLD},
     {"scale": "universal", "mu": 0.25, "max_iter": 50, "tol": 1e-2, **_OLD},
     {"scale": "universal", "mu": 0.5, "max_iter": 150, "tol": 1e-3, **_OLD},
-    {"mu": 0.25, **_OLD},  # the defaults of the previous stop
+    {"mu": 0.25, **_OLD},  # the defaults of stop 3
     {"mu": 0.25, "max_iter": 150, **_OLD},
     {"mu": 0.25, "max_iter": 300, "tol": 1e-4, **_OLD},
     {"mu": 0.18, **_OLD},
@@ -64,15 +64,14 @@ def main() -> None:
     from lfproc.camera.simulate import simulate_capture
     from lfproc.metrics import evaluate
     from lfproc.recon import reconstruct
-    from lfproc.synth import synthesize
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scenes", default="tune", help="'tune' or comma-separated evaluation scene numbers")
     parser.add_argument("--configs", default=None, help="JSON list of reconstruct options (default: README's)")
     parser.add_argument("--capture", default="{}", help="JSON object of simulate_capture options to change")
     parser.add_argument("--size", type=int, nargs=2, default=[434, 625], metavar=("H", "W"))
-    parser.add_argument("--data", type=Path, default=Path(os.environ.get(
-        "LFPROC_SHARED_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data")))
+    parser.add_argument("--data", type=Path, default=DATA,
+                        help="the shared data folder (default $LFPROC_SHARED_DATA or ../shared/data)")
     args = parser.parse_args()
     scenes = TUNE_SCENES if args.scenes == "tune" else [SCENES[int(i)] for i in args.scenes.split(",")]
     configs = README_CONFIGS if args.configs is None else json.loads(args.configs)
@@ -81,7 +80,7 @@ def main() -> None:
     warnings.simplefilter("ignore")  # saturation warnings of the brightest scenes: expected
     data = []
     for kind, texture, seed in scenes:
-        lf = synthesize(kind, size=tuple(args.size), views=5, textures=[args.data / texture], random_state=seed)
+        lf = scene(kind, args.data / texture, seed, args.size)
         data.append((lf, simulate_capture(lf, random_state=seed, **capture_options)))
     print("scenes: " + "; ".join(f"{k} + {Path(t).name} (seed {s})" for k, t, s in scenes)
           + f"; capture {json.dumps(capture_options)}")

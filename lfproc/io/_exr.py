@@ -94,6 +94,7 @@ def open_exr(path: str | os.PathLike, *, header_only: bool = False):
     import OpenEXR
 
     path = Path(path)
+
     def read_head():
         head = OpenEXR.File(str(path), header_only=True)
         return head, list(head.parts)
