@@ -185,7 +185,9 @@ def _solve_group(op, y, w, rowsum, settings: _Settings, n: int):
     codes[rows] = z
     iters[rows] = it
     if "fit" in settings.overlap.split("-"):  # reduced chi-square of the patch's fit (module notes)
-        res = (sub.fwd(z) - yn).astype(np.float64) * (w[rows] * cp[:, None])
+        # A z as the ADMM forms it (``fwd_t``, (m, B) columns): the same GEMM shape in a Dask worker and in
+        # this process (``z @ A^T`` gave last-bit differences between the two now and then)
+        res = (sub.fwd_t(np.ascontiguousarray(z.T)).T - yn).astype(np.float64) * (w[rows] * cp[:, None])
         chi2[rows] = (res * res).sum(axis=1) / m_use[rows]
     return codes, np.where(ok, c_p, 0.0), iters, chi2
 
