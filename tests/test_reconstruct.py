@@ -247,13 +247,13 @@ def dask_scheduler():
 def test_arrays_a_worker_receives_at_any_offset_are_realigned():
     """Dask hands a worker arrays at any byte offset (measured: 7); numpy's matmul skips BLAS for them and
     sums in another order, so they are copied to an aligned buffer first; aligned ones are not copied."""
-    from lfproc.recon._reconstruct import _aligned
+    from lfproc._util import realign
 
     raw = bytearray(4 * 12 + 1)
     odd = np.frombuffer(raw, dtype=np.float32, count=12, offset=1).reshape(3, 4)
     assert odd.ctypes.data % 16 and not odd.flags.aligned
     ok = np.arange(12.0, dtype=np.float32).reshape(3, 4)
-    out = _aligned({"task": [odd, (ok, 3)], "x": "keep"})
+    out = realign({"task": [odd, (ok, 3)], "x": "keep"})
     moved, (same, three) = out["task"][0], out["task"][1]
     assert moved.ctypes.data % 16 == 0 and moved.flags.aligned and np.array_equal(moved, odd)
     assert same is ok and three == 3 and out["x"] == "keep"

@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_random_state, progress
+from .._util import check_random_state, progress, realign
 from ..errors import FileFormatError, InputError, ShapeError
 from ..io import atomic_file
 from ._omp import gram_matrix, omp_codes
@@ -117,6 +117,7 @@ class KsvdResult:
 
 
 def _code_chunk(atoms, gram, rows, sparsity):
+    atoms, gram, rows = realign((atoms, gram, rows))  # in a Dask worker: the in-process sums (lfproc._util.realign)
     return omp_codes(atoms, rows, sparsity, gram=gram)
 
 

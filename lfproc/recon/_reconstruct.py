@@ -69,7 +69,7 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_choice, progress
+from .._util import check_choice, progress, realign
 from .._version import __version__
 from ..errors import InputError, ShapeError
 from ..lightfield import LightField
@@ -255,23 +255,8 @@ def _solve_block(task: dict, shared: dict) -> dict:
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(1):
-        return _solve_block_here(_aligned(task), _aligned(shared))
+        return _solve_block_here(realign(task), realign(shared))
 
-
-def _aligned(value):
-    """``value`` with every array at a 16-byte boundary, as numpy allocates them (copies only those that are not).
-
-    Arrays a Dask worker deserialises can sit at any byte offset (measured: offset 7, ``flags.aligned``
-    False); numpy's matmul then bypasses BLAS and sums in another order, and the worker's output
-    differed from this process's in the last bits (about 1 run in 8 for ADMM, 4 in 10 for FISTA).
-    """
-    if isinstance(value, np.ndarray):
-        return value.copy() if value.ctypes.data % 16 else value
-    if isinstance(value, dict):
-        return {k: _aligned(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return type(value)(_aligned(v) for v in value)
-    return value
 
 
 def _solve_block_here(task: dict, shared: dict) -> dict:
@@ -533,7 +518,7 @@ def reconstruct(
 
     tops, lefts = patch_grid((h, w), size, stride)
     rows_per_block = max(1, block_patches // len(lefts))
-    atoms = np.ascontiguousarray(dictionary.atoms, dtype=np.float32)
+    atoms = realign(np.ascontiguousarray(dictionary.atoms, dtype=np.float32))  # a dictionary a Dask worker received (bench)
     shared: dict[str, Any] = {"atoms": atoms, "patch": dictionary.patch, "settings": settings,
                               "periodic": capture.mask.period is not None}
     if not shared["periodic"]:  # D's rows grouped by patch pixel and colour, for _operator_times
