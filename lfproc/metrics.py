@@ -117,6 +117,8 @@ __all__ = [
     "log_luminance_error",
     "align_result",
     "ALIGN_MODES",
+    "hdr_figures",
+    "EMITTER_SHARE_DOMINATES",
     "evaluate",
 ]
 
@@ -541,6 +543,175 @@ def _relative_error(res: np.ndarray, ref: np.ndarray, eps: float) -> np.ndarray:
 for _f in (pu21_psnr, pu21_ssim, pu2_psnr, log_psnr):
     _f.__doc__ = (_f.__doc__ or "").rstrip() + "\n" + _SHARED_PARAMS_DOC
 del _f
+
+
+# -- figures a user sees: error in stops per decade, zeros, highlight energy, detail -------------
+
+#: :func:`hdr_figures` says the brightest 0.1 % of the reference dominate PU21 (``emitters_dominate``)
+#: when they hold more than this share of the PU21 squared error.
+EMITTER_SHARE_DOMINATES = 0.5
+_HIGHLIGHT_FRACTION = 0.01  # "the brightest 1 %" of highlight_energy
+_EMITTER_FRACTION = 0.001  # "the brightest 0.1 %" of emitter_share
+
+
+def _figure_luminance(values: Any, name: str) -> np.ndarray:
+    """Luminance (:data:`PU21_LUMA`, float64) of a LightField or an ``(..., C)`` array, C = 1 or 3."""
+    data = values.data if isinstance(values, LightField) else values
+    arr = _as_numeric(data, name)
+    if arr.ndim < 3 or arr.shape[-1] not in (1, 3):
+        raise ShapeError(f"{name}: expected a light field or an array of shape (..., H, W, 1 or 3), "
+                         f"got shape {arr.shape}")
+    return metric_luminance(arr, channel_axis=-1)
+
+
+def _brightest(y: np.ndarray, fraction: float) -> np.ndarray:
+    """Indices of the ``ceil(fraction * n)`` (at least one) largest values of the 1-d ``y``."""
+    k = max(1, math.ceil(fraction * y.size))
+    if k >= y.size:
+        return np.arange(y.size)
+    return np.argpartition(y, y.size - k)[y.size - k:]
+
+
+def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None, mask: Any = None,
+                peak_luminance: float = 1000.0) -> dict[str, Any]:
+    """Figures of an HDR result a user can check: error in stops per decade, zeros, highlights, detail.
+
+    PU21-PSNR/SSIM map the reference peak to ``peak_luminance`` and barely see the dark
+    decades, so a few bright emitters can decide them. These figures look at the whole range.
+    Luminance uses the weights of :data:`PU21_LUMA`; a *sample* is one pixel of one view.
+
+    Parameters
+    ----------
+    result, reference : LightField or ndarray of shape (..., H, W, C), C = 1 or 3
+        Linear radiance in the same units and of the same shape (for example
+        ``(V, U, H, W, 3)`` or ``(H, W, 3)``).
+    noise_floor : float or None
+        Reference luminance (in the data's units, before any scaling) at or below which a
+        sample is left out of ``stops_by_decade`` and ``zeros_above_floor``. ``None``
+        (default) is 0: every sample with a positive reference luminance counts.
+    mask : array_like of bool, shape (H, W) or the luminance shape (e.g. (V, U, H, W)), optional
+        Samples to include in every figure (an (H, W) mask applies to every view).
+        Default: all samples.
+    peak_luminance : float, default 1000
+        Display peak in cd/m^2; both luminances are multiplied by
+        ``peak_luminance / max(reference)`` (the maximum over every sample and channel, as
+        :func:`pu21_psnr`; taken over the whole reference even with a mask) before the PU21
+        encoding of ``detail_ratio`` and ``emitter_share``.
+
+    Returns
+    -------
+    dict
+        ``stops_by_decade``
+            list, ascending, of ``{"decade": (lo, hi), "median_stops": float, "samples": int}``:
+            the decades ``[10^k, 10^(k+1))`` of the reference luminance (data units,
+            ``k = floor(log10(Y_ref))``), and the median of ``|log2(Y_res / Y_ref)|`` over the
+            samples above the noise floor in that decade. A result luminance ``<= 0`` is an
+            infinite error (``inf`` stops), so a decade more than half zeros reads ``inf``.
+        ``max_decade_stops``
+            the largest ``median_stops`` (``nan`` when no sample is above the floor).
+        ``zeros_above_floor``
+            share of the samples above the noise floor whose result luminance is ``<= 0``
+            (``nan`` when there is none).
+        ``highlight_energy``
+            ``sum(Y_res) / sum(Y_ref)`` over the brightest 1 % of the reference samples
+            (at least one sample): 1.0 keeps the highlights' energy, 0.8 loses a fifth.
+        ``detail_ratio``
+            ``sum(lap(P_res - P_ref)^2) / sum(lap(P_ref)^2)``, with ``P`` the PU21-encoded
+            scaled luminance and ``lap`` the 2-D Laplacian of each view
+            (:func:`scipy.ndimage.laplace`, reflected borders), summed over the mask: 0 is
+            every detail right, 1.0 as much wrong detail as the reference has (a flat result
+            scores about 1). ``nan`` for a reference without any detail.
+        ``emitter_share``, ``emitters_dominate``
+            share of the PU21 squared error (the MSE of PU21-PSNR) that comes from the
+            brightest 0.1 % of the reference samples (0.0 when there is no error), and
+            whether it is above :data:`EMITTER_SHARE_DOMINATES` (a few emitters decide PU21).
+        ``noise_floor``, ``samples``, ``samples_above_floor``, ``scale_factor``
+            the floor used, the number of samples in the mask, of those above the floor, and
+            the PU21 scale factor (cd/m^2 per data unit).
+
+    Raises
+    ------
+    ShapeError
+        Different shapes, no colour axis, a mask of another shape, an empty mask.
+    InputError
+        Non-finite values, a negative noise floor, a reference without a positive maximum.
+    """
+    from scipy.ndimage import laplace
+
+    y_res = _figure_luminance(result, "result")
+    y_ref = _figure_luminance(reference, "reference")
+    if y_res.shape != y_ref.shape:
+        raise ShapeError(f"result and reference: expected the same shape, got {y_res.shape} and {y_ref.shape} "
+                         "(luminance)")
+    if noise_floor is None:
+        floor = 0.0
+    else:
+        floor = float(noise_floor)
+        if not (math.isfinite(floor) and floor >= 0):
+            raise InputError(f"noise_floor: expected a finite value >= 0, got {noise_floor!r}")
+    ref_data = reference.data if isinstance(reference, LightField) else np.asarray(reference)
+    factor = _scale_factor(ref_data, peak_luminance)
+    if mask is None:
+        keep = np.ones(y_ref.shape, dtype=bool)
+    else:
+        m = np.asarray(mask)
+        if m.dtype != bool:
+            raise ShapeError(f"mask: expected a boolean array, got dtype {m.dtype}")
+        if m.shape != y_ref.shape and m.shape != y_ref.shape[-2:]:
+            raise ShapeError(f"mask: expected shape {y_ref.shape[-2:]} or {y_ref.shape}, got {m.shape}")
+        keep = np.broadcast_to(m, y_ref.shape)
+    n = int(np.count_nonzero(keep))
+    if n == 0:
+        raise ShapeError("mask: expected at least one sample to evaluate, the mask selects none")
+
+    ref_k, res_k = y_ref[keep], y_res[keep]
+    above = ref_k > floor
+    n_above = int(np.count_nonzero(above))
+    ref_a, res_a = ref_k[above], res_k[above]
+    positive = res_a > 0
+    stops = np.full(ref_a.shape, np.inf)
+    stops[positive] = np.abs(np.log2(res_a[positive] / ref_a[positive]))
+    decades = np.floor(np.log10(ref_a)).astype(np.int64)
+    by_decade = []
+    for k in np.unique(decades):
+        sel = decades == k
+        by_decade.append({"decade": (10.0 ** int(k), 10.0 ** (int(k) + 1)),
+                          "median_stops": float(np.median(stops[sel])), "samples": int(np.count_nonzero(sel))})
+    max_stops = max((d["median_stops"] for d in by_decade), default=math.nan)
+    zeros = float(np.count_nonzero(~positive) / n_above) if n_above else math.nan
+
+    top = _brightest(ref_k, _HIGHLIGHT_FRACTION)
+    ref_energy = float(ref_k[top].sum())
+    highlight = float(res_k[top].sum()) / ref_energy if ref_energy > 0 else math.nan
+
+    p_ref = pu21_encode(y_ref * factor)
+    err = pu21_encode(y_res * factor)
+    err -= p_ref
+    sq = np.square(err[keep])
+    total = float(sq.sum())
+    share = float(sq[_brightest(ref_k, _EMITTER_FRACTION)].sum()) / total if total > 0 else 0.0
+
+    h, w = y_ref.shape[-2:]
+    flat_keep = keep.reshape(-1, h, w)
+    lap_err = lap_ref = 0.0
+    for i, (e, r) in enumerate(zip(err.reshape(-1, h, w), p_ref.reshape(-1, h, w))):
+        lap_err += float(np.sum(np.square(laplace(e))[flat_keep[i]]))
+        lap_ref += float(np.sum(np.square(laplace(r))[flat_keep[i]]))
+    detail = lap_err / lap_ref if lap_ref > 0 else math.nan
+
+    return {
+        "stops_by_decade": by_decade,
+        "max_decade_stops": float(max_stops),
+        "zeros_above_floor": zeros,
+        "highlight_energy": highlight,
+        "detail_ratio": detail,
+        "emitter_share": share,
+        "emitters_dominate": bool(share > EMITTER_SHARE_DOMINATES),
+        "noise_floor": floor,
+        "samples": n,
+        "samples_above_floor": n_above,
+        "scale_factor": factor,
+    }
 
 
 # -- light fields ----------------------------------------------------------------------------------

@@ -337,3 +337,126 @@ def test_integer_inputs_do_not_wrap():
     assert psnr(a, b, data_range=255) == pytest.approx(10 * math.log10(255**2 / 100))
     assert mean_relative_error(a, b) == pytest.approx(np.mean([10 / (20 + 0.19), 10 / (190 + 0.19)]))
     assert pu21_psnr(a, b) == pytest.approx(pu21_psnr(a.astype(float), b.astype(float)))
+
+
+# -- hdr_figures: error in stops per decade, zeros, highlight energy, detail ----------------------
+
+@pytest.fixture
+def hdr_lf():
+    """A (2, 3, 24, 32, 3) HDR light field over ~8 decades with texture, every sample positive."""
+    rng = np.random.default_rng(11)
+    yy, xx = np.mgrid[0:24, 0:32]
+    base = 10.0 ** (8 * xx / 31 - 4) * (1 + 0.4 * np.sin(yy / 2.0))
+    data = base[None, None, :, :, None] * rng.uniform(0.7, 1.3, (2, 3, 24, 32, 3))
+    return LightField(data=data.astype(np.float32))
+
+
+def test_hdr_figures_identity(hdr_lf):
+    from lfproc.metrics import hdr_figures
+
+    out = hdr_figures(hdr_lf, hdr_lf)
+    assert out["max_decade_stops"] == 0.0
+    assert all(d["median_stops"] == 0.0 for d in out["stops_by_decade"])
+    assert sum(d["samples"] for d in out["stops_by_decade"]) == 2 * 3 * 24 * 32
+    assert out["zeros_above_floor"] == 0.0
+    assert out["highlight_energy"] == 1.0
+    assert out["detail_ratio"] == 0.0
+    assert out["emitter_share"] == 0.0 and out["emitters_dominate"] is False
+    # the decades are those of the reference luminance, ascending
+    y = metric_luminance(hdr_lf.data.astype(np.float64))
+    lo = [d["decade"][0] for d in out["stops_by_decade"]]
+    assert lo == sorted(lo)
+    assert lo[0] == pytest.approx(10.0 ** math.floor(math.log10(y.min())))
+    assert out["stops_by_decade"][-1]["decade"][1] == pytest.approx(10.0 ** (math.floor(math.log10(y.max())) + 1))
+
+
+def test_hdr_figures_twice_as_bright(hdr_lf):
+    from lfproc.metrics import hdr_figures
+
+    out = hdr_figures(2.0 * hdr_lf.data, hdr_lf.data)  # arrays as well as light fields
+    for d in out["stops_by_decade"]:
+        assert d["median_stops"] == pytest.approx(1.0, abs=1e-6)
+    assert out["max_decade_stops"] == pytest.approx(1.0, abs=1e-6)
+    assert out["highlight_energy"] == pytest.approx(2.0, rel=1e-6)
+    assert out["zeros_above_floor"] == 0.0
+    assert 0 < out["detail_ratio"]
+
+
+def test_hdr_figures_blurred_detail_ratio(hdr_lf):
+    from scipy.ndimage import gaussian_filter, laplace
+
+    from lfproc.metrics import hdr_figures
+
+    blurred = gaussian_filter(hdr_lf.data.astype(np.float64), sigma=(0, 0, 1.0, 1.0, 0))
+    out = hdr_figures(blurred, hdr_lf.data, peak_luminance=500.0)
+    # the definition written out again: PU21 (published formula) of the luminance scaled by
+    # 500 / max(reference), squared Laplacian of every view, summed
+    factor = 500.0 / float(hdr_lf.data.max())
+    p_res = reference_pu21(metric_luminance(blurred) * factor, "banding_glare")
+    p_ref = reference_pu21(metric_luminance(hdr_lf.data.astype(np.float64)) * factor, "banding_glare")
+    num = sum(np.sum(laplace(p_res[v, u] - p_ref[v, u]) ** 2) for v in range(2) for u in range(3))
+    den = sum(np.sum(laplace(p_ref[v, u]) ** 2) for v in range(2) for u in range(3))
+    assert 0.0 < out["detail_ratio"] < 1.0
+    assert out["detail_ratio"] == pytest.approx(num / den, rel=1e-9)
+    # a flat (mean) result recovers no detail at all: ratio ~1
+    flat = np.broadcast_to(hdr_lf.data.mean(axis=(2, 3), keepdims=True), hdr_lf.shape)
+    assert hdr_figures(flat, hdr_lf.data)["detail_ratio"] == pytest.approx(1.0, abs=0.05)
+
+
+def test_hdr_figures_zeros_in_the_dark(hdr_lf):
+    from lfproc.metrics import hdr_figures
+
+    y = metric_luminance(hdr_lf.data.astype(np.float64))
+    dark = y < np.percentile(y, 10)
+    data = hdr_lf.data.copy()
+    data[dark] = 0.0
+    out = hdr_figures(data, hdr_lf.data)
+    assert out["zeros_above_floor"] == np.count_nonzero(dark) / y.size
+    assert math.isinf(out["stops_by_decade"][0]["median_stops"])  # the darkest decade: all zeros
+    assert out["highlight_energy"] == 1.0  # the highlights are untouched
+    # above a noise floor that leaves out the zeroed samples: no zeros, no error
+    floor = float(y[dark].max())
+    out = hdr_figures(data, hdr_lf.data, noise_floor=floor)
+    assert out["zeros_above_floor"] == 0.0 and out["max_decade_stops"] == 0.0
+    assert out["samples_above_floor"] == np.count_nonzero(y > floor)
+
+
+def test_hdr_figures_mask_and_emitters(hdr_lf):
+    from lfproc.metrics import hdr_figures
+
+    data = hdr_lf.data.copy()
+    data[:, :, :, :4] *= 8.0  # three stops off in the first four columns
+    assert hdr_figures(data, hdr_lf)["max_decade_stops"] == pytest.approx(3.0, abs=1e-5)
+    mask = np.ones((24, 32), dtype=bool)
+    mask[:, :4] = False
+    out = hdr_figures(data, hdr_lf, mask=mask)
+    assert out["max_decade_stops"] == 0.0 and out["samples"] == 2 * 3 * 24 * 28
+    full_mask = np.broadcast_to(mask, (2, 3, 24, 32))
+    assert hdr_figures(data, hdr_lf, mask=full_mask)["samples"] == out["samples"]
+
+    # a few emitters lost: they hold nearly all the PU21 error
+    ref = hdr_lf.data.copy()
+    ref[:, :, 3, 5] = 1e6
+    res = hdr_lf.data.copy()
+    res[:, :, 3, 5] = 1e3
+    res *= np.float32(1.01)
+    out = hdr_figures(res, ref)
+    assert out["emitter_share"] > 0.6 and out["emitters_dominate"] is True
+    assert out["highlight_energy"] < 0.1
+
+
+def test_hdr_figures_bad_inputs(hdr_lf):
+    from lfproc.metrics import hdr_figures
+
+    with pytest.raises(ShapeError, match="same shape"):
+        hdr_figures(hdr_lf.data[:, :, :10], hdr_lf.data)
+    with pytest.raises(ShapeError, match="mask: expected shape"):
+        hdr_figures(hdr_lf, hdr_lf, mask=np.ones((3, 3), dtype=bool))
+    with pytest.raises(ShapeError, match="mask: expected a boolean"):
+        hdr_figures(hdr_lf, hdr_lf, mask=np.ones((24, 32)))
+    with pytest.raises(ShapeError, match="selects none"):
+        hdr_figures(hdr_lf, hdr_lf, mask=np.zeros((24, 32), dtype=bool))
+    with pytest.raises(InputError, match="noise_floor"):
+        hdr_figures(hdr_lf, hdr_lf, noise_floor=-1.0)
+    with pytest.raises(ShapeError, match="expected a light field or an array"):
+        hdr_figures(np.ones((4, 5)), np.ones((4, 5)))
