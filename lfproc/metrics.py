@@ -119,6 +119,7 @@ __all__ = [
     "ALIGN_MODES",
     "hdr_figures",
     "EMITTER_SHARE_DOMINATES",
+    "evaluation_mask",
     "evaluate",
 ]
 
@@ -573,7 +574,7 @@ def _brightest(y: np.ndarray, fraction: float) -> np.ndarray:
 
 
 def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None, mask: Any = None,
-                peak_luminance: float = 1000.0) -> dict[str, Any]:
+                peak_luminance: float | None = 1000.0) -> dict[str, Any]:
     """Figures of an HDR result a user can check: error in stops per decade, zeros, highlights, detail.
 
     PU21-PSNR/SSIM map the reference peak to ``peak_luminance`` and barely see the dark
@@ -592,11 +593,12 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
     mask : array_like of bool, shape (H, W) or the luminance shape (e.g. (V, U, H, W)), optional
         Samples to include in every figure (an (H, W) mask applies to every view).
         Default: all samples.
-    peak_luminance : float, default 1000
+    peak_luminance : float or None, default 1000
         Display peak in cd/m^2; both luminances are multiplied by
         ``peak_luminance / max(reference)`` (the maximum over every sample and channel, as
         :func:`pu21_psnr`; taken over the whole reference even with a mask) before the PU21
-        encoding of ``detail_ratio`` and ``emitter_share``.
+        encoding of ``detail_ratio`` and ``emitter_share``. ``None``: the data already are
+        absolute cd/m^2.
 
     Returns
     -------
@@ -842,9 +844,86 @@ def _check_lightfields(result: LightField, reference: LightField, scale_toleranc
             )
 
 
+def evaluation_mask(reference: LightField, *, mask: Any = None, exclude_above: float | None = None) -> np.ndarray | None:
+    """The samples :func:`evaluate` scores: ``mask`` and the reference luminance ``<= exclude_above``.
+
+    Parameters
+    ----------
+    reference : LightField
+    mask : array_like of bool, shape (H, W) or (V, U, H, W), optional
+        Samples to include (an (H, W) mask applies to every view).
+    exclude_above : float, optional
+        Leave out the samples whose reference luminance (:data:`PU21_LUMA`, data units) is
+        above this value (emitters, the sun).
+
+    Returns
+    -------
+    ndarray of bool (V, U, H, W), or None when neither is given (every sample).
+
+    Raises
+    ------
+    ShapeError
+        A mask of another shape or not boolean; no sample left.
+    InputError
+        ``exclude_above`` not a finite number.
+    """
+    if mask is None and exclude_above is None:
+        return None
+    nv, nu, h, w, _ = reference.shape
+    keep = np.ones((nv, nu, h, w), dtype=bool)
+    if mask is not None:
+        m = np.asarray(mask)
+        if m.dtype != bool:
+            raise ShapeError(f"mask: expected a boolean array, got dtype {m.dtype}")
+        if m.shape not in ((h, w), (nv, nu, h, w)):
+            raise ShapeError(f"mask: expected shape {(h, w)} or {(nv, nu, h, w)} (the reference), got {m.shape}")
+        keep &= m
+    if exclude_above is not None:
+        limit = float(exclude_above)
+        if not math.isfinite(limit):
+            raise InputError(f"exclude_above: expected a finite luminance, got {exclude_above!r}")
+        keep &= metric_luminance(reference.data, channel_axis=-1) <= limit
+    if not keep.any():
+        what = [] if mask is None else ["the mask"]
+        what += [] if exclude_above is None else [f"exclude_above={float(exclude_above):g}"]
+        raise ShapeError(f"evaluate: {' and '.join(what)} left no sample to evaluate; expected at least one")
+    return keep
+
+
+def _view_means(values: np.ndarray, keep: np.ndarray | None) -> np.ndarray:
+    """Mean over the last two axes (pixels) of each view, over the kept pixels only (nan: none kept)."""
+    if keep is None:
+        return np.mean(values, axis=(-2, -1))
+    count = keep.sum(axis=(-2, -1))
+    total = np.where(keep, values, 0.0).sum(axis=(-2, -1))
+    return np.divide(total, count, out=np.full(count.shape, np.nan), where=count > 0)
+
+
+def _ssim_images_masked(p_res: np.ndarray, p_ref: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """Per-view SSIM: the mean of scikit-image's SSIM map over the kept pixels inside its valid
+    region (the same 5-pixel border as the unmasked figure is left out); nan when none is kept."""
+    from skimage.metrics import structural_similarity
+
+    h, w = p_ref.shape[-2:]
+    lead = p_ref.shape[:-2]
+    pad = (_SSIM_MIN_SIZE - 1) // 2
+    out = np.empty(int(np.prod(lead)))
+    for i, (a, b, k) in enumerate(zip(p_res.reshape(-1, h, w), p_ref.reshape(-1, h, w), keep.reshape(-1, h, w))):
+        k = k[pad:h - pad, pad:w - pad]
+        if not k.any():
+            out[i] = np.nan
+        elif np.array_equal(a, b):
+            out[i] = 1.0
+        else:
+            _, smap = structural_similarity(a, b, full=True, **_SSIM_OPTIONS)
+            out[i] = float(smap[pad:h - pad, pad:w - pad][k].mean())
+    return out.reshape(lead)
+
+
 def evaluate(result: LightField, reference: LightField, *, peak_luminance: float | None = 1000.0,
              variant: Pu21Variant = "banding_glare", epsilon_relative: float = 1e-3,
-             scale_tolerance_stops: float | None = 4.0, align: str = "none") -> dict[str, Any]:
+             scale_tolerance_stops: float | None = 4.0, align: str = "none", mask: Any = None,
+             exclude_above: float | None = None, noise_floor: float | None = None) -> dict[str, Any]:
     """All metrics of a result light field against a reference, per view and averaged over views.
 
     Luminance (:data:`PU21_LUMA`) of every view is scaled by one factor,
@@ -867,6 +946,16 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
     align : {"none", "exposure", "gain"}
         How the result is brought to the reference's scale first (:func:`align_result`):
         ``"none"`` refuses different units or exposures.
+    mask : array_like of bool, shape (H, W) or (V, U, H, W), optional
+        Samples to score; every figure is restricted to them (SSIM: the mean of its map over
+        them). The scale factor, the linear PSNR peak and the relative-error regulariser
+        stay those of the whole reference, so masked and unmasked figures share one scale.
+    exclude_above : float, optional
+        Leave out samples whose reference luminance (data units) is above this value, e.g.
+        to score without the emitters (combined with ``mask``).
+    noise_floor : float, optional
+        Reference luminance at or below which samples are left out of the error in stops
+        and the zeros (see :func:`hdr_figures`; default: every positive sample).
 
     Returns
     -------
@@ -879,7 +968,12 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
         ``size``, ``channels``, ``units``, ``pu21_variant``; ``linear_psnr_db`` (PSNR of the
         linear colour samples, peak = the reference's 99.9th percentile, so a small bright
         source does not inflate it; per view too), ``linear_psnr_peak``; ``align`` and ``gain``
-        (the factor applied to the result).
+        (the factor applied to the result); the figures of :func:`hdr_figures` over all views
+        (``stops_by_decade``, ``max_decade_stops``, ``zeros_above_floor``, ``highlight_energy``,
+        ``detail_ratio``, ``emitter_share``, ``emitters_dominate``, ``noise_floor``, ``samples``,
+        ``samples_above_floor``); ``exclude_above`` and ``masked`` (whether a mask or
+        ``exclude_above`` restricted the figures). With a mask, view averages are over the
+        views that keep at least one sample (a view without any has ``nan`` figures).
 
     Raises
     ------
@@ -903,6 +997,9 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
         raise ShapeError(
             f"evaluate: views must be at least {_SSIM_MIN_SIZE}x{_SSIM_MIN_SIZE} pixels for SSIM, got {h}x{w}"
         )
+    keep = evaluation_mask(reference, mask=mask, exclude_above=exclude_above)
+    hdr = hdr_figures(result, reference, noise_floor=noise_floor, mask=keep, peak_luminance=peak_luminance)
+    hdr.pop("scale_factor")
     factor = _scale_factor(reference.data, peak_luminance)
     display_peak = float(reference.data.max()) * factor
     # luminance of every view at once, float64 (V, U, H, W), scaled by the one factor
@@ -912,27 +1009,27 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
         y_res *= factor
         y_ref *= factor
 
-    axes = (-2, -1)
     p_res, p_ref = pu21_encode(y_res, variant=variant), pu21_encode(y_ref, variant=variant)
-    pu21_psnr_v = _psnr_from_mse(np.mean(np.square(p_res - p_ref), axis=axes), PU21_PSNR_PEAK)
-    pu21_ssim_v = _ssim_images(p_res, p_ref)
+    pu21_psnr_v = _psnr_from_mse(_view_means(np.square(p_res - p_ref), keep), PU21_PSNR_PEAK)
+    pu21_ssim_v = _ssim_images(p_res, p_ref) if keep is None else _ssim_images_masked(p_res, p_ref, keep)
     del p_res, p_ref
     pu2_peak = float(pu2_encode(display_peak))
-    pu2_psnr_v = _psnr_from_mse(np.mean(np.square(pu2_encode(y_res) - pu2_encode(y_ref)), axis=axes), pu2_peak)
+    pu2_psnr_v = _psnr_from_mse(_view_means(np.square(pu2_encode(y_res) - pu2_encode(y_ref)), keep), pu2_peak)
     log_peak = _log_peak(display_peak)
-    log_psnr_v = _psnr_from_mse(np.mean(np.square(_log_luminance(y_res) - _log_luminance(y_ref)), axis=axes),
+    log_psnr_v = _psnr_from_mse(_view_means(np.square(_log_luminance(y_res) - _log_luminance(y_ref)), keep),
                                 log_peak)
     del y_res, y_ref
-    # relative error of the colour samples, one row of views at a time (bounds float64 temporaries)
+    # relative error of the colour samples, one row of views at a time (bounds float64 temporaries);
+    # the colour axis averaged first, then the pixels (the same mean when every pixel is kept)
     eps = epsilon_relative * float(reference.data.max())
-    mre_v = np.stack([np.mean(_relative_error(result.data[v], reference.data[v], eps), axis=(1, 2, 3))
-                      for v in range(nv)])
+    mre_v = np.stack([_view_means(np.mean(_relative_error(result.data[v], reference.data[v], eps), axis=-1),
+                                  None if keep is None else keep[v]) for v in range(nv)])
 
     lin_peak = float(np.percentile(reference.data, 99.9))
     if not lin_peak > 0:
         lin_peak = float(reference.data.max())
-    lin_mse = np.stack([np.mean(np.square(result.data[v].astype(np.float64) - reference.data[v]), axis=(1, 2, 3))
-                        for v in range(nv)])
+    lin_mse = np.stack([_view_means(np.mean(np.square(result.data[v].astype(np.float64) - reference.data[v]),
+                                            axis=-1), None if keep is None else keep[v]) for v in range(nv)])
     figures = {
         "pu21_psnr_db": pu21_psnr_v,
         "pu21_ssim": pu21_ssim_v,
@@ -942,7 +1039,7 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
         "mean_relative_error": mre_v,
     }
     views = [{"v": v, "u": u} | {k: float(a[v, u]) for k, a in figures.items()} for v in range(nv) for u in range(nu)]
-    out: dict[str, Any] = {k: float(np.mean(a)) for k, a in figures.items()}
+    out: dict[str, Any] = {k: float(np.mean(a) if keep is None else _nanmean(a)) for k, a in figures.items()}
     out |= {
         "views": views,
         "peak_luminance_cd_m2": display_peak,
@@ -957,5 +1054,12 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
         "size": [h, w],
         "channels": reference.channels,
         "units": reference.units,
-    } | alignment
+    } | alignment | hdr | {"exclude_above": None if exclude_above is None else float(exclude_above),
+                            "masked": keep is not None}
     return out
+
+
+def _nanmean(values: np.ndarray) -> float:
+    """Mean of the non-nan values (views a mask leaves empty); nan when every one is nan."""
+    finite = values[~np.isnan(values)]
+    return float(np.mean(finite)) if finite.size else math.nan

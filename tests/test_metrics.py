@@ -460,3 +460,55 @@ def test_hdr_figures_bad_inputs(hdr_lf):
         hdr_figures(hdr_lf, hdr_lf, noise_floor=-1.0)
     with pytest.raises(ShapeError, match="expected a light field or an array"):
         hdr_figures(np.ones((4, 5)), np.ones((4, 5)))
+
+
+def test_evaluate_reports_hdr_figures_and_keeps_its_keys(bedroom):
+    out = evaluate(_noisy(bedroom, 0.05, 1), bedroom)
+    for key in ("pu21_psnr_db", "pu21_ssim", "pu2_psnr_db", "log_psnr_db", "linear_psnr_db",
+                "mean_relative_error", "views", "scale_factor", "align", "gain"):
+        assert key in out
+    from lfproc.metrics import hdr_figures
+
+    expected = hdr_figures(_noisy(bedroom, 0.05, 1), bedroom)
+    for key in ("max_decade_stops", "zeros_above_floor", "highlight_energy", "detail_ratio", "emitter_share"):
+        assert out[key] == pytest.approx(expected[key], rel=1e-12)
+    assert out["stops_by_decade"] == expected["stops_by_decade"]
+    assert out["masked"] is False and out["exclude_above"] is None
+
+
+def test_evaluate_mask_and_exclude_above_restrict_every_figure():
+    from lfproc.synth import synthesize
+
+    ref = synthesize("layers", size=(32, 48), views=3, random_state=2)
+    data = ref.data.copy()
+    data[:, :, :, :16] *= 3.0  # wrong on the left third only
+    res = ref.replace(data=data)
+    full = evaluate(res, ref)
+    assert full["pu21_psnr_db"] < 60 and full["max_decade_stops"] > 1
+    mask = np.zeros((32, 48), dtype=bool)
+    mask[:, 16:] = True
+    out = evaluate(res, ref, mask=mask)
+    for key in ("pu21_psnr_db", "pu2_psnr_db", "log_psnr_db", "linear_psnr_db"):
+        assert out[key] == math.inf, key
+    assert out["mean_relative_error"] == 0.0 and out["max_decade_stops"] == 0.0
+    assert out["samples"] == 9 * 32 * 32 and out["masked"] is True
+    assert out["scale_factor"] == full["scale_factor"]  # one scale, that of the whole reference
+    # a mask cut inside the view: SSIM over the kept pixels is higher than over all
+    assert out["pu21_ssim"] > full["pu21_ssim"]
+
+    # emitters lost: excluded by luminance, the rest is scored alone
+    y = metric_luminance(ref.data)
+    bright = y > np.percentile(y, 99.5)
+    data = ref.data.copy()
+    data[bright] *= 0.25
+    res = ref.replace(data=data)
+    limit = float(y[~bright].max())
+    out = evaluate(res, ref, exclude_above=limit)
+    assert out["pu21_psnr_db"] == math.inf and out["highlight_energy"] == 1.0
+    assert out["exclude_above"] == limit and out["samples"] == np.count_nonzero(~bright)
+    assert evaluate(res, ref)["highlight_energy"] < 0.5
+
+    with pytest.raises(ShapeError, match="mask: expected shape"):
+        evaluate(res, ref, mask=np.ones((3, 3), bool))
+    with pytest.raises(ShapeError, match="exclude_above=1e-09 left no sample"):
+        evaluate(res, ref, exclude_above=1e-9)
