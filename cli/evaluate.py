@@ -1,8 +1,13 @@
 """``lfproc evaluate RESULT REFERENCE``: HDR quality metrics of a result against a reference.
 
 Prints view-averaged PU21-PSNR, PU21-SSIM, PU2-PSNR, log-PSNR and mean relative error,
-then one row per view. ``--json`` prints one object (see :func:`lfproc.metrics.evaluate`);
+then one row per view, then the figures of :func:`lfproc.metrics.hdr_figures`: the median
+error in stops per decade of the reference luminance, the share of samples returned as 0,
+the energy kept in the brightest 1 %, the PU21 detail ratio, and one line when a few
+emitters dominate PU21. ``--json`` prints one object (see :func:`lfproc.metrics.evaluate`);
 an infinite PSNR (identical views) is written as the string ``"inf"``.
+``--error-map MAP.png`` writes the centre view's error in stops with a colour bar;
+``--mask FILE`` and ``--exclude-above VALUE`` restrict every figure.
 """
 
 from __future__ import annotations
@@ -10,10 +15,15 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
+
+from lfproc.errors import FileFormatError, InputError, ShapeError
 from lfproc.io import read_lightfield
 from lfproc.metrics import evaluate
 
 from ._common import add_json, emit
+
+MASK_SUFFIXES = (".png", ".npy")
 
 _COLUMNS = (
     ("pu21_psnr_db", "PU21-PSNR dB", "{:.2f}"),
@@ -46,6 +56,19 @@ def register(sub, common) -> None:
                         "decode), gain (one gain fitted on the data, reported)")
     p.add_argument("--nonfinite", choices=("raise", "zero", "clip"), default="raise",
                    help="what to do with NaN/Inf samples in the inputs (default: refuse)")
+    p.add_argument("--mask", type=Path, default=None, metavar="FILE",
+                   help="score only these samples: a PNG (white = scored; H x W, applied to every view) or a "
+                        ".npy of booleans or 0/1, shape H x W or V x U x H x W")
+    p.add_argument("--exclude-above", type=float, default=None, metavar="VALUE",
+                   help="leave out samples whose reference luminance is above VALUE (the data's units), e.g. "
+                        "emitters; restricts every figure")
+    p.add_argument("--noise-floor", type=float, default=None, metavar="VALUE",
+                   help="reference luminance at or below which samples are left out of the error in stops and "
+                        "the zeros (default: every sample with a positive reference)")
+    p.add_argument("--error-map", type=Path, default=None, metavar="MAP.png",
+                   help="write the centre view's error in stops (log2 result/reference luminance) with a "
+                        "diverging colour map and a colour bar")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --error-map file")
     add_json(p)
     p.set_defaults(run=run)
 
@@ -71,14 +94,113 @@ def format_table(figures: dict) -> str:
     return "\n".join(lines)
 
 
+def _decade(lo: float) -> str:
+    k = round(math.log10(lo))
+    return f"1e{k:+03d} .. 1e{k + 1:+03d}"
+
+
+def format_hdr_table(figures: dict) -> str:
+    """The figures of :func:`lfproc.metrics.hdr_figures`: error in stops by decade, zeros,
+    highlight energy, detail, and a line when a few emitters dominate PU21."""
+    floor = figures["noise_floor"]
+    lines = [f"error by decade of the reference luminance ({figures['samples_above_floor']} of {figures['samples']} "
+             f"samples above the noise floor {floor:g})",
+             f"{'decade':<18}{'samples':>10}{'median |stops|':>16}"]
+    for d in figures["stops_by_decade"]:
+        lines.append(f"{_decade(d['decade'][0]):<18}{d['samples']:>10}{_cell('{:.3f}', d['median_stops']):>16}")
+    zeros = figures["zeros_above_floor"]
+    lines.append(f"worst decade: {_cell('{:.3f}', figures['max_decade_stops'])} stops; returned as 0 above the "
+                 f"floor: {'n/a' if math.isnan(zeros) else f'{100 * zeros:.3g} %'}")
+    lines.append(f"brightest 1 % keep {100 * figures['highlight_energy']:.1f} % of their energy; detail ratio "
+                 f"{figures['detail_ratio']:.3f} (PU21 Laplacian energy of the error / of the reference: 0 all "
+                 "detail, 1 none)")
+    if figures["emitters_dominate"]:
+        lines.append(f"PU21 is dominated by a few emitters: the brightest 0.1 % of the reference hold "
+                     f"{100 * figures['emitter_share']:.0f} % of its squared error (score without them: "
+                     f"--exclude-above {0.99 * figures['emitter_luminance']:.3g})")
+    return "\n".join(lines)
+
+
+def read_mask(path: Path) -> np.ndarray:
+    """A boolean mask from a PNG (grey level >= half its range = scored) or a ``.npy``
+    (booleans, or integers 0/1), with errors naming ``--mask``."""
+    suffix = path.suffix.lower()
+    if suffix not in MASK_SUFFIXES:
+        raise InputError(f"--mask {path}: expected a .png or .npy file, found {suffix or 'no suffix'!r}")
+    if not path.is_file():
+        raise InputError(f"--mask {path}: no such file")
+    if suffix == ".npy":
+        from lfproc._untrusted import read_npy
+
+        with open(path, "rb") as fh:
+            arr = read_npy(fh, path.stat().st_size, source=f"--mask {path}", what="mask")
+        if arr.dtype != bool:
+            if not np.issubdtype(arr.dtype, np.integer) or not np.isin(arr, (0, 1)).all():
+                raise FileFormatError(f"--mask {path}: expected booleans or integers 0/1, found {arr.dtype}"
+                                      + ("" if not np.issubdtype(arr.dtype, np.integer) else " with other values"))
+            arr = arr.astype(bool)
+        if arr.ndim not in (2, 4):
+            raise ShapeError(f"--mask {path}: expected shape H x W or V x U x H x W, found {arr.shape}")
+        return arr
+    import cv2
+
+    from lfproc.io.images import imread
+
+    raw = imread(path, cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH, what="mask image")
+    top = np.iinfo(raw.dtype).max if np.issubdtype(raw.dtype, np.integer) else 1.0
+    return raw >= top / 2
+
+
+def _check_mask_shape(mask: np.ndarray, path: Path, reference) -> None:
+    nv, nu, h, w, _ = reference.shape
+    if mask.shape not in ((h, w), (nv, nu, h, w)):
+        found = " x ".join(str(n) for n in mask.shape)
+        raise ShapeError(f"--mask {path}: expected {h} x {w} (or {nv} x {nu} x {h} x {w}) like the reference, "
+                         f"found {found}")
+
+
 def run(args) -> int:
+    from lfproc.io import check_output
+
+    if args.error_map is not None:  # before reading anything large
+        from lfproc.preview import PREVIEW_SUFFIXES
+
+        if args.error_map.suffix.lower() not in PREVIEW_SUFFIXES:
+            raise InputError(f"--error-map {args.error_map}: expected a file ending in {', '.join(PREVIEW_SUFFIXES)}")
+        check_output(args.error_map, force=args.force)
+    for option, value in (("--exclude-above", args.exclude_above), ("--noise-floor", args.noise_floor)):
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise InputError(f"{option}: expected a finite luminance >= 0, got {value:g}")
+    mask = None if args.mask is None else read_mask(args.mask)
     result = read_lightfield(args.result, nonfinite=args.nonfinite)
     reference = read_lightfield(args.reference, nonfinite=args.nonfinite)
+    if mask is not None:
+        _check_mask_shape(mask, args.mask, reference)
+    if args.exclude_above is not None:
+        from lfproc.metrics import metric_luminance
+
+        if not (metric_luminance(reference.data) <= args.exclude_above).any():
+            raise InputError(f"--exclude-above {args.exclude_above:g}: every reference sample is brighter; expected "
+                             "a value that keeps some (the reference's luminance starts at "
+                             f"{float(metric_luminance(reference.data).min()):.4g})")
     figures = evaluate(result, reference, peak_luminance=args.peak_luminance,
-                       scale_tolerance_stops=args.scale_tolerance_stops, align=args.align)
-    figures = {"result": str(args.result), "reference": str(args.reference)} | figures
+                       scale_tolerance_stops=args.scale_tolerance_stops, align=args.align, mask=mask,
+                       exclude_above=args.exclude_above, noise_floor=args.noise_floor)
+    figures = {"result": str(args.result), "reference": str(args.reference),
+               "mask": None if args.mask is None else str(args.mask)} | figures
+    if args.error_map is not None:
+        from lfproc.metrics import evaluation_mask
+        from lfproc.preview import write_error_map
+
+        aligned = result if figures["gain"] == 1.0 else result.replace(data=result.data * np.float32(figures["gain"]))
+        keep = evaluation_mask(reference, mask=mask, exclude_above=args.exclude_above)
+        write_error_map(aligned, reference, args.error_map, force=args.force, mask=keep)
+        figures["error_map"] = str(args.error_map)
     if args.json:
         emit(figures, as_json=True)
     else:
         print(format_table(figures))
+        print(format_hdr_table(figures))
+        if args.error_map is not None:
+            print(f"error map: {args.error_map}")
     return 0

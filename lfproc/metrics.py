@@ -120,6 +120,7 @@ __all__ = [
     "hdr_figures",
     "EMITTER_SHARE_DOMINATES",
     "evaluation_mask",
+    "error_stops",
     "evaluate",
 ]
 
@@ -626,7 +627,9 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
         ``emitter_share``, ``emitters_dominate``
             share of the PU21 squared error (the MSE of PU21-PSNR) that comes from the
             brightest 0.1 % of the reference samples (0.0 when there is no error), and
-            whether it is above :data:`EMITTER_SHARE_DOMINATES` (a few emitters decide PU21).
+            whether it is above :data:`EMITTER_SHARE_DOMINATES` (a few emitters decide PU21);
+            ``emitter_luminance`` is the reference luminance (data units) where those brightest
+            0.1 % begin (``exclude_above`` just below it scores without them).
         ``noise_floor``, ``samples``, ``samples_above_floor``, ``scale_factor``
             the floor used, the number of samples in the mask, of those above the floor, and
             the PU21 scale factor (cd/m^2 per data unit).
@@ -691,7 +694,8 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
     err -= p_ref
     sq = np.square(err[keep])
     total = float(sq.sum())
-    share = float(sq[_brightest(ref_k, _EMITTER_FRACTION)].sum()) / total if total > 0 else 0.0
+    emitters = _brightest(ref_k, _EMITTER_FRACTION)
+    share = float(sq[emitters].sum()) / total if total > 0 else 0.0
 
     h, w = y_ref.shape[-2:]
     flat_keep = keep.reshape(-1, h, w)
@@ -709,11 +713,48 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
         "detail_ratio": detail,
         "emitter_share": share,
         "emitters_dominate": bool(share > EMITTER_SHARE_DOMINATES),
+        "emitter_luminance": float(ref_k[emitters].min()),
         "noise_floor": floor,
         "samples": n,
         "samples_above_floor": n_above,
         "scale_factor": factor,
     }
+
+
+def error_stops(result: Any, reference: Any, *, view: tuple[int, int] | None = None) -> np.ndarray:
+    """Per-pixel error in stops of one view: ``log2(Y_result / Y_reference)`` (:data:`PU21_LUMA`).
+
+    Parameters
+    ----------
+    result, reference : LightField, or ndarray of shape (H, W, C) or (V, U, H, W, C), C = 1 or 3
+    view : (v, u), optional
+        The view of a light field (default: the centre view, ``(V // 2, U // 2)``).
+
+    Returns
+    -------
+    ndarray (H, W), float64
+        Positive where the result is too bright; ``nan`` where the reference luminance is
+        ``<= 0`` (no defined error), ``-inf`` where the result is ``<= 0`` and the reference
+        is not (a lost sample).
+    """
+    y_res = _figure_luminance(result, "result")
+    y_ref = _figure_luminance(reference, "reference")
+    if y_res.shape != y_ref.shape:
+        raise ShapeError(f"result and reference: expected the same shape, got {y_res.shape} and {y_ref.shape} "
+                         "(luminance)")
+    if y_ref.ndim == 4:
+        nv, nu = y_ref.shape[:2]
+        v, u = (nv // 2, nu // 2) if view is None else view
+        if not (0 <= v < nv and 0 <= u < nu):
+            raise InputError(f"view: expected (v, u) with 0 <= v < {nv}, 0 <= u < {nu}, got {view!r}")
+        y_res, y_ref = y_res[v, u], y_ref[v, u]
+    elif y_ref.ndim != 2:
+        raise ShapeError(f"reference: expected (H, W, C) or (V, U, H, W, C), got luminance of shape {y_ref.shape}")
+    out = np.full(y_ref.shape, np.nan)
+    both = (y_ref > 0) & (y_res > 0)
+    out[both] = np.log2(y_res[both] / y_ref[both])
+    out[(y_ref > 0) & ~(y_res > 0)] = -np.inf
+    return out
 
 
 # -- light fields ----------------------------------------------------------------------------------
@@ -970,7 +1011,8 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
         source does not inflate it; per view too), ``linear_psnr_peak``; ``align`` and ``gain``
         (the factor applied to the result); the figures of :func:`hdr_figures` over all views
         (``stops_by_decade``, ``max_decade_stops``, ``zeros_above_floor``, ``highlight_energy``,
-        ``detail_ratio``, ``emitter_share``, ``emitters_dominate``, ``noise_floor``, ``samples``,
+        ``detail_ratio``, ``emitter_share``, ``emitters_dominate``, ``emitter_luminance``,
+        ``noise_floor``, ``samples``,
         ``samples_above_floor``); ``exclude_above`` and ``masked`` (whether a mask or
         ``exclude_above`` restricted the figures). With a mask, view averages are over the
         views that keep at least one sample (a view without any has ``nan`` figures).

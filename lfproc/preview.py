@@ -40,6 +40,8 @@ __all__ = [
     "epi_stretch",
     "PREVIEWS",
     "PREVIEW_SUFFIXES",
+    "render_error_map",
+    "write_error_map",
 ]
 
 PREVIEW_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff")
@@ -349,6 +351,138 @@ def write_preview(obj: Any, path: str | os.PathLike, *, kind: str = "centre", fo
             info.add_text("lfproc_options", repr(sorted(options.items())))
             if isinstance(obj, LightField) and obj.source:
                 info.add_text("Source", obj.source)
+            pil.save(tmp, format="PNG", pnginfo=info)
+        elif suffix in (".jpg", ".jpeg"):
+            pil.save(tmp, format="JPEG", quality=92)
+        else:
+            pil.save(tmp, format="TIFF")
+    return path
+
+
+# -- error maps -----------------------------------------------------------------------------------
+
+#: Colours of the error map for samples without a colour-map value (RGB in [0, 1]).
+ERROR_MAP_LOST = (0.0, 0.0, 0.0)  # the result is 0 where the reference is not
+ERROR_MAP_EXCLUDED = (0.62, 0.62, 0.62)  # masked out, or the reference is 0
+
+
+def _error_limit(stops: np.ndarray) -> float:
+    """Half-range of the colour bar: the 99th percentile of |finite errors| rounded up to 0.25 stop,
+    between 0.25 and 8 stops."""
+    finite = np.abs(stops[np.isfinite(stops)])
+    top = float(np.percentile(finite, 99)) if finite.size else 0.0
+    return float(min(8.0, max(0.25, math.ceil(top * 4 - 1e-9) / 4)))
+
+
+def render_error_map(result: Any, reference: Any, *, view: tuple[int, int] | None = None, mask: Any = None,
+                     limit_stops: float | None = None, cmap: str = "RdBu_r", dpi: int = 100) -> np.ndarray:
+    """A picture of the per-pixel error in stops of one view, with a colour bar.
+
+    The error is :func:`lfproc.metrics.error_stops` (``log2`` of the result's over the
+    reference's luminance): red too bright, blue too dark, white right, on a diverging
+    colour map symmetric about 0 and clipped at ``+-limit_stops``. Black marks samples the
+    result returns as 0 where the reference is not; grey, samples outside ``mask`` or with a
+    reference luminance of 0.
+
+    Parameters
+    ----------
+    result, reference : LightField or ndarray (H, W, C) / (V, U, H, W, C)
+    view : (v, u), optional
+        Default: the centre view.
+    mask : array_like of bool, (H, W) or (V, U, H, W), optional
+        Samples to show (the others are grey).
+    limit_stops : float, optional
+        Half-range of the colour bar in stops (default: the 99th percentile of the absolute
+        error shown, rounded up to a quarter stop, from 0.25 to 8).
+    cmap : str
+        A diverging matplotlib colour map.
+
+    Returns
+    -------
+    ndarray (H', W', 3), uint8
+    """
+    import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure
+
+    from .metrics import error_stops
+
+    stops = error_stops(result, reference, view=view)
+    h, w = stops.shape
+    shown = np.ones((h, w), dtype=bool)
+    if mask is not None:
+        m = np.asarray(mask)
+        if m.dtype != bool:
+            raise ShapeError(f"mask: expected a boolean array, got dtype {m.dtype}")
+        if m.ndim == 4:
+            nv, nu = m.shape[:2]
+            v, u = (nv // 2, nu // 2) if view is None else view
+            m = m[v, u]
+        if m.shape != (h, w):
+            raise ShapeError(f"mask: expected shape {(h, w)} or (V, U, {h}, {w}), got {np.asarray(mask).shape}")
+        shown &= m
+    visible = np.where(shown, stops, np.nan)
+    if limit_stops is None:
+        limit = _error_limit(visible)
+    else:
+        limit = float(limit_stops)
+        if not (math.isfinite(limit) and limit > 0):
+            raise InputError(f"limit_stops: expected a positive number of stops, got {limit_stops!r}")
+    colours = matplotlib.colormaps[cmap]
+    norm = Normalize(vmin=-limit, vmax=limit, clip=True)
+    rgb = colours(norm(np.nan_to_num(visible, nan=0.0, neginf=-limit, posinf=limit)))[..., :3]
+    lost = shown & np.isneginf(stops)
+    rgb[lost] = ERROR_MAP_LOST
+    rgb[~shown | np.isnan(stops)] = ERROR_MAP_EXCLUDED
+
+    zoom = max(1.0, 420.0 / max(h, w))  # small views drawn larger, pixel for pixel
+    fig = Figure(figsize=(w * zoom / dpi + 1.7, h * zoom / dpi + 1.1), dpi=dpi, layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    ax.imshow(rgb, interpolation="nearest")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    finite = np.abs(visible[np.isfinite(visible)])
+    median = float(np.median(finite)) if finite.size else math.nan
+    where = "" if view is None else f" view {tuple(view)}"
+    ax.set_title(f"error{where or ' (centre view)'}: median |error| {median:.3g} stops", fontsize=9)
+    notes = []
+    if lost.any():
+        notes.append(f"black: result 0 ({100 * lost.sum() / shown.sum():.3g} %)")
+    if (~shown | np.isnan(stops)).any():
+        notes.append("grey: excluded or reference 0")
+    if notes:
+        ax.set_xlabel("; ".join(notes), fontsize=8)
+    bar = fig.colorbar(matplotlib.cm.ScalarMappable(norm=norm, cmap=colours), ax=ax, extend="both",
+                       fraction=0.05, pad=0.02)
+    bar.set_label("log2(result / reference) luminance, stops", fontsize=8)
+    bar.ax.tick_params(labelsize=8)
+    fig.canvas.draw()
+    return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+
+
+def write_error_map(result: Any, reference: Any, path: str | os.PathLike, *, force: bool = False,
+                    **options) -> Path:
+    """Write :func:`render_error_map` atomically to a PNG (or JPEG/TIFF); refuses an existing
+    ``path`` unless ``force``. ``options`` go to :func:`render_error_map`."""
+    from PIL import Image
+    from PIL.PngImagePlugin import PngInfo
+
+    from .io import atomic_file, check_output
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in PREVIEW_SUFFIXES:
+        raise InputError(f"{path}: expected an error-map file ending in {', '.join(PREVIEW_SUFFIXES)}")
+    check_output(path, force=force)
+    image = render_error_map(result, reference, **options)
+    with atomic_file(path, force=force) as tmp:
+        pil = Image.fromarray(image)
+        if suffix == ".png":
+            info = PngInfo()
+            info.add_text("Software", f"lfproc {__version__}")
+            info.add_text("lfproc_preview", "error-map")
             pil.save(tmp, format="PNG", pnginfo=info)
         elif suffix in (".jpg", ".jpeg"):
             pil.save(tmp, format="JPEG", quality=92)

@@ -80,7 +80,8 @@ def test_known_log_psnr_and_relative_error_of_a_scaled_image(tmp_path, capsys):
     assert 0.0199 < out["mean_relative_error"] < 0.02  # just under 2 %: the regulariser
     assert len(out["views"]) == 1 and out["angular_shape"] == [1, 1]
     assert main(["evaluate", str(tmp_path / "res.exr"), str(tmp_path / "ref.exr")]) == 0
-    assert len(capsys.readouterr().out.splitlines()) == 3  # header, columns, mean only
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[3].startswith("error by decade")  # header, columns, mean only, then the HDR figures
 
 
 def test_identical_json_is_valid_with_inf(scene, capsys):
@@ -126,7 +127,7 @@ def test_table_shows_the_json_figures(scene, tmp_path, capsys):
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("5x5 views of 32x40, reference peak -> 1000 cd/m^2")
     assert "PU21-PSNR dB" in lines[1] and "PU21-SSIM" in lines[1]
-    assert lines[2].split()[0] == "mean" and len(lines) == 3 + 25
+    assert lines[2].split()[0] == "mean" and lines[3 + 25].startswith("error by decade")
     assert float(lines[2].split()[1]) == pytest.approx(doc["pu21_psnr_db"], abs=0.005)
     assert float(lines[2].split()[2]) == pytest.approx(doc["pu21_ssim"], abs=5e-5)
     first = doc["views"][0]
@@ -246,3 +247,144 @@ def test_merge_output_carries_its_exposure(tmp_path):
     path = tmp_path / "m.exr"
     write_lightfield(merged, path)
     assert read_lightfield(path).exposure_s == 1.0
+
+
+# -- HDR figures, error map, mask (issue 20 item 4, issue 23) -------------------------------------------
+
+def _lost_highlights(tmp_path):
+    """A reference with a few emitters 10 stops above the scene, and a result that keeps the scene
+    exactly but returns the emitters at 1/16 and zeros in a dark corner."""
+    rng = np.random.default_rng(3)
+    ref = rng.uniform(0.01, 1.0, (1, 1, 40, 48)).astype(np.float32)
+    ref[0, 0, 5, 30:32] = 1000.0
+    res = ref.copy()
+    res[0, 0, 5, 30:32] = 1000.0 / 16
+    ref[0, 0, 30:, :8] = 0.001  # a dark corner (80 samples) the result loses
+    res[0, 0, 30:, :8] = 0.0
+    from lfproc.lightfield import LightField
+
+    ref_lf, res_lf = LightField(data=_grey(ref)), LightField(data=_grey(res))
+    return (write_lightfield(res_lf, tmp_path / "res.exr"), write_lightfield(ref_lf, tmp_path / "ref.exr"),
+            res_lf, ref_lf)
+
+
+def test_table_prints_hdr_figures_and_says_when_emitters_dominate(tmp_path, capsys):
+    res, ref, res_lf, ref_lf = _lost_highlights(tmp_path)
+    doc = _json(capsys, ["evaluate", str(res), str(ref), "--json", "--scale-tolerance-stops", "10"])
+    assert doc["zeros_above_floor"] == pytest.approx(80 / (40 * 48))
+    assert doc["highlight_energy"] < 0.5 and doc["emitters_dominate"] is True
+    assert {"decade", "median_stops", "samples"} <= set(doc["stops_by_decade"][0])
+    assert doc["stops_by_decade"][0]["median_stops"] == "inf"  # the dark decade: all zeros
+    assert main(["evaluate", str(res), str(ref), "--scale-tolerance-stops", "10"]) == 0
+    out = capsys.readouterr().out
+    assert "error by decade of the reference luminance" in out
+    assert "1e+03 .. 1e+04" in out and "1e-03 .. 1e-02" in out and f"returned as 0 above the floor: {100 * 80 / 1920:.3g} %" in out
+    line = next(x for x in out.splitlines() if x.startswith("PU21 is dominated by a few emitters"))
+    # the advice works: excluding above the suggested value scores the scene without the emitters
+    value = line.split("--exclude-above ")[1].rstrip(")")
+    doc = _json(capsys, ["evaluate", str(res), str(ref), "--json", "--exclude-above", value,
+                         "--scale-tolerance-stops", "10", "--noise-floor", "0.002"])
+    assert doc["pu21_psnr_db"] == "inf" and doc["max_decade_stops"] == 0.0 and doc["emitters_dominate"] is False
+    assert doc["samples"] == 40 * 48 - 2 and doc["zeros_above_floor"] == 0.0
+
+
+def test_mask_files_restrict_every_figure(tmp_path, capsys):
+    from PIL import Image
+
+    res, ref, res_lf, ref_lf = _lost_highlights(tmp_path)
+    keep = np.ones((40, 48), bool)
+    keep[5, 30:32] = False
+    keep[30:, :8] = False
+    np.save(tmp_path / "keep.npy", keep)
+    Image.fromarray((keep * 255).astype(np.uint8)).save(tmp_path / "keep.png")  # white = scored
+    for name in ("keep.npy", "keep.png"):
+        doc = _json(capsys, ["evaluate", str(res), str(ref), "--json", "--mask", str(tmp_path / name),
+                             "--scale-tolerance-stops", "10"])
+        assert doc["pu21_psnr_db"] == "inf" and doc["log_psnr_db"] == "inf" and doc["mean_relative_error"] == 0.0
+        assert doc["samples"] == int(keep.sum()) and doc["max_decade_stops"] == 0.0 and doc["masked"] is True
+        assert doc["mask"] == str(tmp_path / name)
+    lib = evaluate(res_lf, ref_lf, mask=keep, scale_tolerance_stops=10)
+    assert lib["pu21_ssim"] == pytest.approx(doc["pu21_ssim"], rel=1e-12)
+
+
+def test_error_map_shows_stops_with_a_colour_bar(tmp_path, capsys):
+    from PIL import Image
+
+    from lfproc.lightfield import LightField
+
+    rng = np.random.default_rng(4)
+    ref = rng.uniform(0.1, 1.0, (3, 3, 40, 60)).astype(np.float32)
+    res = ref.copy()
+    res[:, :, :, :20] *= 4.0  # +2 stops on the left, -2 on the right, right in the middle
+    res[:, :, :, 40:] /= 4.0
+    write_lightfield(LightField(data=_grey(ref)), tmp_path / "ref.exr")
+    write_lightfield(LightField(data=_grey(res)), tmp_path / "res.exr")
+    out = tmp_path / "map.png"
+    doc = _json(capsys, ["evaluate", str(tmp_path / "res.exr"), str(tmp_path / "ref.exr"), "--json",
+                         "--error-map", str(out)])
+    assert doc["error_map"] == str(out)
+    img = np.asarray(Image.open(out).convert("RGB")).astype(int)
+    redish = (img[..., 0] - img[..., 2]) > 50
+    blueish = (img[..., 2] - img[..., 0]) > 50
+    # the map: red (too bright) left, blue (too dark) right; the colour bar holds both hues stacked
+    # vertically in one narrow column to the right of the map
+    rows_r, cols_r = np.nonzero(redish)
+    rows_b, cols_b = np.nonzero(blueish)
+    assert np.median(cols_r) < np.median(cols_b)
+    bar_cols = [c for c in range(img.shape[1]) if redish[:, c].any() and blueish[:, c].any()]
+    assert bar_cols and min(bar_cols) > np.percentile(cols_b, 50)
+    c = bar_cols[len(bar_cols) // 2]
+    assert np.nonzero(redish[:, c])[0].mean() < np.nonzero(blueish[:, c])[0].mean()  # red on top
+    # no overwrite without --force; with it, the map is rewritten
+    before = out.read_bytes()
+    line = _error(capsys, ["evaluate", str(tmp_path / "res.exr"), str(tmp_path / "ref.exr"), "--error-map", str(out)])
+    assert "output exists" in line and out.read_bytes() == before
+    assert main(["evaluate", str(tmp_path / "res.exr"), str(tmp_path / "ref.exr"), "--error-map", str(out),
+                 "--force"]) == 0
+    capsys.readouterr()
+
+
+def test_error_map_values_are_log2_ratios():
+    from lfproc.metrics import error_stops
+
+    ref = _grey(np.full((2, 2, 4, 5), 2.0))
+    res = ref.copy()
+    res[1, 1, 0, 0] = 8.0
+    res[1, 1, 0, 1] = 0.0
+    ref[1, 1, 0, 2] = 0.0
+    stops = error_stops(res, ref)  # the centre view (1, 1)
+    assert stops[0, 0] == 2.0 and stops[0, 1] == -math.inf and math.isnan(stops[0, 2]) and stops[1, 1] == 0.0
+    assert (error_stops(res, ref, view=(0, 0)) == 0).all()
+
+
+def test_mask_and_error_map_errors(scene, tmp_path, capsys):
+    path = str(scene[0])
+    line = _error(capsys, ["evaluate", path, path, "--mask", str(tmp_path / "none.png")])
+    assert "--mask" in line and "none.png: no such file" in line
+    line = _error(capsys, ["evaluate", path, path, "--mask", str(tmp_path / "m.txt")])
+    assert "--mask" in line and "expected a .png or .npy file" in line
+    np.save(tmp_path / "wrong.npy", np.ones((3, 4), bool))
+    line = _error(capsys, ["evaluate", path, path, "--mask", str(tmp_path / "wrong.npy")])
+    assert "--mask" in line and "expected 32 x 40 (or 5 x 5 x 32 x 40)" in line and "found 3 x 4" in line
+    np.save(tmp_path / "float.npy", np.full((32, 40), 0.5))
+    line = _error(capsys, ["evaluate", path, path, "--mask", str(tmp_path / "float.npy")])
+    assert "--mask" in line and "expected booleans or integers 0/1, found float64" in line
+    (tmp_path / "bad.npy").write_bytes(b"not an array")
+    line = _error(capsys, ["evaluate", path, path, "--mask", str(tmp_path / "bad.npy")])
+    assert "--mask" in line and "not a valid .npy" in line
+    (tmp_path / "bad.png").write_bytes(b"\x89PNG\r\n\x1a\n garbage")
+    line = _error(capsys, ["evaluate", path, path, "--mask", str(tmp_path / "bad.png")])
+    assert "bad.png" in line
+    np.save(tmp_path / "none.npy", np.zeros((32, 40), bool))
+    line = _error(capsys, ["evaluate", path, path, "--mask", str(tmp_path / "none.npy")])
+    assert "no sample to evaluate" in line
+    line = _error(capsys, ["evaluate", path, path, "--exclude-above", "-1"])
+    assert "--exclude-above: expected a finite luminance >= 0, got -1" in line
+    line = _error(capsys, ["evaluate", path, path, "--exclude-above", "0"])
+    assert "--exclude-above 0: every reference sample is brighter" in line
+    line = _error(capsys, ["evaluate", path, path, "--error-map", str(tmp_path / "map.exr")])
+    assert "--error-map" in line and "expected a file ending in .png" in line
+    line = _error(capsys, ["evaluate", path, path, "--error-map", str(tmp_path / "no" / "map.png")])
+    assert "does not exist" in line
+    # nothing half-written
+    assert not any(p.name.startswith(("map", ".lfproc-tmp")) for p in tmp_path.rglob("*"))
