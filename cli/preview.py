@@ -1,4 +1,8 @@
-"""``lfproc preview LF -o OUT.png --kind centre|sheet|epi|histogram``: look at a light field."""
+"""``lfproc preview LF -o OUT.png --kind centre|sheet|epi|histogram``: look at a light field.
+
+``--exposure-from REFERENCE`` tone-maps with the reference's curve (log-average and white
+point), so a result and its truth previewed with the same reference share one exposure.
+"""
 
 from __future__ import annotations
 
@@ -26,6 +30,10 @@ def register(sub, common) -> None:
                    help=f"light fields: {', '.join(kinds)} (default centre); coded captures: "
                         f"{', '.join(preview_kinds(lfproc.camera.capture.Capture))} (default capture); dictionaries: atoms")
     p.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="extra exposure in stops")
+    p.add_argument("--exposure-from", type=Path, default=None, metavar="REFERENCE",
+                   help="light field whose tone curve (log-average, white point) is used instead of the input's: "
+                        "preview a result and its truth with the same REFERENCE to compare them at one exposure "
+                        "(histograms share its range of stops)")
     p.add_argument("--nonfinite", choices=("raise", "zero", "clip"), default="raise",
                    help="what to do with NaN/Inf samples (default: refuse the file)")
     add_json(p)
@@ -43,23 +51,35 @@ def run(args) -> int:
     check_output(args.output, force=args.force)
     from lfproc.dictionary import is_dictionary_file, load_dictionary
 
+    def _no_exposure_from(what: str) -> None:
+        if args.exposure_from is not None:
+            raise InputError(f"--exposure-from: applies to light-field previews; {args.input} is {what}")
+
     if is_dictionary_file(args.input):
+        _no_exposure_from("a dictionary")
         d = load_dictionary(str(args.input))
         kind = args.kind or "atoms"
         path = write_preview(d, args.output, kind=kind, force=args.force)
         emit({"output": str(path), "kind": kind, "atoms": d.n_atoms, "patch": list(d.patch)}, as_json=args.json)
         return 0
     if is_capture_file(args.input):
+        _no_exposure_from("a coded capture")
         summary = write_capture_preview(args.input, args.output, kind=args.kind or "capture", force=args.force)
         emit(summary, as_json=args.json)
         return 0
+    if args.exposure_from is not None and not args.exposure_from.exists():
+        raise InputError(f"--exposure-from {args.exposure_from}: no such file or folder")
     lf = read_lightfield(args.input, nonfinite=args.nonfinite)
+    options = {"exposure_ev": args.exposure}
+    if args.exposure_from is not None:
+        options["exposure_from"] = read_lightfield(args.exposure_from, nonfinite=args.nonfinite)
     kind = args.kind or "centre"
-    path = write_preview(lf, args.output, kind=kind, force=args.force, exposure_ev=args.exposure)
+    path = write_preview(lf, args.output, kind=kind, force=args.force, **options)
     from PIL import Image
 
     with Image.open(path) as im:
         width, height = im.size
     emit({"output": str(path), "kind": kind, "size": [height, width], "views": list(lf.views),
-          "dynamic_range_stops": lf.dynamic_range_stops()}, as_json=args.json)
+          "dynamic_range_stops": lf.dynamic_range_stops(),
+          "exposure_from": None if args.exposure_from is None else str(args.exposure_from)}, as_json=args.json)
     return 0

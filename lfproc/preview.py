@@ -38,6 +38,8 @@ __all__ = [
     "register_preview",
     "preview_kinds",
     "epi_stretch",
+    "sheet_tile_size",
+    "SHEET_MAX_PIXELS",
     "PREVIEWS",
     "PREVIEW_SUFFIXES",
     "render_error_map",
@@ -151,21 +153,86 @@ def _gap(h: int, w: int) -> int:
     return max(2, min(h, w) // 64)
 
 
-def _preview_centre(lf: LightField, *, exposure_ev: float = 0.0) -> np.ndarray:
-    """The centre view, tone-mapped with its own statistics."""
-    return _to_uint8(tonemap(lf.centre(), exposure_ev=exposure_ev))
+def _tone_source(lf: LightField, exposure_from: LightField | None) -> LightField:
+    """The light field whose statistics set the tone curve: ``exposure_from`` when given."""
+    if exposure_from is None:
+        return lf
+    if not isinstance(exposure_from, LightField):
+        raise InputError(f"exposure_from: expected a LightField (the reference whose tone curve is shared), "
+                         f"got {type(exposure_from).__name__}")
+    return exposure_from
 
 
-def _preview_sheet(lf: LightField, *, exposure_ev: float = 0.0) -> np.ndarray:
-    """All V x U views as tiles separated by gaps of ``max(2, min(H, W) // 64)`` pixels, one tone curve."""
+def _preview_centre(lf: LightField, *, exposure_ev: float = 0.0, exposure_from: LightField | None = None
+                    ) -> np.ndarray:
+    """The centre view, tone-mapped with its own statistics (or those of ``exposure_from``'s centre view)."""
+    return _to_uint8(tonemap(lf.centre(), exposure_ev=exposure_ev, reference=_tone_source(lf, exposure_from).centre()))
+
+
+#: Default pixel budget of a contact sheet's tiles (about 1.2 megapixels: a PNG of real views
+#: of at most about 2 MB). Larger light fields are downscaled to fit.
+SHEET_MAX_PIXELS = 1_200_000
+
+
+def sheet_tile_size(lf: LightField, max_pixels: int | None = SHEET_MAX_PIXELS) -> tuple[int, int]:
+    """Size (h, w) of one tile of the contact sheet: the view size, downscaled by one factor
+    (at most 1) so that all ``V * U`` tiles hold at most ``max_pixels`` pixels (``None``: full size)."""
     nv, nu = lf.views
     h, w = lf.size
-    g = _gap(h, w)
-    tiles = _to_uint8(tonemap(lf.data, exposure_ev=exposure_ev))
-    sheet = np.full((nv * h + (nv - 1) * g, nu * w + (nu - 1) * g, 3), _GAP_GREY, np.uint8)
+    if max_pixels is None:
+        return h, w
+    if isinstance(max_pixels, bool) or not (isinstance(max_pixels, (int, np.integer)) and max_pixels > 0):
+        raise InputError(f"max_pixels: expected a positive integer number of pixels, got {max_pixels!r}")
+    scale = min(1.0, math.sqrt(max_pixels / (nv * nu * h * w)))
+    return max(1, int(h * scale)), max(1, int(w * scale))
+
+
+def _label_font(height: int):
+    from PIL import ImageFont
+
+    try:
+        return ImageFont.load_default(size=height)
+    except (OSError, TypeError, ValueError, ImportError):  # no FreeType: the fixed bitmap font
+        return ImageFont.load_default()
+
+
+def _sheet_label_height(tile_w: int) -> int:
+    return int(min(18, max(10, tile_w // 10)))
+
+
+def _preview_sheet(lf: LightField, *, exposure_ev: float = 0.0, exposure_from: LightField | None = None,
+                   max_pixels: int | None = SHEET_MAX_PIXELS, labels: bool = True) -> np.ndarray:
+    """All V x U views as tiles, one tone curve, each under a label ``v,u`` (0-based view indices).
+
+    Tiles are the views downscaled to :func:`sheet_tile_size` (``max_pixels`` in all), separated
+    by gaps of ``max(2, min(h, w) // 64)`` pixels; with ``labels`` each tile has a band of
+    ``min(18, max(10, w // 10))`` pixels above it holding its indices.
+    """
+    from PIL import Image, ImageDraw
+
+    nv, nu = lf.views
+    h, w = lf.size
+    th, tw = sheet_tile_size(lf, max_pixels)
+    g = _gap(th, tw)
+    lb = _sheet_label_height(tw) if labels else 0
+    tiles = _to_uint8(tonemap(lf.data, exposure_ev=exposure_ev, reference=_tone_source(lf, exposure_from).data))
+    sheet = np.full((nv * (lb + th) + (nv - 1) * g, nu * tw + (nu - 1) * g, 3), _GAP_GREY, np.uint8)
     for v in range(nv):
         for u in range(nu):
-            sheet[v * (h + g):v * (h + g) + h, u * (w + g):u * (w + g) + w] = tiles[v, u]
+            tile = tiles[v, u]
+            if (th, tw) != (h, w):
+                tile = np.asarray(Image.fromarray(tile).resize((tw, th), Image.Resampling.LANCZOS))
+            top, left = v * (lb + th + g) + lb, u * (tw + g)
+            sheet[top:top + th, left:left + tw] = tile
+    if labels:
+        pil = Image.fromarray(sheet)
+        draw = ImageDraw.Draw(pil)
+        font = _label_font(lb - 2)
+        for v in range(nv):
+            for u in range(nu):
+                draw.text((u * (tw + g) + 2, v * (lb + th + g) + lb // 2), f"{v},{u}", fill=(225, 225, 225),
+                          font=font, anchor="lm")
+        sheet = np.asarray(pil).copy()
     return sheet
 
 
@@ -176,11 +243,12 @@ def epi_stretch(lf: LightField) -> int:
 
 
 def _preview_epi(lf: LightField, *, exposure_ev: float = 0.0, row: int | None = None,
-                 column: int | None = None) -> np.ndarray:
+                 column: int | None = None, exposure_from: LightField | None = None) -> np.ndarray:
     """Centre view with the EPI lines marked, the horizontal EPI below it, the vertical EPI to its right.
 
     Each view is one row (column) of an EPI, repeated ``epi_stretch(lf)`` times so that the
-    slopes (disparities) are visible; the tone curve is the centre view's. Layout::
+    slopes (disparities) are visible; the tone curve is the centre view's
+    (``exposure_from``'s centre view when given). Layout::
 
         [ centre view, row and column marked ] [gap] [ vertical EPI (H x V*s)   ]
         [ horizontal EPI (U*s x W)           ] [gap] [ empty                    ]
@@ -191,8 +259,8 @@ def _preview_epi(lf: LightField, *, exposure_ev: float = 0.0, row: int | None = 
     column = w // 2 if column is None else column
     s = epi_stretch(lf)
     g = _gap(h, w)
-    ref = lf.centre()
-    centre = _to_uint8(tonemap(ref, exposure_ev=exposure_ev))
+    ref = _tone_source(lf, exposure_from).centre()
+    centre = _to_uint8(tonemap(lf.centre(), exposure_ev=exposure_ev, reference=ref))
     ehor = _to_uint8(tonemap(lf.epi(axis="horizontal", index=row), exposure_ev=exposure_ev, reference=ref))
     ever = _to_uint8(tonemap(lf.epi(axis="vertical", index=column), exposure_ev=exposure_ev, reference=ref))
     ehor = np.repeat(ehor, s, axis=0)  # (U*s, W, 3)
@@ -209,10 +277,20 @@ def _preview_epi(lf: LightField, *, exposure_ev: float = 0.0, row: int | None = 
     return out
 
 
-def _histogram_data(lf: LightField) -> dict[str, Any]:
+def _stops_range(lf: LightField) -> tuple[int, int] | None:
+    lum = lf.luminance().ravel()
+    positive = lum[lum > 0]
+    if not positive.size:
+        return None
+    stops = np.log2(positive.astype(np.float64))
+    return math.floor(stops.min()), math.ceil(stops.max())
+
+
+def _histogram_data(lf: LightField, span: tuple[int, int] | None = None) -> dict[str, Any]:
     """What the histogram preview draws: bin ``edges`` (stops, whole stops at both ends, 8 bins
     a stop, 20 to 400 bins), ``fractions`` of all samples per bin, the 0.1/99.9 percentiles of
-    log2 luminance, the dynamic range, the saturated and zero fractions."""
+    log2 luminance, the dynamic range, the saturated and zero fractions. ``span`` (whole
+    stops) widens the bins' range, so that two histograms share an axis."""
     lum = lf.luminance().ravel()
     positive = lum[lum > 0]
     out: dict[str, Any] = {"edges": None, "fractions": None, "p_lo": None, "p_hi": None,
@@ -221,6 +299,8 @@ def _histogram_data(lf: LightField) -> dict[str, Any]:
     if positive.size:
         stops = np.log2(positive.astype(np.float64))
         lo, hi = math.floor(stops.min()), math.ceil(stops.max())
+        if span is not None:
+            lo, hi = min(lo, span[0]), max(hi, span[1])
         hi = max(hi, lo + 1)
         bins = np.linspace(lo, hi, int(min(400, max(20, 8 * (hi - lo)))) + 1)
         counts, edges = np.histogram(stops, bins=bins)
@@ -230,12 +310,17 @@ def _histogram_data(lf: LightField) -> dict[str, Any]:
 
 
 def _preview_histogram(lf: LightField, *, exposure_ev: float = 0.0, width_px: int = 800,
-                       height_px: int = 500) -> np.ndarray:
-    """Histogram of log2 luminance (all views), with the robust dynamic range and saturation."""
+                       height_px: int = 500, exposure_from: LightField | None = None) -> np.ndarray:
+    """Histogram of log2 luminance (all views), with the robust dynamic range and saturation.
+
+    The figures are written under the plot, never over the bars. With ``exposure_from`` the
+    stops axis spans both light fields, so the two histograms can be laid side by side.
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    data = _histogram_data(lf)
+    span = None if exposure_from is None else _stops_range(_tone_source(lf, exposure_from))
+    data = _histogram_data(lf, span)
     dpi = 100
     fig = Figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi)
     FigureCanvasAgg(fig)
@@ -254,16 +339,17 @@ def _preview_histogram(lf: LightField, *, exposure_ev: float = 0.0, width_px: in
     ax.set_ylabel("fraction of pixels")
     sat = data["saturated"]
     sat_text = "unknown (no saturation level)" if sat is None else f"{100 * sat:.3g} %"
-    text = (f"dynamic range (0.1-99.9 %): {data['dynamic_range_stops']:.1f} stops\n"
-            f"saturated: {sat_text}\nzero pixels: {100 * data['zero_fraction']:.3g} %")
-    ax.text(0.98, 0.97, text, transform=ax.transAxes, ha="right", va="top", fontsize=9,
-            bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": "#999999"})
+    text = (f"dynamic range (0.1-99.9 %): {data['dynamic_range_stops']:.1f} stops    "
+            f"saturated: {sat_text}    zero pixels: {100 * data['zero_fraction']:.3g} %")
+    # under the plot, outside the axes: never over the bars (the peak is often at the right)
+    fig.text(0.5, 0.012, text, ha="center", va="bottom", fontsize=9,
+             bbox={"facecolor": "white", "edgecolor": "#999999", "boxstyle": "round,pad=0.3"})
     nv, nu = lf.views
     h, w = lf.size
     title = f"{lf.source or 'light field'}: {nv}x{nu} views of {h}x{w}, units {lf.units}"
     ax.set_title(title, fontsize=10)
     ax.grid(True, which="major", alpha=0.3)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
     fig.canvas.draw()
     return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
 
@@ -291,7 +377,7 @@ def register_preview(kind: str, render: Callable[..., np.ndarray], *, accepts: t
 
 
 register_preview("centre", _preview_centre, description="tone-mapped centre view")
-register_preview("sheet", _preview_sheet, description="contact sheet of all views, one tone curve")
+register_preview("sheet", _preview_sheet, description="contact sheet of all views, labelled v,u, one tone curve")
 register_preview("epi", _preview_epi, description="centre view with horizontal and vertical epipolar-plane images")
 register_preview("histogram", _preview_histogram, description="histogram of log2 luminance with the dynamic range")
 
@@ -308,11 +394,18 @@ def render_preview(obj: Any, kind: str = "centre", **options) -> np.ndarray:
     ----------
     obj : LightField (or the input type a registered kind accepts)
     kind : str
-        ``"centre"`` (H x W), ``"sheet"`` (``V*H + (V-1)*g`` by ``U*W + (U-1)*g`` with gap
-        ``g = max(2, min(H, W) // 64)``), ``"epi"`` (``H + g + U*s`` by ``W + g + V*s``,
+        ``"centre"`` (H x W), ``"sheet"`` (``V*(b+h) + (V-1)*g`` by ``U*w + (U-1)*g``: tiles of
+        ``(h, w) = sheet_tile_size(lf)``, the views downscaled to ``max_pixels`` (default
+        :data:`SHEET_MAX_PIXELS`; ``None`` keeps full size), label bands of
+        ``b = min(18, max(10, w // 10))`` pixels (0 with ``labels=False``), gaps
+        ``g = max(2, min(h, w) // 64)``), ``"epi"`` (``H + g + U*s`` by ``W + g + V*s``,
         ``s = epi_stretch(lf)``) or ``"histogram"`` (800 x 500 plot).
     **options
-        Passed to the renderer (``exposure_ev`` for all light-field kinds).
+        Passed to the renderer: ``exposure_ev`` and ``exposure_from`` for all light-field
+        kinds. ``exposure_from=reference`` (a LightField) takes the tone curve (log-average
+        and white point) from the reference instead of ``obj``, so a result and its truth
+        rendered with the same ``exposure_from`` are shown at one exposure (the histogram
+        shares the reference's range of stops).
     """
     if kind not in PREVIEWS:
         raise InputError(f"preview kind: expected one of {', '.join(PREVIEWS)}; got {kind!r}")
@@ -323,6 +416,12 @@ def render_preview(obj: Any, kind: str = "centre", **options) -> np.ndarray:
     if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
         raise ShapeError(f"preview kind {kind!r}: renderer returned {image.dtype} {image.shape}, expected uint8 (H, W, 3)")
     return image
+
+
+def _describe_option(value: Any) -> Any:
+    if isinstance(value, LightField):
+        return f"LightField({value.source})" if value.source else repr(value)
+    return value
 
 
 def write_preview(obj: Any, path: str | os.PathLike, *, kind: str = "centre", force: bool = False,
@@ -348,7 +447,7 @@ def write_preview(obj: Any, path: str | os.PathLike, *, kind: str = "centre", fo
             info = PngInfo()
             info.add_text("Software", f"lfproc {__version__}")
             info.add_text("lfproc_preview", kind)
-            info.add_text("lfproc_options", repr(sorted(options.items())))
+            info.add_text("lfproc_options", repr(sorted((k, _describe_option(v)) for k, v in options.items())))
             if isinstance(obj, LightField) and obj.source:
                 info.add_text("Source", obj.source)
             pil.save(tmp, format="PNG", pnginfo=info)

@@ -97,7 +97,7 @@ def test_sheet_has_tiles_and_gaps_with_one_tone_curve():
     base = synthesize("checker", size=(32, 40), views=3, baseline_px=0.0, random_state=1).data.copy()
     base[0, 0] *= 4  # one view 2 stops brighter: with a common curve its tile is brighter
     lf = LightField(data=base)
-    img = render_preview(lf, "sheet")
+    img = render_preview(lf, "sheet", labels=False)
     g = 2
     assert img.shape == (3 * 32 + 2 * g, 3 * 40 + 2 * g, 3)
     assert (img[32:32 + g] == 40).all() and (img[:, 40:40 + g] == 40).all()
@@ -224,8 +224,8 @@ def test_cli_preview(lf, tmp_path, capsys):
     out = tmp_path / "sheet.png"
     assert main(["preview", str(src), "-o", str(out), "--kind", "sheet", "--exposure", "1", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    g = 2
-    assert report["size"] == [5 * 48 + 4 * g, 5 * 64 + 4 * g] and report["kind"] == "sheet"
+    g, band = 2, 10  # gaps; label bands of max(10, 64 // 10) pixels
+    assert report["size"] == [5 * (band + 48) + 4 * g, 5 * 64 + 4 * g] and report["kind"] == "sheet"
     expected = render_preview(lf, "sheet", exposure_ev=1.0)
     with Image.open(out) as im:
         np.testing.assert_array_equal(np.asarray(im), expected)
@@ -259,3 +259,149 @@ def test_previews_of_real_light_field(shared_data, tmp_path, kind):
     assert main(["preview", str(folder), "-o", str(out), "--kind", kind]) == 0
     with Image.open(out) as im:
         np.testing.assert_array_equal(np.asarray(im), render_preview(read_lightfield(folder), kind))
+
+
+# -- comparable pictures (issue 20, item 4) -------------------------------------------------------
+
+def test_exposure_from_shows_a_result_and_its_truth_at_one_exposure(lf, tmp_path, capsys):
+    dark = lf.replace(data=lf.data * np.float32(0.25))  # a result two stops too dark
+    for kind in ("centre", "sheet", "epi"):
+        own, truth = render_preview(dark, kind), render_preview(lf, kind)
+        # each with its own curve, the two look alike: the error cannot be seen
+        assert abs(own.astype(float).mean() - truth.astype(float).mean()) < 3, kind
+        shared = render_preview(dark, kind, exposure_from=lf)
+        assert shared.astype(float).mean() < truth.astype(float).mean() - 20, kind
+        np.testing.assert_array_equal(render_preview(lf, kind, exposure_from=lf), truth)
+    # the same curve as tonemap(..., reference=the truth's centre view)
+    expected = np.round(tonemap(dark.centre(), reference=lf.centre()) * 255).astype(np.uint8)
+    np.testing.assert_array_equal(render_preview(dark, "centre", exposure_from=lf), expected)
+    with pytest.raises(InputError, match="exposure_from: expected a LightField"):
+        render_preview(dark, "centre", exposure_from=np.ones((4, 4, 3)))
+
+    from lfproc.cli.main import main
+
+    res, ref = write_lightfield(dark, tmp_path / "res.exr"), write_lightfield(lf, tmp_path / "ref.exr")
+    out = tmp_path / "res.png"
+    assert main(["preview", str(res), "-o", str(out), "--exposure-from", str(ref), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["exposure_from"] == str(ref)
+    from lfproc.io import read_lightfield
+
+    with Image.open(out) as im:
+        np.testing.assert_array_equal(np.asarray(im), render_preview(read_lightfield(res), "centre",
+                                                                     exposure_from=read_lightfield(ref)))
+    assert main(["preview", str(res), "-o", str(tmp_path / "n.png"), "--exposure-from", str(tmp_path / "no.exr")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--exposure-from" in err and "no.exr: no such file" in err
+    assert not (tmp_path / "n.png").exists()
+
+
+def test_exposure_from_refused_for_a_capture(tmp_path, capsys, lf):
+    from lfproc.camera.simulate import simulate_capture
+    from lfproc.cli.main import main
+
+    cap = simulate_capture(lf.data[:, :, :32, :32], profile="paper-medium", shots=1, mask_period=4, random_state=1)
+    path = cap.save(tmp_path / "a.capture.npz")
+    ref = write_lightfield(lf, tmp_path / "ref.exr")
+    assert main(["preview", str(path), "-o", str(tmp_path / "c.png"), "--exposure-from", str(ref)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--exposure-from: applies to light-field previews" in err
+    assert not (tmp_path / "c.png").exists()
+
+
+def test_histogram_figures_never_cover_the_peak():
+    # the same two bars mirrored: the tallest one at the left, then at the right (where a legend
+    # box used to sit); each is drawn to the same full height
+    left = _bars(render_preview(_grey_levels([1.0, 16.0], [30, 10]), "histogram"))
+    right = _bars(render_preview(_grey_levels([1.0, 16.0], [10, 30]), "histogram"))
+    assert len(left) == len(right) == 2
+    assert left[0][1] == right[1][1] and left[1][1] == right[0][1]
+    assert right[1][1] > right[0][1]
+
+
+def test_histogram_exposure_from_shares_the_stops_axis():
+    from lfproc.preview import _histogram_data, _stops_range
+
+    narrow = _grey_levels([1.0, 4.0], [10, 10])  # 0 and 2 stops
+    wide = _grey_levels([1 / 64, 1.0, 256.0], [10, 10, 10])  # -6, 0 and 8 stops
+    assert _stops_range(wide) == (-6, 8)
+    edges = _histogram_data(narrow, _stops_range(wide))["edges"]
+    assert edges[0] == -6 and edges[-1] == 8
+    # the bar at 0 stops is drawn at the same place in both pictures
+    a = _bars(render_preview(narrow, "histogram", exposure_from=wide))
+    b = _bars(render_preview(wide, "histogram", exposure_from=narrow))
+    assert len(a) == 2 and len(b) == 3 and a[0][0] == b[1][0]
+    assert _bars(render_preview(narrow, "histogram"))[0][0] < a[0][0] - 100  # alone, it spans the plot
+
+
+def _dark_lf(views, h, w):
+    return LightField(data=np.full((views, views, h, w, 3), 1e-4, np.float32))
+
+
+def test_sheet_is_labelled_with_view_indices():
+    lf = _dark_lf(3, 40, 60)
+    img = render_preview(lf, "sheet")
+    band, g = 10, 2  # max(10, 60 // 10), max(2, 40 // 64)
+    assert img.shape == (3 * (band + 40) + 2 * g, 3 * 60 + 2 * g, 3)
+    bands = [img[v * (band + 40 + g):v * (band + 40 + g) + band, u * (60 + g):u * (60 + g) + 60]
+             for v in range(3) for u in range(3)]
+    for b in bands:
+        assert (b > 150).any()  # light text on the dark band
+    # each label is different ("0,0", "0,1", ...), and the tiles themselves are untouched
+    assert len({b.tobytes() for b in bands}) == 9
+    plain = render_preview(lf, "sheet", labels=False)
+    np.testing.assert_array_equal(img[band:band + 40, :60], plain[:40, :60])
+
+
+def test_sheet_is_downscaled_to_its_pixel_budget():
+    from lfproc.preview import SHEET_MAX_PIXELS, sheet_tile_size
+
+    big = LightField(data=np.zeros((5, 5, 434, 625, 1), np.float32))  # Lytro size, as the issue's 9.7 MB sheet
+    th, tw = sheet_tile_size(big)
+    assert 25 * th * tw <= SHEET_MAX_PIXELS and th * tw > 0.95 * SHEET_MAX_PIXELS / 25
+    assert abs(tw / th - 625 / 434) < 0.01  # the aspect is kept
+    assert sheet_tile_size(big, None) == (434, 625)
+    assert sheet_tile_size(_dark_lf(3, 40, 60)) == (40, 60)  # small light fields keep full size
+    img = render_preview(big, "sheet")
+    assert img.shape[1] == 5 * tw + 4 * 2
+    with pytest.raises(InputError, match="max_pixels: expected a positive integer"):
+        render_preview(big, "sheet", max_pixels=0)
+
+
+def test_sheet_of_a_real_light_field_is_at_most_2_mb(shared_data, tmp_path):
+    from lfproc.io import read_lightfield
+
+    folder = shared_data / "lightfields" / "hci_antinous_5x5"
+    if not folder.is_dir():
+        pytest.skip(f"{folder} not found")
+    lf = read_lightfield(folder)
+    path = write_preview(lf, tmp_path / "sheet.png", kind="sheet")
+    assert path.stat().st_size < 2_000_000
+    full = write_preview(lf, tmp_path / "full.png", kind="sheet", max_pixels=None)
+    assert full.stat().st_size > 3 * path.stat().st_size
+
+
+def test_capture_preview_has_colour_bars(lf):
+    from lfproc.camera.capture import render_capture_preview
+    from lfproc.camera.simulate import simulate_capture
+
+    cap = simulate_capture(lf.data[:, :, :32, :32], profile="paper-medium", shots=1, mask_period=4, random_state=1)
+
+    def gradient_columns(img):
+        """Columns holding a grey ramp, white at the top to black at the bottom, in one run of at
+        least 100 rows, each row no lighter than the one above: a colour bar (the pictures
+        themselves are pixel noise, the other figures' columns are flat)."""
+        found = []
+        for c in range(img.shape[1]):
+            col = img[:, c].astype(int)
+            ok = (np.ptp(col, axis=-1) <= 2)[1:] & (np.diff(col[:, 0]) <= 0) & (np.diff(col[:, 0]) >= -6)
+            start = 0
+            for r in range(1, ok.size + 1):
+                if r == ok.size or not ok[r]:
+                    if r - start >= 100 and col[start, 0] - col[r, 0] >= 150:
+                        found.append(c)
+                        break
+                    start = r + 1
+        return found
+
+    for kind in ("sensor", "mask"):
+        assert gradient_columns(render_capture_preview(cap, kind)), kind

@@ -901,6 +901,9 @@ def render_capture_preview(capture: Capture, kind: str = "capture", *, shot: int
     kind : {"capture", "sensor", "iso", "mask"}
         ``capture`` shows all three side by side (each with a zoomed top-left crop of
         ``zoom`` pixels so pixel-level patterns are visible); the others one of them.
+        The sensor image has a colour bar in DN above the black level (gamma 2.2 scale),
+        the mask one of its transmission (0 to 1; the hue is the pixel's CFA colour), the
+        ISO map a legend of its ISOs.
     shot : int
         Which shot to show.
     zoom : int
@@ -925,9 +928,9 @@ def render_capture_preview(capture: Capture, kind: str = "capture", *, shot: int
     z = max(2, min(int(zoom), h, w))
     profile = capture.profile
     black = float(profile.black_level_dn)
-    sensor = np.maximum(capture.dn[shot].astype(np.float64) - black, 0)
-    top = max(float(np.percentile(sensor, 99.5)), 1.0)
-    sensor = np.clip(sensor / top, 0, 1) ** (1 / 2.2)
+    sensor_dn = np.maximum(capture.dn[shot].astype(np.float64) - black, 0)
+    top = max(float(np.percentile(sensor_dn, 99.5)), 1.0)
+    sensor = np.clip(sensor_dn / top, 0, 1) ** (1 / 2.2)
     isos = capture.isos
     colours = _iso_colours(len(isos))
     iso_index = np.searchsorted(np.asarray(isos), capture.iso[shot])
@@ -937,23 +940,36 @@ def render_capture_preview(capture: Capture, kind: str = "capture", *, shot: int
     # the mask seen by the centre view at each pixel's CFA colour, tinted by that colour
     tint = np.eye(3)[op.cfa_index]
     mask_rgb = op.weights[shot, centre[0], centre[1]][..., None] * tint
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize, PowerNorm
+
+    # colour bars: (mappable, label) of the values shown, drawn beside the full panel
+    sensor_bar = (ScalarMappable(norm=PowerNorm(gamma=1 / 2.2, vmin=0, vmax=top), cmap="gray"),
+                  "DN above black (clipped at the 99.5th percentile)")
+    mask_bar = (ScalarMappable(norm=Normalize(vmin=0, vmax=1), cmap="gray"), "mask transmission (hue: CFA colour)")
     panels = []
     if kind in ("capture", "sensor"):
-        panels.append((f"sensor, shot {shot + 1}/{capture.shots} (DN - black, gamma 2.2)", sensor, "gray", None))
+        panels.append((f"sensor, shot {shot + 1}/{capture.shots} (DN - black, gamma 2.2)", sensor, "gray", None,
+                       sensor_bar))
     if kind in ("capture", "iso"):
         legend = [Patch(color=colours[i], label=f"ISO {_num(v)}") for i, v in enumerate(isos)]
         title = f"ISO map ({capture.iso_pattern.get('kind', 'given')})"
-        panels.append((title, iso_rgb, None, legend))
+        panels.append((title, iso_rgb, None, legend, None))
     if kind in ("capture", "mask"):
-        panels.append((f"mask, view {centre}, CFA {capture.cfa_pattern} ({capture.mask.kind})", mask_rgb, None, None))
+        panels.append((f"mask, view {centre}, CFA {capture.cfa_pattern} ({capture.mask.kind})", mask_rgb, None, None,
+                       mask_bar))
     fig = Figure(figsize=(4.2 * len(panels), 8.4), dpi=dpi)
-    for i, (title, image, cmap, legend) in enumerate(panels):
+    for i, (title, image, cmap, legend, bar) in enumerate(panels):
         ax = fig.add_subplot(2, len(panels), i + 1)
         ax.imshow(image, cmap=cmap, vmin=0, vmax=1, interpolation="nearest")
         ax.set_title(title, fontsize=9)
         ax.add_patch(matplotlib.patches.Rectangle((-0.5, -0.5), z, z, fill=False, color="red", lw=1))
         ax.set_xticks([])
         ax.set_yticks([])
+        if bar is not None:
+            cb = fig.colorbar(bar[0], ax=ax, fraction=0.046, pad=0.03)
+            cb.set_label(bar[1], fontsize=8)
+            cb.ax.tick_params(labelsize=7)
         ax2 = fig.add_subplot(2, len(panels), len(panels) + i + 1)
         ax2.imshow(image[:z, :z], cmap=cmap, vmin=0, vmax=1, interpolation="nearest")
         ax2.set_title(f"top-left {z} x {z} pixels", fontsize=9)
