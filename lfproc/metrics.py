@@ -657,7 +657,7 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
     ref_data = reference.data if isinstance(reference, LightField) else np.asarray(reference)
     factor = _scale_factor(ref_data, peak_luminance)
     if mask is None:
-        keep = np.ones(y_ref.shape, dtype=bool)
+        keep = None
     else:
         m = np.asarray(mask)
         if m.dtype != bool:
@@ -665,11 +665,12 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
         if m.shape != y_ref.shape and m.shape != y_ref.shape[-2:]:
             raise ShapeError(f"mask: expected shape {y_ref.shape[-2:]} or {y_ref.shape}, got {m.shape}")
         keep = np.broadcast_to(m, y_ref.shape)
-    n = int(np.count_nonzero(keep))
+    n = y_ref.size if keep is None else int(np.count_nonzero(keep))
     if n == 0:
         raise ShapeError("mask: expected at least one sample to evaluate, the mask selects none")
 
-    ref_k, res_k = y_ref[keep], y_res[keep]
+    # the kept samples, 1-d (views of the luminance when every sample is kept)
+    ref_k, res_k = (y_ref.ravel(), y_res.ravel()) if keep is None else (y_ref[keep], y_res[keep])
     above = ref_k > floor
     n_above = int(np.count_nonzero(above))
     ref_a, res_a = ref_k[above], res_k[above]
@@ -692,17 +693,18 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
     p_ref = pu21_encode(y_ref * factor)
     err = pu21_encode(y_res * factor)
     err -= p_ref
-    sq = np.square(err[keep])
+    sq = np.square(err.ravel() if keep is None else err[keep])
     total = float(sq.sum())
     emitters = _brightest(ref_k, _EMITTER_FRACTION)
     share = float(sq[emitters].sum()) / total if total > 0 else 0.0
 
     h, w = y_ref.shape[-2:]
-    flat_keep = keep.reshape(-1, h, w)
+    flat_keep = None if keep is None else keep.reshape(-1, h, w)
     lap_err = lap_ref = 0.0
     for i, (e, r) in enumerate(zip(err.reshape(-1, h, w), p_ref.reshape(-1, h, w))):
-        lap_err += float(np.sum(np.square(laplace(e))[flat_keep[i]]))
-        lap_ref += float(np.sum(np.square(laplace(r))[flat_keep[i]]))
+        le, lr = np.square(laplace(e)), np.square(laplace(r))
+        lap_err += float(np.sum(le if flat_keep is None else le[flat_keep[i]]))
+        lap_ref += float(np.sum(lr if flat_keep is None else lr[flat_keep[i]]))
     detail = lap_err / lap_ref if lap_ref > 0 else math.nan
 
     return {
