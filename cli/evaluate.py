@@ -43,7 +43,11 @@ def register(sub, common) -> None:
                     "reference peak is --peak-luminance cd/m^2, then PU21-PSNR (peak 256), PU21-SSIM (data range "
                     "256), PU2-PSNR (peak PU2 of the display peak), log-PSNR, a linear PSNR (peak: the reference's "
                     "99.9th percentile) and the mean relative error of the linear values are computed per view "
-                    "and averaged over views. --align says how RESULT is brought to the reference's scale.")
+                    "and averaged over views. --align says how RESULT is brought to the reference's scale. "
+                    "Then the figures PU21 hides: the median error in stops per decade of the reference "
+                    "luminance, the share of samples returned as 0, the energy kept by the brightest 1 %, the "
+                    "detail ratio (Laplacian energy of the PU21 error over the reference's), and a line when a "
+                    "few emitters dominate PU21. --mask and --exclude-above restrict every figure.")
     p.add_argument("result", type=Path, help="light field or image to judge")
     p.add_argument("reference", type=Path, help="ground-truth light field or image")
     p.add_argument("--peak-luminance", type=float, default=1000.0, metavar="CD_M2",

@@ -41,6 +41,14 @@ conventions of the reference implementation of PU21, ``pu21_metric.m`` of ``gfxd
   average PSNR ``inf``). The array functions (:func:`pu21_psnr`...) instead treat their whole
   input as one signal (one MSE over every sample; SSIM averaged over the 2-D images).
 
+PU21 maps the reference peak to the display peak, so its dark decades barely count and a few
+emitters can decide the score. :func:`hdr_figures` gives what a user sees instead: the median
+error in stops per decade of the reference luminance, the share of samples returned as 0,
+the energy kept by the brightest 1 %, a detail ratio (Laplacian energy of the PU21 error over
+the reference's) and the share of the PU21 error held by the brightest 0.1 %;
+:func:`evaluate` reports them too, and takes a mask (or ``exclude_above``) that restricts
+every figure.
+
 PU encodings are computed in float64 over whole arrays at once (every view of a light field
 in one call); SSIM runs per 2-D view.
 
