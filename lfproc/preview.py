@@ -202,7 +202,8 @@ def _sheet_label_height(tile_w: int) -> int:
 
 def _preview_sheet(lf: LightField, *, exposure_ev: float = 0.0, exposure_from: LightField | None = None,
                    max_pixels: int | None = SHEET_MAX_PIXELS, labels: bool = True) -> np.ndarray:
-    """All V x U views as tiles, one tone curve, each under a label ``v,u`` (0-based view indices).
+    """All V x U views as tiles, one tone curve, each under a label ``v,u`` (0-based view indices,
+    as in ``lfproc evaluate``'s rows and :meth:`LightField.view`; file names ``view_RR_CC`` count from 01).
 
     Tiles are the views downscaled to :func:`sheet_tile_size` (``max_pixels`` in all), separated
     by gaps of ``max(2, min(h, w) // 64)`` pixels; with ``labels`` each tile has a band of
