@@ -895,7 +895,8 @@ def _check_lightfields(result: LightField, reference: LightField, scale_toleranc
             )
 
 
-def evaluation_mask(reference: LightField, *, mask: Any = None, exclude_above: float | None = None) -> np.ndarray | None:
+def evaluation_mask(reference: LightField, *, mask: Any = None,
+                    exclude_above: float | None = None) -> np.ndarray | None:
     """The samples :func:`evaluate` scores: ``mask`` and the reference luminance ``<= exclude_above``.
 
     Parameters
