@@ -377,9 +377,11 @@ def _scaled_luminance(result: Any, reference: Any, peak_luminance: float | None,
 # -- PSNR and SSIM kernels -----------------------------------------------------------------------
 
 def _psnr_from_mse(mse: np.ndarray | float, peak: float) -> np.ndarray:
+    """PSNR of each MSE: ``inf`` for 0, ``nan`` for ``nan`` (a view a mask leaves empty)."""
     mse = np.asarray(mse, dtype=np.float64)
     with np.errstate(divide="ignore"):
-        return np.where(mse > 0, 10.0 * np.log10(peak * peak / np.where(mse > 0, mse, 1.0)), np.inf)
+        out = np.where(mse > 0, 10.0 * np.log10(peak * peak / np.where(mse > 0, mse, 1.0)), np.inf)
+    return np.where(np.isnan(mse), np.nan, out)
 
 
 def psnr(result: Any, reference: Any, *, data_range: float) -> float:
@@ -1024,7 +1026,8 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
         (``stops_by_decade``, ``max_decade_stops``, ``zeros_above_floor``, ``highlight_energy``,
         ``detail_ratio``, ``emitter_share``, ``emitters_dominate``, ``emitter_luminance``,
         ``noise_floor``, ``samples``,
-        ``samples_above_floor``); ``exclude_above`` and ``masked`` (whether a mask or
+        ``samples_above_floor``; their PU21 figures use the ``banding_glare`` variant whatever
+        ``variant`` says); ``exclude_above`` and ``masked`` (whether a mask or
         ``exclude_above`` restricted the figures). With a mask, view averages are over the
         views that keep at least one sample (a view without any has ``nan`` figures).
 

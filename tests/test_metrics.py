@@ -512,3 +512,22 @@ def test_evaluate_mask_and_exclude_above_restrict_every_figure():
         evaluate(res, ref, mask=np.ones((3, 3), bool))
     with pytest.raises(ShapeError, match="exclude_above=1e-09 left no sample"):
         evaluate(res, ref, exclude_above=1e-9)
+
+
+def test_evaluate_mask_that_leaves_a_view_empty():
+    from lfproc.synth import synthesize
+
+    ref = synthesize("layers", size=(24, 32), views=3, random_state=3)
+    res = _noisy(ref, 0.05, 2)
+    keep = np.ones((3, 3, 24, 32), dtype=bool)
+    keep[0, 0] = False  # view (0, 0) not scored at all
+    out = evaluate(res, ref, mask=keep)
+    first = out["views"][0]
+    assert (first["v"], first["u"]) == (0, 0)
+    for key in ("pu21_psnr_db", "pu21_ssim", "pu2_psnr_db", "log_psnr_db", "linear_psnr_db", "mean_relative_error"):
+        assert math.isnan(first[key]), key
+        assert out[key] == pytest.approx(np.mean([r[key] for r in out["views"][1:]]), rel=1e-12), key
+    # the other views score as they do without a mask
+    full = evaluate(res, ref)
+    assert out["views"][4]["pu21_psnr_db"] == pytest.approx(full["views"][4]["pu21_psnr_db"], rel=1e-12)
+    assert out["views"][4]["pu21_ssim"] == pytest.approx(full["views"][4]["pu21_ssim"], rel=1e-9)
