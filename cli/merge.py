@@ -26,7 +26,7 @@ def register(sub, common) -> None:
                                                          "(overrides the metadata)")
     p.add_argument("--isos", default=None, help="comma-separated ISO values (one, or one per input)")
     p.add_argument("--white-db", type=Path, default=None, help="white-image database for Lytro captures")
-    p.add_argument("--iterations", type=int, default=2, help="ml: weight updates after the read-noise start")
+    p.add_argument("--iterations", type=int, default=2, help="ml: weight updates after the start (read-noise weights; 8-bit images: hat-weighted mean)")
     p.add_argument("--seed", type=int, default=0, help="debevec: seed of the response-recovery pixel sampling")
     p.add_argument("--mask", type=Path, default=None,
                    help="also write the saturated-everywhere mask as a 1-channel light field (.exr)")
