@@ -24,14 +24,26 @@ def register(sub, common) -> None:
     p.add_argument("--profile", default=None, help="camera profile name or JSON file (ml; raw codes)")
     p.add_argument("--exposures-s", default=None, help="comma-separated exposure times in seconds, one per input "
                                                          "(overrides the metadata)")
+    p.add_argument("--exposures-file", type=Path, default=None, metavar="LIST",
+                   help="exposure list file (overrides the metadata): 'NAME SECONDS' lines (seconds as 0.125 or "
+                        "1/8), 'SECONDS' lines in the inputs' order, JSON, or Debevec's HDRShop list "
+                        "('NAME 1/t F_STOP ...' lines, as memorial.hdr_image_list.txt: recognised by its 3-5 "
+                        "fields or a '1/shutter_speed' comment; the second field is 1/t)")
     p.add_argument("--isos", default=None, help="comma-separated ISO values (one, or one per input)")
     p.add_argument("--white-db", type=Path, default=None, help="white-image database for Lytro captures")
-    p.add_argument("--iterations", type=int, default=2, help="ml: weight updates after the start (read-noise weights; 8-bit images: hat-weighted mean)")
+    p.add_argument("--iterations", type=int, default=None,
+                   help="ml: weight updates after the start (read-noise weights; 8-bit images: hat-weighted mean); "
+                        "default 2")
     p.add_argument("--seed", type=int, default=0, help="debevec: seed of the response-recovery pixel sampling")
     p.add_argument("--mask", type=Path, default=None,
                    help="also write the saturated-everywhere mask as a 1-channel light field (.exr)")
     add_json(p)
     p.set_defaults(run=run)
+
+
+#: the CLI options of merge_files' parameters, for its messages
+_OPTION_NAMES = {"profile": "--profile", "exposures_s": "--exposures-s", "isos": "--isos", "white_db": "--white-db",
+                 "n_iter": "--iterations", "method": "--method"}
 
 
 def run(args) -> int:
@@ -47,10 +59,22 @@ def run(args) -> int:
     check_output(args.output, force=args.force)
     if args.mask is not None:
         check_output(args.mask, force=args.force)
+    if args.exposures_s and args.exposures_file is not None:
+        raise InputError("--exposures-s and --exposures-file: expected one source of exposure times, got both")
+    if args.iterations is not None and args.method == "debevec":
+        raise InputError("--iterations: has no effect with --method debevec (ml weight updates); drop it")
+    if args.iterations is not None and args.iterations < 0:
+        raise InputError(f"--iterations: expected a non-negative integer, got {args.iterations}")
     exposures = parse_floats(args.exposures_s, option="--exposures-s") if args.exposures_s else None
+    if args.exposures_file is not None:
+        from lfproc.dataset import read_exposure_file
+
+        exposures = read_exposure_file(args.exposures_file, args.inputs, bare_order="inputs")
     isos = parse_floats(args.isos, option="--isos") if args.isos else None
     merged, info = merge_files(args.inputs, method=args.method, profile=args.profile, exposures_s=exposures,
-                               isos=isos, white_db=args.white_db, n_iter=args.iterations, random_state=args.seed)
+                               isos=isos, white_db=args.white_db,
+                               n_iter=2 if args.iterations is None else args.iterations, random_state=args.seed,
+                               option_names=_OPTION_NAMES)
     outputs = [args.output] if args.mask is None else [args.output, args.mask]
     with atomic_outputs(outputs, force=args.force) as staged:  # both outputs or neither
         write_lightfield(merged, staged[0])

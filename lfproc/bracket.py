@@ -264,12 +264,18 @@ def merge_files(
     n_iter: int = 2,
     random_state=0,
     n_threads: int | None = None,
+    option_names: dict[str, str] | None = None,
 ) -> tuple[LightField, dict[str, Any]]:
     """Read a bracket of files and merge it (:func:`read_bracket` then :func:`lfproc.merge.merge_lightfields`).
 
     ``method=None`` chooses: ``debevec`` for 8-bit camera images (non-linear) or when no camera
     profile is known (unless the inputs carry their own variances, as decoded captures do),
     ``ml`` otherwise. Lytro captures default to the ``illum`` profile.
+
+    A parameter that would have no effect is refused (:class:`InputError`) rather than silently
+    ignored: ``profile`` with 8-bit images (their response is recovered from the bracket, both
+    methods) and ``white_db`` without a Lytro capture. ``option_names`` maps parameter names to
+    the names used in messages (the CLI passes its options, e.g. ``{"profile": "--profile"}``).
 
     Returns the merged light field (``attrs["sources"]`` are the file paths) and the merge
     information (see :func:`lfproc.merge.merge_lightfields`), plus ``method``.
@@ -279,11 +285,22 @@ def merge_files(
 
     if method is not None:
         check_choice("method", method, MERGE_METHODS)
+    names = option_names or {}
     paths = [Path(p) for p in paths]
     lytro = any(p.suffix.lower() in LYTRO_SUFFIXES for p in paths)
+    if white_db is not None and not lytro:
+        raise InputError(f"{names.get('white_db', 'white_db')}: has no effect without a Lytro capture (.lfr, .lfp) "
+                         "among the inputs; drop it")
+    profile_given = profile is not None
     if profile is None and lytro:
         profile = "illum"
     lfs = read_bracket(paths, exposures_s=exposures_s, isos=isos, white_db=white_db, profile=profile)
+    if profile_given:
+        eight = next((p for p, lf in zip(paths, lfs) if lf.attrs.get("codes_bits") == 8), None)
+        if eight is not None:
+            raise InputError(f"{names.get('profile', 'profile')}: has no effect on 8-bit images such as {eight} "
+                             "(their camera response is recovered from the bracket and the ml weights from its "
+                             "noise); drop it")
     if method is None:
         codes8 = any(lf.attrs.get("codes_bits") == 8 for lf in lfs)
         with_variance = all(lf.variance is not None and lf.units != "dn" for lf in lfs)

@@ -543,3 +543,63 @@ def test_ml_8bit_weights_do_not_overflow():
     red = r[..., 0]
     ok = (radiance > 0.1) & (radiance < 5)
     assert np.median(red[ok] / radiance[ok]) == pytest.approx(1, rel=0.02)
+
+
+# -- issue 20 item 2: exposure list files, options without effect -------------------------------------------
+
+def test_cli_merge_exposures_file_forms(tmp_path, capsys):
+    """--exposures-file reads NAME SECONDS lines, bare seconds in the inputs' order and Debevec's HDRShop
+    image list (the Memorial bracket's NAME 1/t F_STOP GAIN ND lines, names of .ppm files)."""
+    pngs = _write_png_bracket(tmp_path)  # shot0..2.png at 0.25, 0.5, 1 s
+    out = tmp_path / "o.exr"
+    forms = {
+        "names.txt": "# name seconds\nshot2.png 1\nshot0.png 1/4\nshot1.png 0.5\n",
+        "bare.txt": "0.25\n0.5\n1\n",
+        "memorial.hdr_image_list.txt": ("# Number of Images\n3\n# Filename  1/shutter_speed f/stop gain(db) ND_filters\n"
+                                        "shot0.ppm 4 8 0 0\nshot1.ppm 2 8 0 0\nshot2.ppm 1 8 0 0\n"),
+        "hdrshop_no_count.txt": "shot0.png 4 8\nshot1.png 2 8\nshot2.png 1 8\n",
+        "exposures.json": json.dumps({"shot0.png": "1/4", "shot1.png": 0.5, "shot2.png": 1}),
+    }
+    for name, text in forms.items():
+        (tmp_path / name).write_text(text)
+        assert main(["merge", *map(str, pngs), "-o", str(out), "--force", "--json", "--exposures-file",
+                     str(tmp_path / name)]) == 0, (name, capsys.readouterr().err)
+        assert json.loads(capsys.readouterr().out)["exposures_s"] == [0.25, 0.5, 1.0], name
+    # bare seconds follow the inputs as given
+    assert main(["merge", str(pngs[0]), str(pngs[1]), str(pngs[2]), "-o", str(out), "--force", "--json",
+                 "--exposures-file", str(tmp_path / "bare.txt")]) == 0
+    capsys.readouterr()
+    # errors: one line naming the file or option, exit 2, nothing written
+    out.unlink()
+    bad = {
+        "fstops.txt": ("shot0.png 4 8 0 0\nshot1.png 2 5.6 0 0\nshot2.png 1 8 0 0\n", "aperture, gain or ND filter differ"),
+        "count.txt": ("4\nshot0.png 4 8\nshot1.png 2 8\nshot2.png 1 8\n", "says 4 images, lists 3"),
+        "missing.txt": ("shot0.png 1/4\nshot1.png 0.5\n", "no exposure time for shot2.png"),
+        "zero.txt": ("shot0.png 0 8\nshot1.png 2 8\nshot2.png 1 8\n", "line 1 (1/shutter_speed): expected a positive"),
+        "wide.txt": ("shot0.png 4 8 0 0 1 2\n", "line 1: expected 'NAME SECONDS'"),
+    }
+    for name, (text, message) in bad.items():
+        (tmp_path / name).write_text(text)
+        assert main(["merge", *map(str, pngs), "-o", str(out), "--exposures-file", str(tmp_path / name)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and str(tmp_path / name) in err and message in err, err
+    assert main(["merge", *map(str, pngs), "-o", str(out), "--exposures-file", str(tmp_path / "nope.txt")]) == 2
+    assert "nope.txt: no such exposure file" in capsys.readouterr().err
+    assert main(["merge", *map(str, pngs), "-o", str(out), "--exposures-file", str(tmp_path / "names.txt"),
+                 "--exposures-s", "0.25,0.5,1"]) == 2
+    assert "got both" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_cli_merge_refuses_options_without_effect(frobisher, tmp_path, capsys):
+    """--profile was silently ignored for 8-bit images; --iterations with debevec, --white-db without Lytro."""
+    paths, _ = frobisher
+    out = tmp_path / "o.exr"
+    for extra, message in ((["--profile", "illum"], "--profile: has no effect on 8-bit images"),
+                           (["--method", "ml", "--profile", "illum"], "--profile: has no effect on 8-bit images"),
+                           (["--method", "debevec", "--iterations", "3"], "--iterations: has no effect"),
+                           (["--white-db", str(tmp_path)], "--white-db: has no effect without a Lytro capture")):
+        assert main(["merge", *map(str, paths), "-o", str(out), *extra]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and message in err, err
+    assert not out.exists()
