@@ -848,16 +848,29 @@ def merge_ml_codes8(
     cidx = np.arange(channels)
     chunk = max(1, chunk_size // channels)
     x_t = [(x_lut / np.float32(t[i])) for i in range(n)]  # X_i = x / t_i per exposure
-    # the code an exposure x predicts: the usable code whose x_lut is nearest (x_lut is non-decreasing)
+    # the code an exposure x predicts: the usable code whose x_lut is nearest (x_lut is non-decreasing),
+    # tabulated on a fine grid of ln x per channel (a table look-up instead of a search per sample)
     lo_code, hi_code = 1, int(saturation_code) - 1
-    mids = [(x64[lo_code:hi_code, c] + x64[lo_code + 1:hi_code + 1, c]) / 2 for c in range(channels)]
+    n_grid = 4096
+    ln_lo = np.log(np.maximum(x64[lo_code], 1e-300))
+    ln_hi = np.log(np.maximum(x64[hi_code], 1e-300))
+    grid_scale = (n_grid - 1) / np.maximum(ln_hi - ln_lo, 1e-12)
+    code_grid = np.empty((n_grid, channels), np.intp)
+    for c in range(channels):
+        xs_c = np.exp(np.linspace(ln_lo[c], ln_hi[c], n_grid))
+        mids = (x64[lo_code:hi_code, c] + x64[lo_code + 1:hi_code + 1, c]) / 2
+        code_grid[:, c] = lo_code + np.searchsorted(mids, xs_c)
+
+    def grid_index(x: np.ndarray) -> np.ndarray:
+        """(P, C) exposures -> (P, C) flat indices into a (n_grid, C) table."""
+        with np.errstate(divide="ignore"):
+            k = (np.log(x) - ln_lo) * grid_scale
+        k = np.clip(np.nan_to_num(k, nan=0.0, neginf=0.0), 0, n_grid - 1).astype(np.intp)
+        return k * channels + cidx
 
     def predicted_code(x: np.ndarray) -> np.ndarray:
         """(P, C) exposures -> (P, C) codes in lo_code..hi_code."""
-        out = np.empty(x.shape, np.intp)
-        for c in range(channels):
-            out[:, c] = lo_code + np.searchsorted(mids[c], x[:, c])
-        return out
+        return code_grid.ravel()[grid_index(x)]
 
     def weighted(a: int, b: int):
         """Hat-weighted pass (shortest first, clipping guard): sum w X, sum w, per-exposure weights and X."""
@@ -924,6 +937,7 @@ def merge_ml_codes8(
     V = np.maximum(V, np.maximum(dx * dx / 12.0, (1e-6 * x64) ** 2))
     fill = (x_lut[255] / t[first]).astype(np.float32)
     t2 = t**2
+    inv_v_grid = (1.0 / V[code_grid, cidx]).ravel()  # 1 / V at the code each grid exposure predicts
 
     radiance = np.empty((total, channels), np.float32)
     variance = np.empty((total, channels), np.float32)
@@ -939,9 +953,12 @@ def merge_ml_codes8(
         for _ in range(int(n_iter) + 1):  # weights at the current estimate, never at the sample's own code
             num64 = np.zeros(e.shape)
             wsum = np.zeros(e.shape)
+            with np.errstate(divide="ignore"):
+                k0 = (np.log(e) - ln_lo) * grid_scale
+            k0 = np.nan_to_num(k0, nan=-1e18, neginf=-1e18, posinf=1e18)
             for k, i in enumerate(order):
-                zp = predicted_code(e * t[i])
-                w = np.where(usable[k], t2[i] / V[zp, cidx], 0.0)
+                idx = np.clip(k0 + np.log(t[i]) * grid_scale, 0, n_grid - 1).astype(np.intp) * channels + cidx
+                w = np.where(usable[k], t2[i] * inv_v_grid[idx], 0.0)
                 num64 += w * xs[k]
                 wsum += w
             e = num64 / np.where(none, 1, wsum)
