@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import add_json, add_output, emit, parse_floats
+from ._common import add_json, add_value_policies, add_output, emit, parse_floats
 
 
 def register(sub, common) -> None:
@@ -37,6 +37,7 @@ def register(sub, common) -> None:
     p.add_argument("--seed", type=int, default=0, help="debevec: seed of the response-recovery pixel sampling")
     p.add_argument("--mask", type=Path, default=None,
                    help="also write the saturated-everywhere mask as a 1-channel light field (.exr)")
+    add_value_policies(p, what="light-field (EXR) input")
     add_json(p)
     p.set_defaults(run=run)
 
@@ -74,7 +75,7 @@ def run(args) -> int:
     merged, info = merge_files(args.inputs, method=args.method, profile=args.profile, exposures_s=exposures,
                                isos=isos, white_db=args.white_db,
                                n_iter=2 if args.iterations is None else args.iterations, random_state=args.seed,
-                               option_names=_OPTION_NAMES)
+                               option_names=_OPTION_NAMES, nonfinite=args.nonfinite, negative=args.negative)
     outputs = [args.output] if args.mask is None else [args.output, args.mask]
     with atomic_outputs(outputs, force=args.force) as staged:  # both outputs or neither
         write_lightfield(merged, staged[0])

@@ -184,6 +184,8 @@ def read_bracket(
     isos: Sequence[float] | float | None = None,
     white_db: str | os.PathLike | None = None,
     profile=None,
+    nonfinite: str = "raise",
+    negative: str = "clip",
 ) -> list[LightField]:
     """Read a bracket of inputs (see the module table) as light fields with exposure metadata.
 
@@ -198,6 +200,9 @@ def read_bracket(
         White-image database for Lytro captures (the same white image is used for all).
     profile : camera profile, optional
         Passed to the Lytro decoder.
+    nonfinite, negative : str
+        Value policies of light-field inputs (EXR files, folders of views), as
+        :func:`lfproc.io.read_lightfield`.
 
     Returns
     -------
@@ -226,7 +231,7 @@ def read_bracket(
             raise MissingFileError(f"{p}: no such file or folder")
         suffix = p.suffix.lower()
         if p.is_dir() or suffix == ".exr":
-            lf = read_lightfield(p)
+            lf = read_lightfield(p, nonfinite=nonfinite, negative=negative)
         elif suffix in LYTRO_SUFFIXES:
             lf = _read_lytro(p, white_db=white_db)
         elif suffix in RAW_SUFFIXES:
@@ -265,6 +270,8 @@ def merge_files(
     random_state=0,
     n_threads: int | None = None,
     option_names: dict[str, str] | None = None,
+    nonfinite: str = "raise",
+    negative: str = "clip",
 ) -> tuple[LightField, dict[str, Any]]:
     """Read a bracket of files and merge it (:func:`read_bracket` then :func:`lfproc.merge.merge_lightfields`).
 
@@ -276,6 +283,7 @@ def merge_files(
     ignored: ``profile`` with 8-bit images (their response is recovered from the bracket, both
     methods) and ``white_db`` without a Lytro capture. ``option_names`` maps parameter names to
     the names used in messages (the CLI passes its options, e.g. ``{"profile": "--profile"}``).
+    ``nonfinite`` and ``negative`` are the value policies of light-field inputs (:func:`read_bracket`).
 
     Returns the merged light field (``attrs["sources"]`` are the file paths) and the merge
     information (see :func:`lfproc.merge.merge_lightfields`), plus ``method``.
@@ -294,7 +302,8 @@ def merge_files(
     profile_given = profile is not None
     if profile is None and lytro:
         profile = "illum"
-    lfs = read_bracket(paths, exposures_s=exposures_s, isos=isos, white_db=white_db, profile=profile)
+    lfs = read_bracket(paths, exposures_s=exposures_s, isos=isos, white_db=white_db, profile=profile,
+                       nonfinite=nonfinite, negative=negative)
     if profile_given:
         eight = next((p for p, lf in zip(paths, lfs) if lf.attrs.get("codes_bits") == 8), None)
         if eight is not None:
