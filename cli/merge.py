@@ -35,6 +35,9 @@ def register(sub, common) -> None:
                    help="ml: weight updates after the start (read-noise weights; 8-bit images: hat-weighted mean); "
                         "default 2")
     p.add_argument("--seed", type=int, default=0, help="debevec: seed of the response-recovery pixel sampling")
+    p.add_argument("--response-out", type=Path, default=None, metavar="FILE",
+                   help="also write the camera response the merge recovered from 8-bit images, f^-1(z) and "
+                        "g(z) = ln f^-1(z) per code and channel (FILE.csv or FILE.json), and its plot FILE.png")
     p.add_argument("--mask", type=Path, default=None,
                    help="also write the saturated-everywhere mask as a 1-channel light field (.exr)")
     add_value_policies(p, what="light-field (EXR) input")
@@ -60,6 +63,16 @@ def run(args) -> int:
     check_output(args.output, force=args.force)
     if args.mask is not None:
         check_output(args.mask, force=args.force)
+    response_plot = None
+    if args.response_out is not None:
+        from lfproc.bracket import RESPONSE_SUFFIXES
+
+        if args.response_out.suffix.lower() not in RESPONSE_SUFFIXES:
+            raise InputError(f"--response-out {args.response_out}: expected a file ending in "
+                             f"{' or '.join(RESPONSE_SUFFIXES)}, got {args.response_out.suffix or 'no suffix'}")
+        response_plot = args.response_out.with_suffix(".png")
+        check_output(args.response_out, force=args.force)
+        check_output(response_plot, force=args.force)
     if args.exposures_s and args.exposures_file is not None:
         raise InputError("--exposures-s and --exposures-file: expected one source of exposure times, got both")
     if args.iterations is not None and args.method == "debevec":
@@ -76,14 +89,40 @@ def run(args) -> int:
                                isos=isos, white_db=args.white_db,
                                n_iter=2 if args.iterations is None else args.iterations, random_state=args.seed,
                                option_names=_OPTION_NAMES, nonfinite=args.nonfinite, negative=args.negative)
-    outputs = [args.output] if args.mask is None else [args.output, args.mask]
-    with atomic_outputs(outputs, force=args.force) as staged:  # both outputs or neither
+    response_text = None
+    if args.response_out is not None:
+        from lfproc.bracket import format_response
+
+        if info.get("response") is None:
+            raise InputError(f"--response-out: no camera response was recovered: the inputs are linear data "
+                             f"({merged.attrs['input_mapping']}), not 8-bit images; drop it")
+        response_text = format_response(info["response"], suffix=args.response_out.suffix, metadata={
+            "method": info["method"],
+            "response_kind": info.get("response_kind"),
+            "normalisation": "g(128) = 0",
+            "exposures_s": merged.attrs["exposures_s"],
+            "sources": merged.attrs["sources"],
+            "merged": str(args.output),
+            "lfproc_version": merged.attrs["lfproc_version"],
+        }, where=f"--response-out {args.response_out}")
+    outputs = [args.output]
+    if args.mask is not None:
+        outputs.append(args.mask)
+    if response_text is not None:
+        outputs += [args.response_out, response_plot]
+    with atomic_outputs(outputs, force=args.force) as staged:  # every output or none
         write_lightfield(merged, staged[0])
         if args.mask is not None:
             mask = np.asarray(info["saturated_everywhere"], dtype=np.float32)
             if mask.ndim == 5:
                 mask = mask.max(axis=-1, keepdims=True)
             write_lightfield(LightField(data=mask, source=f"saturated-everywhere mask of {args.output}"), staged[1])
+        if response_text is not None:
+            from lfproc.bracket import plot_response
+
+            staged[-2].write_text(response_text, encoding="utf-8")
+            plot_response(staged[-1], info["response"], title=f"camera response recovered by lfproc merge "
+                                                                f"({info['method']})")
     v, u = merged.views
     h, w = merged.size
     result = {
@@ -102,5 +141,8 @@ def run(args) -> int:
     }
     if args.mask is not None:
         result["mask"] = str(args.mask)
+    if response_text is not None:
+        result["response"] = str(args.response_out)
+        result["response_plot"] = str(response_plot)
     emit(result, as_json=args.json)
     return 0

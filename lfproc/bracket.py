@@ -45,6 +45,10 @@ __all__ = [
     "CAMERA_RESPONSES",
     "camera_response",
     "simulate_ldr_bracket",
+    "RESPONSE_SUFFIXES",
+    "write_response",
+    "format_response",
+    "plot_response",
 ]
 
 LYTRO_SUFFIXES = (".lfr", ".lfp")
@@ -457,3 +461,113 @@ def simulate_ldr_bracket(
         "read_noise_e": float(read_noise_e),
         "jpeg_quality": None if jpeg_quality is None else int(jpeg_quality),
     }
+
+
+# -- the camera response a merge recovered ----------------------------------------------------------
+
+RESPONSE_SUFFIXES = (".csv", ".json")
+
+
+def write_response(
+    path: str | os.PathLike,
+    response,
+    *,
+    plot: str | os.PathLike | None = None,
+    metadata: dict[str, Any] | None = None,
+    force: bool = False,
+) -> list[Path]:
+    """Write a camera response ``g(z) = ln f^-1(z)`` (as :func:`lfproc.merge.recover_response` returns it).
+
+    The file holds, for each 8-bit code ``z`` and channel, the inverse response ``f^-1(z) = exp(g(z))``
+    (the relative exposure that reads ``z``; ``f^-1(128) = 1``), as OpenCV's ``CalibrateDebevec``
+    returns it, and ``g`` itself (colour-hdri's ``g_solve``):
+
+    * ``.csv``: a header ``code,R,G,B,ln_R,ln_G,ln_B`` (``Y``/``ln_Y`` for one channel, ``C0``...
+      for other counts) and 256 rows;
+    * ``.json``: ``{"kind": "camera_response", "codes": [0..255], "channels": [...],
+      "inverse_response": [[...] per channel], "log_inverse_response": [[...] per channel], ...}``
+      plus ``metadata`` (method, exposures, sources...).
+
+    ``plot`` (a ``.png`` path): ``g`` against the code, one curve per channel. All files are
+    written together (:func:`lfproc.io.atomic_outputs`): all or none; an existing one is
+    replaced only with ``force``.
+
+    Returns the written paths.
+    """
+    from .io import atomic_outputs
+
+    path = Path(path)
+    text = format_response(response, suffix=path.suffix, metadata=metadata, where=str(path))
+    outputs = [path] if plot is None else [path, Path(plot)]
+    with atomic_outputs(outputs, force=force) as staged:
+        staged[0].write_text(text, encoding="utf-8")
+        if plot is not None:
+            plot_response(staged[1], response, title=(metadata or {}).get("title"))
+    return outputs
+
+
+def _response_array(response) -> tuple[np.ndarray, list[str]]:
+    g = np.asarray(response, dtype=np.float64)
+    if g.ndim == 1:
+        g = g[:, None]
+    if g.ndim != 2 or g.shape[0] != 256 or not np.isfinite(g).all():
+        raise InputError(f"response: expected a finite array of shape (256,) or (256, C), got {g.shape}")
+    c = g.shape[1]
+    return g, {1: ["Y"], 3: ["R", "G", "B"]}.get(c, [f"C{k}" for k in range(c)])
+
+
+def format_response(response, *, suffix: str, metadata: dict[str, Any] | None = None, where: str = "response file") -> str:
+    """The text of a response file (``suffix`` ``.csv`` or ``.json``; see :func:`write_response`)."""
+    import csv as _csv
+    import io as _io
+    import json
+
+    from ._util import to_jsonable
+
+    if suffix.lower() not in RESPONSE_SUFFIXES:
+        raise InputError(f"{where}: expected a response file ending in {' or '.join(RESPONSE_SUFFIXES)}, "
+                         f"got {suffix or 'no suffix'}")
+    g, names = _response_array(response)
+    x = np.exp(g)
+    if suffix.lower() == ".csv":
+        buf = _io.StringIO()
+        writer = _csv.writer(buf, lineterminator="\n")
+        writer.writerow(["code", *names, *(f"ln_{n}" for n in names)])
+        for z in range(256):
+            writer.writerow([z, *(f"{v:.9g}" for v in x[z]), *(f"{v:.9g}" for v in g[z])])
+        return buf.getvalue()
+    doc = {
+        "kind": "camera_response",
+        "definition": "inverse_response[c][z] = f^-1(z): relative exposure reading 8-bit code z in channel c "
+                      "(f^-1(128) = 1); log_inverse_response = ln of it (Debevec & Malik's g)",
+        "codes": list(range(256)),
+        "channels": names,
+        "inverse_response": x.T.tolist(),
+        "log_inverse_response": g.T.tolist(),
+    }
+    doc.update(to_jsonable(metadata or {}))
+    return json.dumps(doc, indent=1) + "\n"
+
+
+def plot_response(path: str | os.PathLike, response, *, title: str | None = None) -> None:
+    """A PNG plot of ``g(z) = ln f^-1(z)`` against the code, one curve per channel."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+    g, names = _response_array(response)
+    colours = {"R": "tab:red", "G": "tab:green", "B": "tab:blue", "Y": "black"}
+    fig = Figure(figsize=(6.4, 4.4))
+    ax = fig.add_subplot()
+    codes = np.arange(256)
+    for k, name in enumerate(names):
+        ax.plot(codes, g[:, k], color=colours.get(name), label=name, linewidth=1.4)
+    ax.set_xlabel("8-bit code z")
+    ax.set_ylabel("ln exposure  g(z) = ln f$^{-1}$(z)   (g(128) = 0)")
+    ax.set_xlim(0, 255)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="lower right")
+    ax.set_title(title or "camera response recovered by lfproc merge")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)

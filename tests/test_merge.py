@@ -603,3 +603,69 @@ def test_cli_merge_refuses_options_without_effect(frobisher, tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and message in err, err
     assert not out.exists()
+
+
+# -- issue 20 item 8: merge --response-out ----------------------------------------------------------------------
+
+def test_cli_merge_response_out(frobisher, tmp_path, capsys):
+    """The camera response the merge recovered, as CSV or JSON with a PNG plot; the same curve the merged
+    EXR records, and the shape of OpenCV's CalibrateDebevec (its inverse response f^-1(z), per channel)."""
+    import csv
+
+    import cv2
+
+    paths, images = frobisher
+    out = tmp_path / "hdr.exr"
+    resp = tmp_path / "response.csv"
+    assert main(["merge", *map(str, paths), "-o", str(out), "--response-out", str(resp), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["response"] == str(resp) and doc["response_plot"] == str(tmp_path / "response.png")
+    with open(resp, newline="") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["code", "R", "G", "B", "ln_R", "ln_G", "ln_B"] and len(rows) == 257
+    table = np.array(rows[1:], dtype=float)
+    assert (table[:, 0] == np.arange(256)).all()
+    np.testing.assert_allclose(np.log(table[:, 1:4]), table[:, 4:7], rtol=1e-6, atol=1e-7)
+    assert (table[128, 1:4] == 1).all() and (np.diff(table[:, 4:7], axis=0) >= 0).all()
+    lf = read_lightfield(out)
+    np.testing.assert_allclose(table[:, 4:7], np.array(lf.attrs["response_g"]), atol=2e-6)
+    png = tmp_path / "response.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    ref = cv2.createCalibrateDebevec().process([np.ascontiguousarray(i[..., ::-1]) for i in images],
+                                               np.array([0.125, 1.0, 8.0], np.float32))[:, 0, ::-1]
+    for c in range(3):
+        assert np.corrcoef(np.log(ref[10:246, c]), table[10:246, 4 + c])[0, 1] > 0.97
+    # JSON, with the ML merge
+    js = tmp_path / "r.json"
+    assert main(["merge", *map(str, paths), "-o", str(out), "--force", "--method", "ml", "--response-out",
+                 str(js)]) == 0
+    capsys.readouterr()
+    rdoc = json.loads(js.read_text())
+    assert rdoc["kind"] == "camera_response" and rdoc["channels"] == ["R", "G", "B"] and rdoc["method"] == "ml"
+    assert np.array(rdoc["inverse_response"]).shape == (3, 256) and rdoc["exposures_s"] == [0.125, 1.0, 8.0]
+    assert (tmp_path / "r.png").exists()
+
+
+def test_cli_merge_response_out_errors(frobisher, tmp_path, capsys):
+    paths, _ = frobisher
+    out = tmp_path / "hdr.exr"
+    # a suffix that is neither .csv nor .json
+    assert main(["merge", *map(str, paths), "-o", str(out), "--response-out", str(tmp_path / "r.txt")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--response-out" in err and "expected a file ending in .csv or .json" in err
+    # the plot beside it exists: no overwrite without --force, nothing written
+    (tmp_path / "r.png").write_bytes(b"old")
+    assert main(["merge", *map(str, paths), "-o", str(out), "--response-out", str(tmp_path / "r.csv")]) == 2
+    assert "r.png: output exists" in capsys.readouterr().err
+    assert not out.exists() and not (tmp_path / "r.csv").exists() and (tmp_path / "r.png").read_bytes() == b"old"
+    # linear inputs: no response is recovered
+    truth, dn = _bracket(size=(16, 16), views=1, seed=2)
+    exrs = []
+    for i, t in enumerate(TIMES[:3]):
+        p = tmp_path / f"exp{i}.exr"
+        write_lightfield(LightField(data=dn[i].astype(np.float32), units="dn", exposure_s=t, iso=100), p)
+        exrs.append(str(p))
+    assert main(["merge", *exrs, "-o", str(out), "--profile", "illum", "--response-out", str(tmp_path / "l.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--response-out: no camera response was recovered" in err
+    assert not out.exists() and not (tmp_path / "l.csv").exists() and not (tmp_path / "l.png").exists()
