@@ -799,8 +799,9 @@ def merge_ml_codes8(
        the recovered response; it is never below the quantisation ``(dx/dz)^2 / 12``;
     4. the estimate is the inverse-variance mean ``E = sum_i w_i X_i / sum_i w_i`` with
        ``w_i = t_i^2 / V(t_i E)``: like :func:`merge_ml`, the variance is evaluated at the
-       current *estimate*, starting from ``E0``, with ``n_iter`` fixed-point updates, never at
-       the sample's own code. (Weights taken at the observed code, ``t_i^2 / V(z_i)``, favour the
+       current *estimate*, never at the sample's own code: starting from ``E0``, ``n_iter``
+       fixed-point updates (at least one; the result's error changes by under 5 % between
+       1 and 4 updates on the brackets of ``benchmarks/merge_8bit.py``). (Weights taken at the observed code, ``t_i^2 / V(z_i)``, favour the
        samples that noise pushed down, since ``V`` grows with ``x``: with a noisy sensor or
        film grain such a mean is biased low, by a factor 2 and more in the shadows of a
        16-exposure bracket, ``tests/test_merge.py``.) Its variance is ``1 / sum_i w_i``.
@@ -950,7 +951,7 @@ def merge_ml_codes8(
         none = den <= 0
         e = (num / np.where(none, 1, den)).astype(np.float64)
         wsum = np.zeros(e.shape)
-        for _ in range(int(n_iter) + 1):  # weights at the current estimate, never at the sample's own code
+        for _ in range(max(1, int(n_iter))):  # weights at the current estimate, never at the sample's own code
             num64 = np.zeros(e.shape)
             wsum = np.zeros(e.shape)
             with np.errstate(divide="ignore"):
