@@ -80,6 +80,8 @@ MERGE_METHODS = ("ml", "debevec")
 #: n_iter=2) moves samples by at most 0.03-0.12 sd, the first by up to 1.8 sd.
 ML_TOLERANCE_STD = 0.25
 _DEFAULT_CHUNK = 1 << 16
+#: merge_ml_codes8 measures its code variance on a regular subsample of at most this many pixels
+_V_MAX_PIXELS = 200_000
 
 
 # -- validation helpers -------------------------------------------------------------------
@@ -794,7 +796,8 @@ def merge_ml_codes8(
        measured on the bracket: for every sample of a pixel with at least two usable exposures,
        the squared leave-one-out residual ``(x_i - t_i E_-i)^2`` (``E_-i``: the hat-weighted mean
        of the pixel's other exposures), binned by the code that ``t_i E_-i`` predicts and averaged
-       per code and channel (smoothed over 9 codes). It holds whatever noise the camera's
+       per code and channel (smoothed over 9 codes; on at most 200 000 pixels, a regular
+       subsample of larger images). It holds whatever noise the camera's
        pipeline leaves (photon and read noise, quantisation, film grain, JPEG) and the error of
        the recovered response; it is never below the quantisation ``(dx/dz)^2 / 12``;
     4. the estimate is the inverse-variance mean ``E = sum_i w_i X_i / sum_i w_i`` with
@@ -862,18 +865,7 @@ def merge_ml_codes8(
         mids = (x64[lo_code:hi_code, c] + x64[lo_code + 1:hi_code + 1, c]) / 2
         code_grid[:, c] = lo_code + np.searchsorted(mids, xs_c)
 
-    def grid_index(x: np.ndarray) -> np.ndarray:
-        """(P, C) exposures -> (P, C) flat indices into a (n_grid, C) table."""
-        with np.errstate(divide="ignore"):
-            k = (np.log(x) - ln_lo) * grid_scale
-        k = np.clip(np.nan_to_num(k, nan=0.0, neginf=0.0), 0, n_grid - 1).astype(np.intp)
-        return k * channels + cidx
-
-    def predicted_code(x: np.ndarray) -> np.ndarray:
-        """(P, C) exposures -> (P, C) codes in lo_code..hi_code."""
-        return code_grid.ravel()[grid_index(x)]
-
-    def weighted(a: int, b: int):
+    def weighted(a: int, b: int, src=flat):
         """Hat-weighted pass (shortest first, clipping guard): sum w X, sum w, per-exposure weights and X."""
         c = b - a
         num = np.zeros((c, channels), np.float32)
@@ -881,7 +873,7 @@ def merge_ml_codes8(
         clipped = np.zeros((c, channels), bool)
         ws, xs = [], []
         for i in order:
-            zc = flat[i, a:b]
+            zc = src[i, a:b]
             clipped |= zc >= saturation_code
             w = _lut8(zc, hat)
             w[clipped] = 0
@@ -892,14 +884,21 @@ def merge_ml_codes8(
             den += w
         return num, den, ws, xs
 
-    bounds = [(a, min(a + chunk, total)) for a in range(0, total, chunk)]
+    # V is a (256, C) table: a regular subsample of at most _V_MAX_PIXELS pixels measures it
+    step = max(1, -(-total // _V_MAX_PIXELS))
+    sub = np.ascontiguousarray(flat[:, ::step]) if step > 1 else flat
+    bounds = [(a, min(a + chunk, sub.shape[1])) for a in range(0, sub.shape[1], chunk)]
+
+    ln_lo32 = np.asarray(ln_lo, np.float32).reshape(-1)
+    scale32 = np.broadcast_to(np.asarray(grid_scale, np.float32), (channels,)).copy()
 
     def pass1(ab):
         # leave-one-out squared residuals of every usable sample of a pixel with >= 2 usable samples,
         # binned by the code the other exposures predict
         a, b = ab
-        num, den, ws, xs = weighted(a, b)
+        num, den, ws, xs = weighted(a, b, sub)
         n_ok = sum((w > 0).astype(np.int8) for w in ws)
+        ch_index = np.broadcast_to(cidx, num.shape)
         cnt = np.zeros(256 * channels)
         tot = np.zeros(256 * channels)
         for k, i in enumerate(order):
@@ -908,12 +907,16 @@ def merge_ml_codes8(
             ok = (w > 0) & (rest > 0) & (n_ok >= 2)
             if not ok.any():
                 continue
-            e_rest = (num - w * xi) / np.where(ok, rest, 1)
-            pred = e_rest.astype(np.float64) * t[i]
-            r = xi.astype(np.float64) * t[i] - pred
-            key = (predicted_code(pred) * channels + cidx)[ok]
+            ti = np.float32(t[i])
+            pred = (num[ok] - w[ok] * xi[ok]) / rest[ok] * ti  # t_i E_-i of the usable samples, 1-D
+            r = xi[ok] * ti - pred
+            ch = ch_index[ok]
+            with np.errstate(divide="ignore"):
+                kg = (np.log(pred) - ln_lo32[ch]) * scale32[ch]
+            kg = np.clip(np.nan_to_num(kg, nan=0.0, neginf=0.0), 0, n_grid - 1).astype(np.intp)
+            key = code_grid[kg, ch] * channels + ch
             cnt += np.bincount(key, minlength=256 * channels)
-            tot += np.bincount(key, (r * r)[ok], minlength=256 * channels)
+            tot += np.bincount(key, (r.astype(np.float64)) ** 2, minlength=256 * channels)
         return cnt, tot
 
     if n_threads == 1 or len(bounds) == 1:
@@ -939,6 +942,13 @@ def merge_ml_codes8(
     fill = (x_lut[255] / t[first]).astype(np.float32)
     t2 = t**2
     inv_v_grid = (1.0 / V[code_grid, cidx]).ravel()  # 1 / V at the code each grid exposure predicts
+    # weight tables t_i^2 / V, scaled so the largest is 1: float32 when their range allows it (half the
+    # memory traffic), float64 otherwise; the variance takes the scale back
+    w_scale = float(t2.max() * inv_v_grid.max())
+    w_tables = [t2[i] * inv_v_grid / w_scale for i in range(n)]
+    w_dtype = np.float32 if min(float(wt.min()) for wt in w_tables) > 1e-30 else np.float64
+    w_tables = [wt.astype(w_dtype) for wt in w_tables]
+    ln_t_grid = [np.float32(np.log(t[i]) * grid_scale) for i in range(n)]
 
     radiance = np.empty((total, channels), np.float32)
     variance = np.empty((total, channels), np.float32)
@@ -949,21 +959,22 @@ def merge_ml_codes8(
         num, den, ws, xs = weighted(a, b)
         usable = [w > 0 for w in ws]
         none = den <= 0
-        e = (num / np.where(none, 1, den)).astype(np.float64)
-        wsum = np.zeros(e.shape)
+        e = (num / np.where(none, 1, den)).astype(w_dtype)
+        wsum = np.zeros(e.shape, w_dtype)
         for _ in range(max(1, int(n_iter))):  # weights at the current estimate, never at the sample's own code
-            num64 = np.zeros(e.shape)
-            wsum = np.zeros(e.shape)
+            acc = np.zeros(e.shape, w_dtype)
+            wsum = np.zeros(e.shape, w_dtype)
             with np.errstate(divide="ignore"):
-                k0 = (np.log(e) - ln_lo) * grid_scale
-            k0 = np.nan_to_num(k0, nan=-1e18, neginf=-1e18, posinf=1e18)
+                k0 = ((np.log(e) - ln_lo32) * scale32).astype(np.float32)
+            k0 = np.nan_to_num(k0, nan=-1e30, neginf=-1e30, posinf=1e30)
             for k, i in enumerate(order):
-                idx = np.clip(k0 + np.log(t[i]) * grid_scale, 0, n_grid - 1).astype(np.intp) * channels + cidx
-                w = np.where(usable[k], t2[i] * inv_v_grid[idx], 0.0)
-                num64 += w * xs[k]
+                idx = np.clip(k0 + ln_t_grid[i], 0, n_grid - 1).astype(np.intp) * channels + cidx
+                w = w_tables[i][idx]
+                w *= usable[k]
+                acc += w * xs[k]
                 wsum += w
-            e = num64 / np.where(none, 1, wsum)
-        var = 1.0 / np.where(none, 1, wsum)
+            e = np.where(wsum > 0, acc / np.where(wsum > 0, wsum, 1), e)
+        var = 1.0 / (np.where(none | (wsum <= 0), 1, wsum).astype(np.float64) * w_scale)
         sat = none & (flat[first, a:b] >= 128)
         dark = none & ~sat
         e = np.where(sat, fill[None, :], e)

@@ -486,10 +486,11 @@ def test_ml_8bit_frobisher_dark_deciles_agree_with_debevec_and_opencv(frobisher)
 def test_ml_8bit_noisy_16_exposure_bracket_is_not_biased_dark(shared_data):
     """A real HDR photograph through a noisy sensor (200 e- full well) into a Memorial-like bracket of 16
     8-bit frames, 1/32 s to 1024 s. The ML merge weighted each sample by the variance of its own code,
-    t^2 / V(z_i): samples that noise pushed down got the larger weights, so the result came out dark in the
-    shadows (0.61 of the Debevec merge in the darkest deciles, 0.93 of the truth there and 1.22 in the
-    brightest, log error 0.21 against Debevec's 0.20). With the variance taken at the estimate every decile
-    is within 10 % of the truth."""
+    t^2 / V(z_i): samples that noise pushed down got the larger weights. Measured before the fix: 0.61-0.96
+    of the Debevec merge per decile (darkest lowest), 0.95-1.22 of the truth after one gain, log error 0.21
+    (Debevec 0.20). With the variance taken at the estimate: 0.99-1.03 of the truth, log error 0.075. The
+    reference is the truth, not the Debevec merge: on so noisy a bracket Debevec's log-domain hat mean is
+    itself 0.88-1.30 of the truth (too bright in the shadows)."""
     from lfproc.bracket import simulate_ldr_bracket
     from lfproc.merge import merge_ml_codes8
     from lfproc.metrics import log_luminance_error
@@ -510,10 +511,10 @@ def test_ml_8bit_noisy_16_exposure_bracket_is_not_biased_dark(shared_data):
     y = y / np.median(y[well] / truth[well])
     ratios = _decile_ratios(y, truth, codes)
     assert all(r is not None for r in ratios[:9])
-    assert all(abs(r - 1) < 0.10 for r in ratios if r is not None), ratios  # measured 0.98-1.04
+    assert all(abs(r - 1) < 0.10 for r in ratios if r is not None), ratios  # measured 0.988-1.034
     err_ml = log_luminance_error(ml, hdr, mask=well)
     err_deb = log_luminance_error(deb, hdr, mask=well)
-    assert err_ml < 0.6 * err_deb, (err_ml, err_deb)  # measured 0.072 against 0.196
+    assert err_ml < 0.6 * err_deb, (err_ml, err_deb)  # measured 0.075 against 0.196
     assert np.isfinite(var).all() and (var > 0).all()
 
 
