@@ -516,7 +516,8 @@ def _response_array(response) -> tuple[np.ndarray, list[str]]:
     return g, {1: ["Y"], 3: ["R", "G", "B"]}.get(c, [f"C{k}" for k in range(c)])
 
 
-def format_response(response, *, suffix: str, metadata: dict[str, Any] | None = None, where: str = "response file") -> str:
+def format_response(response, *, suffix: str, metadata: dict[str, Any] | None = None,
+                    where: str = "response file") -> str:
     """The text of a response file (``suffix`` ``.csv`` or ``.json``; see :func:`write_response`)."""
     import csv as _csv
     import io as _io

@@ -556,7 +556,8 @@ def test_cli_merge_exposures_file_forms(tmp_path, capsys):
     forms = {
         "names.txt": "# name seconds\nshot2.png 1\nshot0.png 1/4\nshot1.png 0.5\n",
         "bare.txt": "0.25\n0.5\n1\n",
-        "memorial.hdr_image_list.txt": ("# Number of Images\n3\n# Filename  1/shutter_speed f/stop gain(db) ND_filters\n"
+        "memorial.hdr_image_list.txt": ("# Number of Images\n3\n"
+                                        "# Filename  1/shutter_speed f/stop gain(db) ND_filters\n"
                                         "shot0.ppm 4 8 0 0\nshot1.ppm 2 8 0 0\nshot2.ppm 1 8 0 0\n"),
         "hdrshop_no_count.txt": "shot0.png 4 8\nshot1.png 2 8\nshot2.png 1 8\n",
         "exposures.json": json.dumps({"shot0.png": "1/4", "shot1.png": 0.5, "shot2.png": 1}),
@@ -573,7 +574,8 @@ def test_cli_merge_exposures_file_forms(tmp_path, capsys):
     # errors: one line naming the file or option, exit 2, nothing written
     out.unlink()
     bad = {
-        "fstops.txt": ("shot0.png 4 8 0 0\nshot1.png 2 5.6 0 0\nshot2.png 1 8 0 0\n", "aperture, gain or ND filter differ"),
+        "fstops.txt": ("shot0.png 4 8 0 0\nshot1.png 2 5.6 0 0\nshot2.png 1 8 0 0\n",
+                       "aperture, gain or ND filter differ"),
         "count.txt": ("4\nshot0.png 4 8\nshot1.png 2 8\nshot2.png 1 8\n", "says 4 images, lists 3"),
         "missing.txt": ("shot0.png 1/4\nshot1.png 0.5\n", "no exposure time for shot2.png"),
         "zero.txt": ("shot0.png 0 8\nshot1.png 2 8\nshot2.png 1 8\n", "line 1 (1/shutter_speed): expected a positive"),
