@@ -21,7 +21,8 @@ def register(sub, common) -> None:
     p.add_argument("inputs", nargs="+", type=Path, metavar="INPUT", help="the bracket, one file per exposure")
     add_output(p, help="output light field (.exr)")
     p.add_argument("--method", choices=("ml", "debevec"), default=None, help="merging estimator")
-    p.add_argument("--profile", default=None, help="camera profile name or JSON file (ml; raw codes)")
+    p.add_argument("--profile", default=None, help="camera profile name or JSON file (raw or linear data; refused for 8-bit images, "
+                                                         "whose response and noise come from the bracket)")
     p.add_argument("--exposures-s", default=None, help="comma-separated exposure times in seconds, one per input "
                                                          "(overrides the metadata)")
     p.add_argument("--exposures-file", type=Path, default=None, metavar="LIST",
@@ -34,7 +35,7 @@ def register(sub, common) -> None:
     p.add_argument("--iterations", type=int, default=None,
                    help="ml: weight updates after the start (read-noise weights; 8-bit images: hat-weighted mean); "
                         "default 2")
-    p.add_argument("--seed", type=int, default=0, help="debevec: seed of the response-recovery pixel sampling")
+    p.add_argument("--seed", type=int, default=0, help="8-bit images: seed of the response-recovery pixel sampling")
     p.add_argument("--response-out", type=Path, default=None, metavar="FILE",
                    help="also write the camera response the merge recovered from 8-bit images, f^-1(z) and "
                         "g(z) = ln f^-1(z) per code and channel (FILE.csv or FILE.json), and its plot FILE.png")
