@@ -11,7 +11,8 @@ from typing import Any
 from lfproc._util import to_jsonable
 from lfproc.errors import InputError
 
-__all__ = ["to_jsonable", "emit", "add_output", "add_json", "parse_floats", "parse_ints", "parse_size"]
+__all__ = ["to_jsonable", "emit", "add_output", "add_json", "add_value_policies", "parse_floats", "parse_ints",
+           "parse_size"]
 
 
 def _fmt(value: Any) -> str:
@@ -42,6 +43,19 @@ def add_json(parser: argparse.ArgumentParser) -> None:
 def add_output(parser: argparse.ArgumentParser, *, required: bool = True, help: str = "output path") -> None:
     parser.add_argument("-o", "--output", required=required, type=Path, help=help)
     parser.add_argument("--force", action="store_true", help="overwrite an existing output")
+
+
+def add_value_policies(parser: argparse.ArgumentParser, *, negative: str = "clip", nonfinite: str = "raise",
+                       what: str = "input") -> None:
+    """``--nonfinite raise|zero|clip`` and ``--negative clip|raise``: what to do with NaN/Inf and negative
+    samples of the light fields a command reads (:func:`lfproc.lightfield.clean_nonfinite`)."""
+    samples = f"{what} samples".strip()
+    parser.add_argument("--nonfinite", choices=("raise", "zero", "clip"), default=nonfinite,
+                        help=f"NaN/Inf {samples}: refuse (raise), set to 0 (zero), or NaN and -Inf to 0 and +Inf "
+                             f"to the largest finite value (clip); default {nonfinite}")
+    parser.add_argument("--negative", choices=("clip", "raise"), default=negative,
+                        help=f"negative {samples} (lossy EXR compression leaves tiny ones): set to 0 (clip) or "
+                             f"refuse (raise); default {negative}")
 
 
 def parse_floats(text: str, *, option: str) -> list[float]:

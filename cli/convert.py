@@ -6,6 +6,8 @@ from pathlib import Path
 
 from lfproc.io import read_lightfield, write_lightfield
 
+from ._common import add_value_policies
+
 
 def register(sub, common) -> None:
     p = sub.add_parser(
@@ -28,8 +30,7 @@ def register(sub, common) -> None:
     p.add_argument("--dtype", choices=("float32", "half"), default="float32", help="EXR sample type")
     p.add_argument("--transfer", choices=("srgb", "linear"), default="srgb",
                    help="encoding of 8/16-bit outputs (and decoding of such inputs)")
-    p.add_argument("--nonfinite", choices=("raise", "zero", "clip"), default="raise",
-                   help="what to do with NaN/Inf input samples (default: refuse)")
+    add_value_policies(p)
     p.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
     p.set_defaults(run=run)
 
@@ -43,7 +44,7 @@ def run(args) -> int:
     from lfproc.tonemap import display_transform
 
     check_output(args.output, force=args.force)
-    lf = read_lightfield(args.input, nonfinite=args.nonfinite, transfer=args.transfer)
+    lf = read_lightfield(args.input, nonfinite=args.nonfinite, negative=args.negative, transfer=args.transfer)
     if args.exposure_ev != 0 or args.tonemap != "none":
         lf = display_transform(lf, exposure_ev=args.exposure_ev, tonemap=args.tonemap)
     with warnings.catch_warnings(record=True) as caught:

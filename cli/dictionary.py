@@ -5,7 +5,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from ._common import add_json, add_output, emit, parse_ints
+from ._common import add_json, add_value_policies, add_output, emit, parse_ints
 
 
 def register(sub, common) -> None:
@@ -37,6 +37,7 @@ def register(sub, common) -> None:
     t.add_argument("--checkpoint", type=Path, default=None, metavar="DIR",
                    help="checkpoint folder (default: OUTPUT.ckpt, removed when training ends)")
     t.add_argument("--scheduler", default=None, metavar="ADDRESS", help="Dask scheduler for the sparse coding")
+    add_value_policies(t, what="training light-field")
     add_json(t)
     t.set_defaults(run=run_train)
 
@@ -56,6 +57,7 @@ def register(sub, common) -> None:
     e.add_argument("--stride", type=int, default=None, help="patch grid step in pixels (default: half the patch)")
     e.add_argument("--no-dct", action="store_true", help="skip the DCT comparison")
     e.add_argument("--peak-luminance", type=float, default=1000.0, help="display peak for PU21 (cd/m2)")
+    add_value_policies(e)
     add_json(e)
     e.set_defaults(run=run_eval)
 
@@ -98,7 +100,7 @@ def run_train(args) -> int:
         raise InputError("no training data: give light fields (LF ...) and/or --synthetic")
     check_output(args.output, force=args.force)
     files = collect_lightfields(args.inputs)
-    lfs = [read_lightfield(f) for f in files]
+    lfs = [read_lightfield(f, nonfinite=args.nonfinite, negative=args.negative) for f in files]
     checkpoint = args.checkpoint or args.output.with_name(args.output.name + ".ckpt")
     start = time.perf_counter()
     d = train_dictionary(lfs, preset=args.preset, synthetic=args.synthetic, patch=patch, atoms=args.atoms,
@@ -146,7 +148,8 @@ def run_eval(args) -> int:
         raise InputError(f"--stride: expected 1..{d.patch_px} (the patch size), got {args.stride}")
     if not args.peak_luminance > 0:
         raise InputError(f"--peak-luminance: expected a positive number, got {args.peak_luminance}")
-    lfs = [read_lightfield(f) for f in collect_lightfields(args.inputs)]
+    lfs = [read_lightfield(f, nonfinite=args.nonfinite, negative=args.negative)
+           for f in collect_lightfields(args.inputs)]
     result = evaluate_dictionary(d, lfs, sparsity=args.sparsity, stride=args.stride, compare_dct=not args.no_dct,
                                  peak_luminance=args.peak_luminance)
     if not args.json:

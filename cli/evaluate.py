@@ -21,7 +21,7 @@ from lfproc.errors import FileFormatError, InputError, ShapeError
 from lfproc.io import read_lightfield
 from lfproc.metrics import evaluate
 
-from ._common import add_json, emit
+from ._common import add_json, add_value_policies, emit
 
 MASK_SUFFIXES = (".png", ".npy")
 
@@ -58,8 +58,7 @@ def register(sub, common) -> None:
                    help="bring RESULT to the reference's scale first: none (refuse different units or exposures; "
                         "default), exposure (multiply by the exposure ratio, e.g. a merge per second against a "
                         "decode), gain (one gain fitted on the data, reported)")
-    p.add_argument("--nonfinite", choices=("raise", "zero", "clip"), default="raise",
-                   help="what to do with NaN/Inf samples in the inputs (default: refuse)")
+    add_value_policies(p)
     p.add_argument("--mask", type=Path, default=None, metavar="FILE",
                    help="score only these samples: a PNG (white = scored; H x W, applied to every view) or a "
                         ".npy of booleans or 0/1, shape H x W or V x U x H x W")
@@ -176,8 +175,8 @@ def run(args) -> int:
         if value is not None and not (math.isfinite(value) and value >= 0):
             raise InputError(f"{option}: expected a finite luminance >= 0, got {value:g}")
     mask = None if args.mask is None else read_mask(args.mask)
-    result = read_lightfield(args.result, nonfinite=args.nonfinite)
-    reference = read_lightfield(args.reference, nonfinite=args.nonfinite)
+    result = read_lightfield(args.result, nonfinite=args.nonfinite, negative=args.negative)
+    reference = read_lightfield(args.reference, nonfinite=args.nonfinite, negative=args.negative)
     if mask is not None:
         _check_mask_shape(mask, args.mask, reference)
     if args.exclude_above is not None:

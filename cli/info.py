@@ -6,7 +6,7 @@ from pathlib import Path
 
 from lfproc.info import describe
 
-from ._common import add_json, emit
+from ._common import add_json, add_value_policies, emit
 
 
 def register(sub, common) -> None:
@@ -15,14 +15,13 @@ def register(sub, common) -> None:
                                    "a light field (EXR, folder of views), an image, a Lytro file, a coded capture "
                                    "(.capture.npz) or a camera profile (JSON).")
     p.add_argument("path", type=Path, help="light-field file or folder, image, Lytro file, capture or profile")
-    p.add_argument("--nonfinite", choices=("raise", "zero", "clip"), default="raise",
-                   help="what to do with NaN/Inf samples (default: refuse the file)")
+    add_value_policies(p, what="")
     add_json(p)
     p.set_defaults(run=run)
 
 
 def run(args) -> int:
-    doc = describe(args.path, nonfinite=args.nonfinite)
+    doc = describe(args.path, nonfinite=args.nonfinite, negative=args.negative)
     if doc.get("kind") == "camera_profile" and not args.json:
         from .profile import print_profile
 

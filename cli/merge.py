@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import add_json, add_output, emit, parse_floats
+from ._common import add_json, add_value_policies, add_output, emit, parse_floats
 
 
 def register(sub, common) -> None:
@@ -21,17 +21,34 @@ def register(sub, common) -> None:
     p.add_argument("inputs", nargs="+", type=Path, metavar="INPUT", help="the bracket, one file per exposure")
     add_output(p, help="output light field (.exr)")
     p.add_argument("--method", choices=("ml", "debevec"), default=None, help="merging estimator")
-    p.add_argument("--profile", default=None, help="camera profile name or JSON file (ml; raw codes)")
+    p.add_argument("--profile", default=None, help="camera profile name or JSON file (raw or linear data; refused for 8-bit images, "
+                                                         "whose response and noise come from the bracket)")
     p.add_argument("--exposures-s", default=None, help="comma-separated exposure times in seconds, one per input "
                                                          "(overrides the metadata)")
+    p.add_argument("--exposures-file", type=Path, default=None, metavar="LIST",
+                   help="exposure list file (overrides the metadata): 'NAME SECONDS' lines (seconds as 0.125 or "
+                        "1/8), 'SECONDS' lines in the inputs' order, JSON, or Debevec's HDRShop list "
+                        "('NAME 1/t F_STOP ...' lines, as memorial.hdr_image_list.txt: recognised by its 3-5 "
+                        "fields or a '1/shutter_speed' comment; the second field is 1/t)")
     p.add_argument("--isos", default=None, help="comma-separated ISO values (one, or one per input)")
     p.add_argument("--white-db", type=Path, default=None, help="white-image database for Lytro captures")
-    p.add_argument("--iterations", type=int, default=2, help="ml: weight updates after the read-noise start")
-    p.add_argument("--seed", type=int, default=0, help="debevec: seed of the response-recovery pixel sampling")
+    p.add_argument("--iterations", type=int, default=None,
+                   help="ml: weight updates after the start (read-noise weights; 8-bit images: hat-weighted mean); "
+                        "default 2")
+    p.add_argument("--seed", type=int, default=0, help="8-bit images: seed of the response-recovery pixel sampling")
+    p.add_argument("--response-out", type=Path, default=None, metavar="FILE",
+                   help="also write the camera response the merge recovered from 8-bit images, f^-1(z) and "
+                        "g(z) = ln f^-1(z) per code and channel (FILE.csv or FILE.json), and its plot FILE.png")
     p.add_argument("--mask", type=Path, default=None,
                    help="also write the saturated-everywhere mask as a 1-channel light field (.exr)")
+    add_value_policies(p, what="light-field (EXR) input")
     add_json(p)
     p.set_defaults(run=run)
+
+
+#: the CLI options of merge_files' parameters, for its messages
+_OPTION_NAMES = {"profile": "--profile", "exposures_s": "--exposures-s", "isos": "--isos", "white_db": "--white-db",
+                 "n_iter": "--iterations", "method": "--method"}
 
 
 def run(args) -> int:
@@ -47,18 +64,66 @@ def run(args) -> int:
     check_output(args.output, force=args.force)
     if args.mask is not None:
         check_output(args.mask, force=args.force)
+    response_plot = None
+    if args.response_out is not None:
+        from lfproc.bracket import RESPONSE_SUFFIXES
+
+        if args.response_out.suffix.lower() not in RESPONSE_SUFFIXES:
+            raise InputError(f"--response-out {args.response_out}: expected a file ending in "
+                             f"{' or '.join(RESPONSE_SUFFIXES)}, got {args.response_out.suffix or 'no suffix'}")
+        response_plot = args.response_out.with_suffix(".png")
+        check_output(args.response_out, force=args.force)
+        check_output(response_plot, force=args.force)
+    if args.exposures_s and args.exposures_file is not None:
+        raise InputError("--exposures-s and --exposures-file: expected one source of exposure times, got both")
+    if args.iterations is not None and args.method == "debevec":
+        raise InputError("--iterations: has no effect with --method debevec (ml weight updates); drop it")
+    if args.iterations is not None and args.iterations < 0:
+        raise InputError(f"--iterations: expected a non-negative integer, got {args.iterations}")
     exposures = parse_floats(args.exposures_s, option="--exposures-s") if args.exposures_s else None
+    if args.exposures_file is not None:
+        from lfproc.dataset import read_exposure_file
+
+        exposures = read_exposure_file(args.exposures_file, args.inputs, bare_order="inputs")
     isos = parse_floats(args.isos, option="--isos") if args.isos else None
     merged, info = merge_files(args.inputs, method=args.method, profile=args.profile, exposures_s=exposures,
-                               isos=isos, white_db=args.white_db, n_iter=args.iterations, random_state=args.seed)
-    outputs = [args.output] if args.mask is None else [args.output, args.mask]
-    with atomic_outputs(outputs, force=args.force) as staged:  # both outputs or neither
+                               isos=isos, white_db=args.white_db,
+                               n_iter=2 if args.iterations is None else args.iterations, random_state=args.seed,
+                               option_names=_OPTION_NAMES, nonfinite=args.nonfinite, negative=args.negative)
+    response_text = None
+    if args.response_out is not None:
+        from lfproc.bracket import format_response
+
+        if info.get("response") is None:
+            raise InputError(f"--response-out: no camera response was recovered: the inputs are linear data "
+                             f"({merged.attrs['input_mapping']}), not 8-bit images; drop it")
+        response_text = format_response(info["response"], suffix=args.response_out.suffix, metadata={
+            "method": info["method"],
+            "response_kind": info.get("response_kind"),
+            "normalisation": "g(128) = 0",
+            "exposures_s": merged.attrs["exposures_s"],
+            "sources": merged.attrs["sources"],
+            "merged": str(args.output),
+            "lfproc_version": merged.attrs["lfproc_version"],
+        }, where=f"--response-out {args.response_out}")
+    outputs = [args.output]
+    if args.mask is not None:
+        outputs.append(args.mask)
+    if response_text is not None:
+        outputs += [args.response_out, response_plot]
+    with atomic_outputs(outputs, force=args.force) as staged:  # every output or none
         write_lightfield(merged, staged[0])
         if args.mask is not None:
             mask = np.asarray(info["saturated_everywhere"], dtype=np.float32)
             if mask.ndim == 5:
                 mask = mask.max(axis=-1, keepdims=True)
             write_lightfield(LightField(data=mask, source=f"saturated-everywhere mask of {args.output}"), staged[1])
+        if response_text is not None:
+            from lfproc.bracket import plot_response
+
+            staged[-2].write_text(response_text, encoding="utf-8")
+            plot_response(staged[-1], info["response"], title=f"camera response recovered by lfproc merge "
+                                                                f"({info['method']})")
     v, u = merged.views
     h, w = merged.size
     result = {
@@ -77,5 +142,8 @@ def run(args) -> int:
     }
     if args.mask is not None:
         result["mask"] = str(args.mask)
+    if response_text is not None:
+        result["response"] = str(args.response_out)
+        result["response_plot"] = str(response_plot)
     emit(result, as_json=args.json)
     return 0

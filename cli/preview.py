@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import add_json, add_output, emit
+from ._common import add_json, add_value_policies, add_output, emit
 
 
 def register(sub, common) -> None:
@@ -34,8 +34,7 @@ def register(sub, common) -> None:
                    help="light field whose tone curve (log-average, white point) is used instead of the input's: "
                         "preview a result and its truth with the same REFERENCE to compare them at one exposure "
                         "(histograms share its range of stops)")
-    p.add_argument("--nonfinite", choices=("raise", "zero", "clip"), default="raise",
-                   help="what to do with NaN/Inf samples (default: refuse the file)")
+    add_value_policies(p)
     add_json(p)
     p.set_defaults(run=run)
 
@@ -69,10 +68,11 @@ def run(args) -> int:
         return 0
     if args.exposure_from is not None and not args.exposure_from.exists():
         raise InputError(f"--exposure-from {args.exposure_from}: no such file or folder")
-    lf = read_lightfield(args.input, nonfinite=args.nonfinite)
+    lf = read_lightfield(args.input, nonfinite=args.nonfinite, negative=args.negative)
     options = {"exposure_ev": args.exposure}
     if args.exposure_from is not None:
-        options["exposure_from"] = read_lightfield(args.exposure_from, nonfinite=args.nonfinite)
+        options["exposure_from"] = read_lightfield(args.exposure_from, nonfinite=args.nonfinite,
+                                                   negative=args.negative)
     kind = args.kind or "centre"
     path = write_preview(lf, args.output, kind=kind, force=args.force, **options)
     from PIL import Image

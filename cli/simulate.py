@@ -6,7 +6,7 @@ from pathlib import Path
 
 from lfproc.camera.iso import DEFAULT_BLOCK_PX
 
-from ._common import add_json, add_output, emit, parse_floats
+from ._common import add_json, add_value_policies, add_output, emit, parse_floats
 
 
 def register(sub, common) -> None:
@@ -42,6 +42,7 @@ def register(sub, common) -> None:
                    help="exposure at which the automatic radiance scale saturates the scene's brightest expected "
                         "signal (default 0.004); --exposure-s longer than this saturates more, as in a camera")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: drawn and recorded)")
+    add_value_policies(p, negative="raise", what="light-field")
     add_json(p)
     p.set_defaults(run=run)
 
@@ -73,6 +74,8 @@ def run(args) -> int:
         radiance_scale=args.radiance_scale,
         reference_exposure_s=args.reference_exposure_s,
         random_state=args.seed,
+        nonfinite=args.nonfinite,
+        negative=args.negative,
     )
     emit(summary, as_json=args.json)
     return 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from ._common import add_json, add_output, emit, parse_floats
+from ._common import add_json, add_value_policies, add_output, emit, parse_floats
 
 
 def register(sub, common) -> None:
@@ -25,6 +25,7 @@ def register(sub, common) -> None:
     p.add_argument("--seed", type=int, default=0, help="fixes the camera (serial, grid, hot pixels) and the noise")
     p.add_argument("--exposure-s", type=float, default=0.01, help="exposure time of the 0 EV capture (s)")
     p.add_argument("--iso", type=float, default=100, help="ISO of the captures (a value of the illum profile)")
+    add_value_policies(p)
     add_json(p)
     p.set_defaults(run=run)
 
@@ -35,7 +36,7 @@ def run(args) -> int:
 
     evs = parse_floats(args.exposures_ev, option="--exposures-ev")
     check_output(args.output, force=args.force)
-    lf = read_lightfield(args.lightfield)
+    lf = read_lightfield(args.lightfield, nonfinite=args.nonfinite, negative=args.negative)
     info = make_virtual_illum(lf, args.output, sensor=args.sensor, exposures_ev=evs, seed=args.seed,
                               base_exposure_s=args.exposure_s, iso=args.iso, force=args.force)
     emit({"output": str(args.output), "serial": info["serial"], "sensor_size": info["sensor_size"],

@@ -45,6 +45,10 @@ __all__ = [
     "CAMERA_RESPONSES",
     "camera_response",
     "simulate_ldr_bracket",
+    "RESPONSE_SUFFIXES",
+    "write_response",
+    "format_response",
+    "plot_response",
 ]
 
 LYTRO_SUFFIXES = (".lfr", ".lfp")
@@ -184,6 +188,8 @@ def read_bracket(
     isos: Sequence[float] | float | None = None,
     white_db: str | os.PathLike | None = None,
     profile=None,
+    nonfinite: str = "raise",
+    negative: str = "clip",
 ) -> list[LightField]:
     """Read a bracket of inputs (see the module table) as light fields with exposure metadata.
 
@@ -198,6 +204,9 @@ def read_bracket(
         White-image database for Lytro captures (the same white image is used for all).
     profile : camera profile, optional
         Passed to the Lytro decoder.
+    nonfinite, negative : str
+        Value policies of light-field inputs (EXR files, folders of views), as
+        :func:`lfproc.io.read_lightfield`.
 
     Returns
     -------
@@ -226,7 +235,7 @@ def read_bracket(
             raise MissingFileError(f"{p}: no such file or folder")
         suffix = p.suffix.lower()
         if p.is_dir() or suffix == ".exr":
-            lf = read_lightfield(p)
+            lf = read_lightfield(p, nonfinite=nonfinite, negative=negative)
         elif suffix in LYTRO_SUFFIXES:
             lf = _read_lytro(p, white_db=white_db)
         elif suffix in RAW_SUFFIXES:
@@ -264,12 +273,21 @@ def merge_files(
     n_iter: int = 2,
     random_state=0,
     n_threads: int | None = None,
+    option_names: dict[str, str] | None = None,
+    nonfinite: str = "raise",
+    negative: str = "clip",
 ) -> tuple[LightField, dict[str, Any]]:
     """Read a bracket of files and merge it (:func:`read_bracket` then :func:`lfproc.merge.merge_lightfields`).
 
     ``method=None`` chooses: ``debevec`` for 8-bit camera images (non-linear) or when no camera
     profile is known (unless the inputs carry their own variances, as decoded captures do),
     ``ml`` otherwise. Lytro captures default to the ``illum`` profile.
+
+    A parameter that would have no effect is refused (:class:`InputError`) rather than silently
+    ignored: ``profile`` with 8-bit images (their response is recovered from the bracket, both
+    methods) and ``white_db`` without a Lytro capture. ``option_names`` maps parameter names to
+    the names used in messages (the CLI passes its options, e.g. ``{"profile": "--profile"}``).
+    ``nonfinite`` and ``negative`` are the value policies of light-field inputs (:func:`read_bracket`).
 
     Returns the merged light field (``attrs["sources"]`` are the file paths) and the merge
     information (see :func:`lfproc.merge.merge_lightfields`), plus ``method``.
@@ -279,11 +297,23 @@ def merge_files(
 
     if method is not None:
         check_choice("method", method, MERGE_METHODS)
+    names = option_names or {}
     paths = [Path(p) for p in paths]
     lytro = any(p.suffix.lower() in LYTRO_SUFFIXES for p in paths)
+    if white_db is not None and not lytro:
+        raise InputError(f"{names.get('white_db', 'white_db')}: has no effect without a Lytro capture (.lfr, .lfp) "
+                         "among the inputs; drop it")
+    profile_given = profile is not None
     if profile is None and lytro:
         profile = "illum"
-    lfs = read_bracket(paths, exposures_s=exposures_s, isos=isos, white_db=white_db, profile=profile)
+    lfs = read_bracket(paths, exposures_s=exposures_s, isos=isos, white_db=white_db, profile=profile,
+                       nonfinite=nonfinite, negative=negative)
+    if profile_given:
+        eight = next((p for p, lf in zip(paths, lfs) if lf.attrs.get("codes_bits") == 8), None)
+        if eight is not None:
+            raise InputError(f"{names.get('profile', 'profile')}: has no effect on 8-bit images such as {eight} "
+                             "(their camera response is recovered from the bracket and the ml weights from its "
+                             "noise); drop it")
     if method is None:
         codes8 = any(lf.attrs.get("codes_bits") == 8 for lf in lfs)
         with_variance = all(lf.variance is not None and lf.units != "dn" for lf in lfs)
@@ -431,3 +461,114 @@ def simulate_ldr_bracket(
         "read_noise_e": float(read_noise_e),
         "jpeg_quality": None if jpeg_quality is None else int(jpeg_quality),
     }
+
+
+# -- the camera response a merge recovered ----------------------------------------------------------
+
+RESPONSE_SUFFIXES = (".csv", ".json")
+
+
+def write_response(
+    path: str | os.PathLike,
+    response,
+    *,
+    plot: str | os.PathLike | None = None,
+    metadata: dict[str, Any] | None = None,
+    force: bool = False,
+) -> list[Path]:
+    """Write a camera response ``g(z) = ln f^-1(z)`` (as :func:`lfproc.merge.recover_response` returns it).
+
+    The file holds, for each 8-bit code ``z`` and channel, the inverse response ``f^-1(z) = exp(g(z))``
+    (the relative exposure that reads ``z``; ``f^-1(128) = 1``), as OpenCV's ``CalibrateDebevec``
+    returns it, and ``g`` itself (colour-hdri's ``g_solve``):
+
+    * ``.csv``: a header ``code,R,G,B,ln_R,ln_G,ln_B`` (``Y``/``ln_Y`` for one channel, ``C0``...
+      for other counts) and 256 rows;
+    * ``.json``: ``{"kind": "camera_response", "codes": [0..255], "channels": [...],
+      "inverse_response": [[...] per channel], "log_inverse_response": [[...] per channel], ...}``
+      plus ``metadata`` (method, exposures, sources...).
+
+    ``plot`` (a ``.png`` path): ``g`` against the code, one curve per channel. All files are
+    written together (:func:`lfproc.io.atomic_outputs`): all or none; an existing one is
+    replaced only with ``force``.
+
+    Returns the written paths.
+    """
+    from .io import atomic_outputs
+
+    path = Path(path)
+    text = format_response(response, suffix=path.suffix, metadata=metadata, where=str(path))
+    outputs = [path] if plot is None else [path, Path(plot)]
+    with atomic_outputs(outputs, force=force) as staged:
+        staged[0].write_text(text, encoding="utf-8")
+        if plot is not None:
+            plot_response(staged[1], response, title=(metadata or {}).get("title"))
+    return outputs
+
+
+def _response_array(response) -> tuple[np.ndarray, list[str]]:
+    g = np.asarray(response, dtype=np.float64)
+    if g.ndim == 1:
+        g = g[:, None]
+    if g.ndim != 2 or g.shape[0] != 256 or not np.isfinite(g).all():
+        raise InputError(f"response: expected a finite array of shape (256,) or (256, C), got {g.shape}")
+    c = g.shape[1]
+    return g, {1: ["Y"], 3: ["R", "G", "B"]}.get(c, [f"C{k}" for k in range(c)])
+
+
+def format_response(response, *, suffix: str, metadata: dict[str, Any] | None = None,
+                    where: str = "response file") -> str:
+    """The text of a response file (``suffix`` ``.csv`` or ``.json``; see :func:`write_response`)."""
+    import csv as _csv
+    import io as _io
+    import json
+
+    from ._util import to_jsonable
+
+    if suffix.lower() not in RESPONSE_SUFFIXES:
+        raise InputError(f"{where}: expected a response file ending in {' or '.join(RESPONSE_SUFFIXES)}, "
+                         f"got {suffix or 'no suffix'}")
+    g, names = _response_array(response)
+    x = np.exp(g)
+    if suffix.lower() == ".csv":
+        buf = _io.StringIO()
+        writer = _csv.writer(buf, lineterminator="\n")
+        writer.writerow(["code", *names, *(f"ln_{n}" for n in names)])
+        for z in range(256):
+            writer.writerow([z, *(f"{v:.9g}" for v in x[z]), *(f"{v:.9g}" for v in g[z])])
+        return buf.getvalue()
+    doc = {
+        "kind": "camera_response",
+        "definition": "inverse_response[c][z] = f^-1(z): relative exposure reading 8-bit code z in channel c "
+                      "(f^-1(128) = 1); log_inverse_response = ln of it (Debevec & Malik's g)",
+        "codes": list(range(256)),
+        "channels": names,
+        "inverse_response": x.T.tolist(),
+        "log_inverse_response": g.T.tolist(),
+    }
+    doc.update(to_jsonable(metadata or {}))
+    return json.dumps(doc, indent=1) + "\n"
+
+
+def plot_response(path: str | os.PathLike, response, *, title: str | None = None) -> None:
+    """A PNG plot of ``g(z) = ln f^-1(z)`` against the code, one curve per channel."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+    g, names = _response_array(response)
+    colours = {"R": "tab:red", "G": "tab:green", "B": "tab:blue", "Y": "black"}
+    fig = Figure(figsize=(6.4, 4.4))
+    ax = fig.add_subplot()
+    codes = np.arange(256)
+    for k, name in enumerate(names):
+        ax.plot(codes, g[:, k], color=colours.get(name), label=name, linewidth=1.4)
+    ax.set_xlabel("8-bit code z")
+    ax.set_ylabel("ln exposure  g(z) = ln f$^{-1}$(z)   (g(128) = 0)")
+    ax.set_xlim(0, 255)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="lower right")
+    ax.set_title(title or "camera response recovered by lfproc merge")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)

@@ -13,7 +13,8 @@ which then gives them for every input of the bracket:
 
 * ``exposures.txt``: one line per input, ``NAME SECONDS`` (``img_1.jpg 1/8``; seconds as a
   number or a fraction), or only ``SECONDS`` lines in the order of the inputs' sorted names;
-  ``#`` starts a comment;
+  ``#`` starts a comment; or Debevec's HDRShop image list (``NAME 1/t F_STOP ...`` lines, as
+  ``memorial.hdr_image_list.txt``; see :func:`read_exposure_file`);
 * ``exposures.json``: ``{"NAME": SECONDS, ...}`` or a list of seconds in that order.
 
 Layout of ``DATASET_DIR`` (every file written atomically)::
@@ -117,18 +118,68 @@ def _seconds(text: str, where: str) -> float:
     return value
 
 
-def read_exposure_file(path: str | os.PathLike, inputs) -> list[float]:
-    """Exposure times (s) of ``inputs`` (paths, in bracket order) from an exposure file (see the
-    module documentation); errors name the file and line and what is missing or extra."""
+def _match_names(path: Path, by_name: dict[str, float], names: list[str]) -> list[float]:
+    """The times of ``names`` from ``by_name``: by file name, else by name without its suffix (a list
+    written for ``.ppm`` or ``.hdr`` files of images since converted to ``.png``) when that is unique."""
+    stems: dict[str, list[str]] = {}
+    for key in by_name:
+        stems.setdefault(Path(key).stem, []).append(key)
+    used: set[str] = set()
+    out: list[float | None] = []
+    for name in names:
+        key = name if name in by_name else None
+        if key is None and len(stems.get(Path(name).stem, [])) == 1:
+            key = stems[Path(name).stem][0]
+        out.append(None if key is None else by_name[key])
+        if key is not None:
+            used.add(key)
+    missing = [n for n, v in zip(names, out) if v is None]
+    extra = sorted(set(by_name) - used)
+    if missing or extra:
+        raise InputError(f"{path}: " + "; ".join(
+            ([f"no exposure time for {', '.join(missing)}"] if missing else [])
+            + ([f"names not in the bracket: {', '.join(extra)}"] if extra else [])))
+    return [float(v) for v in out]  # type: ignore[arg-type]
+
+
+def read_exposure_file(path: str | os.PathLike, inputs, *, bare_order: str = "sorted") -> list[float]:
+    """Exposure times (s) of ``inputs`` (paths, in bracket order) from an exposure file.
+
+    Forms (``#`` starts a comment):
+
+    * ``NAME SECONDS`` lines (``img_1.jpg 1/8``; seconds as a number or a fraction);
+    * ``SECONDS`` lines only, in the order of the inputs' sorted names (``bare_order="sorted"``,
+      ``lfproc dataset build``) or in the inputs' order (``bare_order="inputs"``, ``lfproc merge``);
+    * Debevec's HDRShop image list (``memorial.hdr_image_list.txt`` of the Memorial bracket): an
+      optional first line holding the number of images, then ``NAME 1/SHUTTER_SPEED F_STOP
+      [GAIN_DB [ND_FILTERS]]`` lines. Recognised by its lines of 3 to 5 fields, or by a comment
+      naming ``1/shutter_speed`` (then 2-field lines are ``NAME 1/t`` too). The second field is
+      the *inverse* exposure time: ``memorial0061.png 0.03125 8 0 0`` is 32 s. The aperture,
+      gain and ND filter must be the same on every line (lfproc merges exposure times only);
+      the image count must match the lines;
+    * JSON (``.json``): ``{"NAME": SECONDS, ...}`` or a list of seconds.
+
+    Names are matched to the inputs' file names, or to the file names without their suffix when
+    that is unique (the Memorial list names ``.ppm`` files, usually shipped as ``.png``). Errors
+    name the file and line and what is missing or extra.
+    """
     path = Path(path)
+    if bare_order not in ("sorted", "inputs"):
+        raise InputError(f"bare_order: expected 'sorted' or 'inputs', got {bare_order!r}")
     names = [Path(p).name for p in inputs]
-    order = sorted(range(len(names)), key=lambda i: names[i])
+    order = sorted(range(len(names)), key=lambda i: names[i]) if bare_order == "sorted" else list(range(len(names)))
     by_name: dict[str, float] = {}
     in_order: list[float] = []
+    if not path.is_file():
+        raise MissingFileError(f"{path}: no such exposure file")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: expected a text (UTF-8) exposure file, found binary data") from None
     if path.suffix.lower() == ".json":
         try:
-            doc = json.loads(path.read_text(encoding="utf-8"))
-        except (UnicodeDecodeError, ValueError) as exc:
+            doc = json.loads(text)
+        except ValueError as exc:
             raise InputError(f"{path}: not a JSON exposure file ({exc})") from None
         if isinstance(doc, dict):
             by_name = {str(k): _seconds(str(v), f"{path}: {k}") for k, v in doc.items()}
@@ -137,35 +188,62 @@ def read_exposure_file(path: str | os.PathLike, inputs) -> list[float]:
         else:
             raise InputError(f"{path}: expected an object {{\"NAME\": seconds}} or a list of seconds")
     else:
-        for number, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
-            line = raw.split("#", 1)[0].strip()
-            if not line:
-                continue
-            parts = line.split()
-            where = f"{path} line {number}"
-            if len(parts) == 1:
-                in_order.append(_seconds(parts[0], where))
-            elif len(parts) == 2:
-                by_name[parts[0]] = _seconds(parts[1], where)
-            else:
-                raise InputError(f"{where}: expected 'NAME SECONDS' or 'SECONDS', found {raw.strip()!r}")
-        if by_name and in_order:
-            raise InputError(f"{path}: mixes 'NAME SECONDS' and 'SECONDS' lines; use one form")
+        rows = []
+        hdrshop = False
+        for number, raw in enumerate(text.splitlines(), start=1):
+            line, _, comment = raw.partition("#")
+            if "1/shutter" in comment.lower().replace(" ", ""):
+                hdrshop = True
+            if line.strip():
+                rows.append((number, raw.strip(), line.split()))
+        if any(len(parts) > 5 for _, _, parts in rows):
+            number, raw, _ = next(r for r in rows if len(r[2]) > 5)
+            raise InputError(f"{path} line {number}: expected 'NAME SECONDS', 'SECONDS' or an HDRShop line "
+                             f"'NAME 1/t F_STOP [GAIN_DB [ND]]', found {raw!r}")
+        hdrshop = hdrshop or any(len(parts) >= 3 for _, _, parts in rows)
+        if hdrshop:
+            count = None
+            if rows and len(rows[0][2]) == 1:  # the number of images
+                number, raw, parts = rows.pop(0)
+                try:
+                    count = int(parts[0])
+                except ValueError:
+                    raise InputError(f"{path} line {number}: expected the number of images of an HDRShop list, "
+                                     f"found {raw!r}") from None
+            extras = {}
+            for number, raw, parts in rows:
+                where = f"{path} line {number}"
+                if len(parts) < 2:
+                    raise InputError(f"{where}: expected 'NAME 1/t F_STOP ...' (an HDRShop image list), found {raw!r}")
+                inverse = _seconds(parts[1], f"{where} (1/shutter_speed)")
+                by_name[parts[0]] = 1.0 / inverse
+                extras.setdefault(tuple(parts[2:]), number)
+            if len(extras) > 1:
+                (a, la), (b, lb) = list(extras.items())[:2]
+                raise InputError(f"{path}: aperture, gain or ND filter differ between lines {la} ({' '.join(a)}) and "
+                                 f"{lb} ({' '.join(b)}); lfproc merges by exposure time only: give times that "
+                                 "include them (NAME SECONDS lines)")
+            if count is not None and count != len(rows):
+                raise InputError(f"{path}: the HDRShop list says {count} images, lists {len(rows)}")
+        else:
+            for number, raw, parts in rows:
+                where = f"{path} line {number}"
+                if len(parts) == 1:
+                    in_order.append(_seconds(parts[0], where))
+                else:
+                    by_name[parts[0]] = _seconds(parts[1], where)
+            if by_name and in_order:
+                raise InputError(f"{path}: mixes 'NAME SECONDS' and 'SECONDS' lines; use one form")
     if by_name:
-        missing = [n for n in names if n not in by_name]
-        extra = sorted(set(by_name) - set(names))
-        if missing or extra:
-            raise InputError(f"{path}: " + "; ".join(
-                ([f"no exposure time for {', '.join(missing)}"] if missing else [])
-                + ([f"names not in the bracket: {', '.join(extra)}"] if extra else [])))
-        return [by_name[n] for n in names]
+        return _match_names(path, by_name, names)
     if len(in_order) != len(names):
         raise InputError(f"{path}: {len(in_order)} exposure time(s) for {len(names)} inputs "
-                         f"({', '.join(sorted(names))})")
+                         f"({', '.join(names[i] for i in order)})")
     out = [0.0] * len(names)
     for rank, i in enumerate(order):
         out[i] = in_order[rank]
     return out
+
 
 
 def _check_exposures(scene: Scene) -> None:

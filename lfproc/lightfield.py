@@ -96,7 +96,7 @@ def clean_nonfinite(
     if n_neg and negative == "raise":
         raise InputError(
             f"{name}: contains {n_neg} negative values (min {float(out.min()):.4g}); expected non-negative "
-            "radiance (use negative='clip')"
+            "radiance (use negative='clip', or --negative clip on the command line)"
         )
     if n_neg and negative == "clip":
         out = np.where(neg, 0, out).astype(array.dtype, copy=False)

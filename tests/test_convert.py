@@ -106,3 +106,26 @@ def test_single_image_outputs(scene, tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "a single image holds one view, this light field has 3x3" in err
     assert not (tmp_path / "all.hdr").exists()
+
+
+def test_negative_and_nonfinite_options(tmp_path, capsys):
+    """--negative clip|raise (issue 20): clip by default as before, refused with --negative raise."""
+    from lfproc.io import write_image
+
+    img = np.full((8, 8, 3), 0.5, np.float32)
+    img[1, 2, 0] = -0.01
+    src = tmp_path / "neg.exr"
+    write_image(src, img)
+    out = tmp_path / "o.exr"
+    assert main(["convert", str(src), str(out), "--negative", "raise"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{src}: contains 1 negative values" in err
+    assert not out.exists()
+    assert main(["convert", str(src), str(out)]) == 0
+    assert read_lightfield(out).data.min() == 0
+    img[3, 3, 2] = np.inf
+    write_image(src, img, force=True)
+    assert main(["convert", str(src), str(out), "--force"]) == 2
+    assert "1 Inf" in capsys.readouterr().err
+    assert main(["convert", str(src), str(out), "--force", "--nonfinite", "clip"]) == 0
+    assert read_lightfield(out).data.max() == pytest.approx(0.5)

@@ -328,3 +328,46 @@ def test_cli_refuses_bad_light_fields_and_existing_outputs(tmp_path, capsys, lf_
     assert main(["simulate", str(lf_file), "-o", str(out)]) == 2
     assert "output exists" in capsys.readouterr().err
     assert main(["simulate", str(lf_file), "-o", str(out), "--force"]) == 0
+
+
+# -- issue 20 item 3: --negative and --nonfinite on the command line --------------------------------------------
+
+def test_cli_simulate_negative_clip_real_hdr_photograph(shared_data, tmp_path, capsys):
+    """ScanLines_Desk.exr holds 10,794 tiny negatives (lossy compression): refused by default with advice
+    naming the option, simulated with --negative clip (the advice named an option no command had)."""
+    path = shared_data / "hdr" / "ScanLines_Desk.exr"
+    if not path.exists():
+        pytest.skip(f"{path} not found")
+    out = tmp_path / "desk.capture.npz"
+    assert main(["simulate", str(path), "-o", str(out), "--seed", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "10794 negative values" in err and "--negative clip" in err, err
+    assert not out.exists()
+    assert main(["simulate", str(path), "-o", str(out), "--seed", "1", "--negative", "clip", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["size"] == [874, 644] and out.exists()
+
+
+def test_cli_simulate_nonfinite_policies(tmp_path, capsys):
+    img = np.full((16, 16, 3), 0.5, np.float32)
+    img[2, 3, 1] = np.nan
+    img[4, 5, 0] = -0.25
+    src = tmp_path / "bad.exr"
+    write_image(src, img)
+    out = tmp_path / "c.capture.npz"
+    assert main(["simulate", str(src), "-o", str(out), "--negative", "clip"]) == 2
+    assert "1 NaN" in capsys.readouterr().err
+    assert main(["simulate", str(src), "-o", str(out), "--nonfinite", "zero"]) == 2
+    assert "1 negative values" in capsys.readouterr().err
+    assert not out.exists()
+    assert main(["simulate", str(src), "-o", str(out), "--nonfinite", "zero", "--negative", "clip", "--json"]) == 0
+    capsys.readouterr()
+    assert out.exists()
+
+
+@pytest.mark.parametrize("command", [["simulate"], ["convert"], ["evaluate"], ["preview"], ["info"], ["merge"],
+                                     ["virtual-illum"], ["dictionary", "train"], ["dictionary", "eval"]])
+def test_every_command_reading_light_fields_has_the_value_policies(command, capsys):
+    assert main([*command, "--help"]) == 0
+    text = capsys.readouterr().out
+    assert "--negative {clip,raise}" in text and "--nonfinite {raise,zero,clip}" in text, command

@@ -369,12 +369,16 @@ def simulate_file(
     output_path: str | os.PathLike,
     *,
     force: bool = False,
+    nonfinite: str = "raise",
+    negative: str = "raise",
     **options,
 ) -> tuple[Capture, dict[str, Any]]:
     """Read a light field, simulate a capture (:func:`simulate_capture` ``options``), write it.
 
-    NaN/Inf or negative radiance in the input is refused. The capture records the input's
-    path and SHA-256 as its ground truth.
+    NaN/Inf or negative radiance in the input is refused unless ``nonfinite`` (``"zero"``,
+    ``"clip"``) or ``negative`` (``"clip"``: set to 0, as for the tiny negatives of lossy EXR
+    compression) say otherwise (:func:`lfproc.lightfield.clean_nonfinite`). The capture records
+    the input's path and SHA-256 as its ground truth.
 
     Returns
     -------
@@ -384,7 +388,7 @@ def simulate_file(
     from ..io import check_output, read_lightfield
 
     check_output(output_path, force=force)
-    lf = read_lightfield(input_path, nonfinite="raise", negative="raise")
+    lf = read_lightfield(input_path, nonfinite=nonfinite, negative=negative)
     truth = {"path": str(Path(input_path).resolve()), "sha256": file_sha256(input_path)}
     capture = simulate_capture(lf, ground_truth=truth, **options)
     capture.save(output_path, force=force)
