@@ -255,3 +255,20 @@ def test_observation_checks_its_arrays():
         Observation(a, a, np.ones(3), m, m)
     with pytest.raises(InputError, match="observation saturated: expected a boolean mask"):
         Observation(a, a, a, a, m)
+
+
+# -- issue 20, item 6: messages name the argument in Python and the option in the CLI ------------
+
+def test_output_exists_message_names_force_for_the_interface_in_use(tmp_path, capsys):
+    from lfproc.cli.main import main
+    from lfproc.errors import OutputExistsError
+    from lfproc.io import write_lightfield
+
+    lf = LightField(_lf())
+    path = write_lightfield(lf, tmp_path / "lf.exr")
+    with pytest.raises(OutputExistsError) as info:
+        write_lightfield(lf, path)
+    assert "pass force=True to overwrite" in str(info.value) and "--force" not in str(info.value)
+    assert main(["convert", str(path), str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "pass --force to overwrite" in err and "force=True" not in err
