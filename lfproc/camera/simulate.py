@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -54,7 +55,7 @@ from .._version import __version__
 from .iso import DEFAULT_BLOCK_PX, DEFAULT_ISOS, ISO_PATTERNS, _num, describe_iso_pattern, iso_pattern
 from .capture import MAX_SHOTS, Capture, _warn_saturation, file_sha256, observations
 from ..calib import load_profile
-from ..errors import InputError, ShapeError
+from ..errors import InputError, ShapeError, ViewCountWarning, option_name
 from ..lightfield import LightField, clean_nonfinite
 from .projection import MASK_KINDS, build_operator, make_mask
 from .sensor import expose
@@ -142,6 +143,19 @@ def _check_memory(shots: int, nv: int, nu: int, h: int, w: int) -> None:
                     f"{h} x {w} pixels: the projection operator", error=InputError)
 
 
+def _check_dictionary_views(dictionary, views: tuple[int, int]) -> None:
+    """Warn when ``dictionary``'s patch has other views than the light field (reconstruct would refuse)."""
+    from ..dictionary import SHIPPED, dictionary_patch
+
+    name, patch = dictionary_patch(dictionary)
+    if tuple(patch[:2]) != tuple(views):
+        label = f"the shipped dictionary {name!r}" if name in SHIPPED else f"dictionary {name!r}"
+        warnings.warn(ViewCountWarning(
+            f"the light field has {views[0]} x {views[1]} views; {label} has {patch[0]} x {patch[1]} views, so "
+            f"reconstruct will refuse this capture with it (train a dictionary for {views[0]} x {views[1]} views: "
+            f"{option_name('lfproc.dictionary.train_dictionary', 'lfproc dictionary train')})"), stacklevel=3)
+
+
 def simulate_capture(
     lf: LightField | np.ndarray,
     *,
@@ -162,6 +176,7 @@ def simulate_capture(
     noise: bool = True,
     random_state=None,
     ground_truth: dict | None = None,
+    dictionary="default",
 ) -> Capture:
     """Simulate a capture of a light field (see the module documentation).
 
@@ -203,10 +218,23 @@ def simulate_capture(
         Seeds the mask, the random ISO map and the noise. None draws a seed and records it.
     ground_truth : dict, optional
         ``{"path", "sha256"}`` of the light-field file, recorded in the capture.
+    dictionary : Dictionary, shipped name, path or None
+        The dictionary the capture is meant to be reconstructed with (default: the shipped
+        ``"default"``). When its views differ from the light field's, a
+        :class:`~lfproc.errors.ViewCountWarning` names both (the capture is still made, but
+        :func:`lfproc.recon.reconstruct` will refuse it with that dictionary). None: no check.
 
     Returns
     -------
     Capture
+
+    Warns
+    -----
+    ViewCountWarning
+        The light field's views do not match ``dictionary``'s patch.
+    SaturationWarning
+        More than :data:`lfproc.errors.SATURATION_WARNING_FRACTION` of the least sensitive pixels
+        are saturated.
     """
     profile = load_profile(profile)
     if isinstance(lf, LightField):
@@ -221,6 +249,8 @@ def simulate_capture(
     if (data < 0).any() or not np.isfinite(data).all():
         raise InputError("light field: expected finite, non-negative radiance")
     nv, nu, h, w, _ = data.shape
+    if dictionary is not None:
+        _check_dictionary_views(dictionary, (nv, nu))
     exposure_s = check_positive("exposure_s", exposure_s)
     if gamma is not None:
         gamma = check_positive("gamma", gamma)

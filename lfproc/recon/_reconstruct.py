@@ -484,8 +484,9 @@ def reconstruct(
     v_n, u_n, size, _, c_n = dictionary.patch
     if (v_n, u_n) != tuple(capture.views) or c_n != 3:
         raise ShapeError(
-            f"dictionary {dictionary.name or dictionary.preset!r}: patch {list(dictionary.patch)} does not fit the "
-            f"capture: expected {capture.views[0]} x {capture.views[1]} views and 3 colours")
+            f"dictionary {dictionary.name or dictionary.preset!r} has {v_n} x {u_n} views and {c_n} colours "
+            f"(patch {list(dictionary.patch)}); the capture has {capture.views[0]} x {capture.views[1]} views and "
+            f"3 colours: use a dictionary trained for {capture.views[0]} x {capture.views[1]} views")
     h, w = capture.size
     if size > min(h, w):
         raise ShapeError(f"dictionary patch of {size} x {size} pixels does not fit the capture's sensor of {h} x {w}")
