@@ -56,7 +56,7 @@ from typing import Any
 
 import numpy as np
 
-from lfproc._util import check_positive, progress
+from lfproc._util import check_positive, progress, short_repr
 from lfproc._version import __version__
 from lfproc.errors import CalibrationError, InputError, MissingFileError
 
@@ -76,6 +76,7 @@ _CLIPPED_PAIR_FRACTION = 1e-4  # flat pairs with more clipped pixels stay out of
 _BLACK_CLIP_FRACTION = 1e-3
 
 
+@short_repr
 @dataclass(frozen=True)
 class CalibrationResult:
     """What :func:`calibrate` measured.

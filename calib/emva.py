@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from lfproc import _untrusted as ut
-from lfproc._util import progress
+from lfproc._util import progress, short_repr
 from lfproc.errors import CalibrationError, FileFormatError, MissingFileError
 from lfproc.io._atomic import atomic_file
 
@@ -263,6 +263,7 @@ class _StackAccumulator:
         return np.maximum(self.s2 - self.s1 * self.s1 / self.n, 0.0) / (self.n - 1)
 
 
+@short_repr
 @dataclass
 class EmvaData:
     """Reduced EMVA 1288 data: temporal arrays (one entry per bright pair, ordered by

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from lfproc import _untrusted as ut
-from lfproc._util import FrozenDict, frozen_array
+from lfproc._util import FrozenDict, frozen_array, short_repr
 from lfproc._version import __version__
 from lfproc.errors import FileFormatError, MissingFileError, ProfileError, UnsafeFileError
 from lfproc.io._atomic import atomic_outputs
@@ -88,6 +88,7 @@ class IsoFigures:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
+@short_repr
 @dataclass(frozen=True)
 class CameraProfile:
     """A sensor's calibration (see the module documentation).
