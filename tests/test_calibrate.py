@@ -181,7 +181,7 @@ def test_report(result, tmp_path):
     files = write_report(result, tmp_path / "rep")
     names = {f.name for f in files}
     assert {"photon_transfer.png", "dark_level.png", "dark_variance.png", "read_noise_vs_iso.png",
-            "summary.md"} <= names
+            "summary.md", "snr.png", "linearity.png", "prnu_dsnu_histograms.png"} <= names
     for f in files:
         assert f.stat().st_size > 0
     assert cv2.imread(str(tmp_path / "rep" / "photon_transfer.png")).shape[2] == 3

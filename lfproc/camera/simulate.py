@@ -249,8 +249,6 @@ def simulate_capture(
     if (data < 0).any() or not np.isfinite(data).all():
         raise InputError("light field: expected finite, non-negative radiance")
     nv, nu, h, w, _ = data.shape
-    if dictionary is not None:
-        _check_dictionary_views(dictionary, (nv, nu))
     exposure_s = check_positive("exposure_s", exposure_s)
     if gamma is not None:
         gamma = check_positive("gamma", gamma)
@@ -357,6 +355,8 @@ def simulate_capture(
         parameters=parameters,
     )
     _warn_saturation(capture, stacklevel=4)
+    if dictionary is not None:  # last: a capture that cannot be made is refused first
+        _check_dictionary_views(dictionary, (nv, nu))
     return capture
 
 
