@@ -26,6 +26,7 @@ COMMANDS = (
     "convert",
     "synth",
     "preview",
+    "refocus",
     "evaluate",
     "simulate",
     "capture",
