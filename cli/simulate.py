@@ -42,6 +42,9 @@ def register(sub, common) -> None:
                    help="exposure at which the automatic radiance scale saturates the scene's brightest expected "
                         "signal (default 0.004); --exposure-s longer than this saturates more, as in a camera")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: drawn and recorded)")
+    p.add_argument("--dictionary", default="default", metavar="default|FILE",
+                   help="the dictionary the capture is meant for: a warning when its views differ from the light "
+                        "field's (default: the shipped one)")
     add_json(p)
     p.set_defaults(run=run)
 
@@ -73,6 +76,7 @@ def run(args) -> int:
         radiance_scale=args.radiance_scale,
         reference_exposure_s=args.reference_exposure_s,
         random_state=args.seed,
+        dictionary=args.dictionary,
     )
     emit(summary, as_json=args.json)
     return 0

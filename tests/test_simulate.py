@@ -355,3 +355,9 @@ def test_cli_simulate_of_3x3_views_warns_in_one_line(tmp_path, capsys):
     assert err.count("\n") == 1 and err.startswith("lfproc simulate: warning: ")
     assert "3 x 3 views" in err and "'default' has 5 x 5 views" in err and "lfproc dictionary train" in err
     assert out.is_file()
+    from lfproc.dictionary import dct_dictionary, save_dictionary
+
+    mine = save_dictionary(dct_dictionary((3, 3, 4, 4, 3), 40), tmp_path / "d33.npz")
+    assert main(["simulate", str(path), "-o", str(tmp_path / "c2.capture.npz"), "--seed", "1",
+                 "--dictionary", str(mine)]) == 0
+    assert capsys.readouterr().err == ""  # the dictionary it is meant for fits: no warning
