@@ -711,7 +711,7 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
         ``size``, ``channels``, ``units``, ``pu21_variant``; ``linear_psnr_db`` (PSNR of the
         linear colour samples, peak = the reference's 99.9th percentile, so a small bright
         source does not inflate it; per view too), ``linear_psnr_peak``; ``align`` and ``gain``
-        (the factor applied to the result); ``epsilon_relative``.
+        (the factor applied to the result).
 
     Raises
     ------
