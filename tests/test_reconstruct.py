@@ -547,7 +547,7 @@ def test_a_noise_free_sensor_on_a_mostly_black_scene_is_not_returned_black(small
 def test_view_mismatch_message_says_which_side_has_which():
     rng = np.random.default_rng(0)
     lf3 = np.broadcast_to(0.1 + rng.random((1, 1, 16, 16, 3), dtype=np.float32), (3, 3, 16, 16, 3)).copy()
-    capture = simulate_capture(lf3, profile="paper-low", random_state=0, dictionary=None)
+    capture = simulate_capture(lf3, profile="paper-low", random_state=0)
     with pytest.raises(ShapeError) as info:
         reconstruct(capture, "default")
     message = str(info.value)

@@ -337,13 +337,13 @@ def test_simulate_warns_when_the_views_do_not_fit_the_shipped_dictionary():
 
     lf3 = _lf(16, 16)[1:4, 1:4]
     with pytest.warns(ViewCountWarning) as record:
-        capture = simulate_capture(lf3, profile="paper-low", random_state=0)
+        capture = simulate_capture(lf3, profile="paper-low", random_state=0, dictionary="default")
     message = str(record[0].message)
     assert "3 x 3 views" in message and "shipped dictionary 'default' has 5 x 5 views" in message
     assert "--" not in message  # Python names the function, not the command's options
     assert capture.views == (3, 3)  # still made
-    simulate_capture(_lf(16, 16), profile="paper-low", random_state=0)  # 5 x 5: no warning (errors here)
-    simulate_capture(lf3, profile="paper-low", random_state=0, dictionary=None)  # check off: no warning
+    simulate_capture(_lf(16, 16), profile="paper-low", random_state=0, dictionary="default")  # 5 x 5: no warning
+    simulate_capture(lf3, profile="paper-low", random_state=0)  # Python's default: no check
 
 
 def test_cli_simulate_of_3x3_views_warns_in_one_line(tmp_path, capsys):

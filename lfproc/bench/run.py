@@ -145,8 +145,7 @@ def _simulate(lf, cell: Cell, preset: Preset, seed: int):
     from ..camera.simulate import NOISE_PROFILES, simulate_capture
 
     common = dict(profile=NOISE_PROFILES[cell.noise], isos=cell.isos, exposure_s=preset.exposure_s,
-                  mask="random", mask_period=preset.mask_period, random_state=seed,
-                  dictionary=None)  # the bench checks its dictionary against its scenes itself
+                  mask="random", mask_period=preset.mask_period, random_state=seed)
     if cell.method in ("joint", "dual-iso"):
         return simulate_capture(lf, iso_pattern_kind=cell.iso_pattern, shots=cell.shots,
                                 relative_exposures=[cell.exposure] * cell.shots, **common)

@@ -176,7 +176,7 @@ def simulate_capture(
     noise: bool = True,
     random_state=None,
     ground_truth: dict | None = None,
-    dictionary="default",
+    dictionary=None,
 ) -> Capture:
     """Simulate a capture of a light field (see the module documentation).
 
@@ -219,10 +219,11 @@ def simulate_capture(
     ground_truth : dict, optional
         ``{"path", "sha256"}`` of the light-field file, recorded in the capture.
     dictionary : Dictionary, shipped name, path or None
-        The dictionary the capture is meant to be reconstructed with (default: the shipped
-        ``"default"``). When its views differ from the light field's, a
+        The dictionary the capture is meant to be reconstructed with (``"default"``: the shipped
+        one). When its views differ from the light field's, a
         :class:`~lfproc.errors.ViewCountWarning` names both (the capture is still made, but
-        :func:`lfproc.recon.reconstruct` will refuse it with that dictionary). None: no check.
+        :func:`lfproc.recon.reconstruct` will refuse it with that dictionary). None (default):
+        no check; :func:`simulate_file` and ``lfproc simulate`` check against ``"default"``.
 
     Returns
     -------
@@ -399,9 +400,13 @@ def simulate_file(
     output_path: str | os.PathLike,
     *,
     force: bool = False,
+    dictionary="default",
     **options,
 ) -> tuple[Capture, dict[str, Any]]:
     """Read a light field, simulate a capture (:func:`simulate_capture` ``options``), write it.
+
+    ``dictionary`` (default: the shipped ``"default"``) is the dictionary the capture is meant
+    for: a :class:`~lfproc.errors.ViewCountWarning` when its views differ (None: no check).
 
     NaN/Inf or negative radiance in the input is refused. The capture records the input's
     path and SHA-256 as its ground truth.
@@ -416,6 +421,6 @@ def simulate_file(
     check_output(output_path, force=force)
     lf = read_lightfield(input_path, nonfinite="raise", negative="raise")
     truth = {"path": str(Path(input_path).resolve()), "sha256": file_sha256(input_path)}
-    capture = simulate_capture(lf, ground_truth=truth, **options)
+    capture = simulate_capture(lf, ground_truth=truth, dictionary=dictionary, **options)
     capture.save(output_path, force=force)
     return capture, capture_summary(capture, path=output_path)
