@@ -156,7 +156,8 @@ def _read_lytro(path: Path, *, white_db) -> LightField:
     except ImportError:
         raise DependencyError(f"{path}: Lytro decoding (lfproc.lytro.decode) is not available in this build") from None
     if white_db is None:
-        raise InputError(f"{path}: decoding a Lytro capture needs a white-image database ({option_name('white_db=DB', '--white-db DB')})")
+        raise InputError(f"{path}: decoding a Lytro capture needs a white-image database "
+                         f"({option_name('white_db=DB', '--white-db DB')})")
     return decode_capture(path, white_db=white_db)
 
 

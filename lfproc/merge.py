@@ -1097,10 +1097,12 @@ def merge_lightfields(
             return _finish(lfs, names, method, t, iso, prof, "input-variances", radiance, variance, info, unit,
                            n_iter, per_second_iso=same_iso)
         if prof is None:
-            raise InputError(f"method ml needs a camera profile ({option_name('profile=', '--profile')}): gain and read noise set its weights")
+            raise InputError(f"method ml needs a camera profile ({option_name('profile=', '--profile')}): gain and "
+                             "read noise set its weights")
         if iso is None:
             missing = next(nm for lf, nm in zip(lfs, names) if lf.iso is None)
-            raise InputError(f"{missing}: no ISO in its metadata; method ml needs one per exposure (give {option_name('isos=', '--isos')})")
+            raise InputError(f"{missing}: no ISO in its metadata; method ml needs one per exposure "
+                             f"(give {option_name('isos=', '--isos')})")
         if unit != "dn":
             sat = [lf.saturation_level for lf in lfs]
             if any(s is None for s in sat):
@@ -1125,7 +1127,8 @@ def merge_lightfields(
             kwargs = {}
         elif unit == "dn":
             if prof is None:
-                raise InputError(f"raw (dn) input needs a camera profile ({option_name('profile=', '--profile')}) for its black and white levels")
+                raise InputError(f"raw (dn) input needs a camera profile ({option_name('profile=', '--profile')}) "
+                                 "for its black and white levels")
             stack, kwargs = data, {"white_level": prof.white_level_dn, "black_level": prof.black_level_dn}
         else:
             sat = {lf.saturation_level for lf in lfs}

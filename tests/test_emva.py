@@ -362,4 +362,5 @@ def test_saturation_mean_key_and_old_profiles(emva_set, tmp_path):
     figs["saturation_variance_max_dn"] = figs.pop("saturation_mean_dn")  # as older lfproc wrote it
     path.write_text(json.dumps(doc))
     old = load_profile(path).source["emva1288"]["100"]
-    assert old["saturation_mean_dn"] == pytest.approx(f["saturation_mean_dn"]) and "saturation_variance_max_dn" not in old
+    assert old["saturation_mean_dn"] == pytest.approx(f["saturation_mean_dn"])
+    assert "saturation_variance_max_dn" not in old

@@ -7,7 +7,8 @@
 """
 
 from ._dct import dct_dictionary
-from ._files import SHIPPED, Dictionary, dictionary_patch, is_dictionary_file, load_dictionary, save_dictionary, shipped_path
+from ._files import (SHIPPED, Dictionary, dictionary_patch, is_dictionary_file, load_dictionary, save_dictionary,
+                     shipped_path)
 from ._ksvd import KsvdResult, TrainingSignals, ksvd
 from ._omp import batch_omp, codes_to_dense, gram_matrix, omp_codes
 from ._train import PRESETS, Preset, approximate, evaluate_dictionary, get_preset, synthetic_lightfields, train_dictionary

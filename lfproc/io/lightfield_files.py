@@ -388,6 +388,9 @@ def write_lightfield(
     return path
 
 
+_TONEMAP_PYTHON = "lfproc.tonemap.display_transform(lf, exposure_ev=, tonemap=)"
+
+
 def _warn_clipping(lf: LightField, path: Path) -> None:
     import warnings
 
@@ -397,7 +400,8 @@ def _warn_clipping(lf: LightField, path: Path) -> None:
     if frac > 0:
         warnings.warn(SaturationWarning(
             f"{path}: {frac:.1%} of the samples exceed 1 and are clipped by the 8/16-bit encoding "
-            f"(lower the exposure or tone map: {option_name('lfproc.tonemap.display_transform(lf, exposure_ev=, tonemap=)', '--exposure-ev, --tonemap')})"), stacklevel=3)
+            f"(lower the exposure or tone map: {option_name(_TONEMAP_PYTHON, '--exposure-ev, --tonemap')})"),
+            stacklevel=3)
 
 
 def _write_pfm(path: Path, disparity: np.ndarray) -> None:

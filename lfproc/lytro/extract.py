@@ -231,7 +231,8 @@ def _video_frames(video: Path, folder: Path, stem: str, frames_meta: list, files
                 params["lambda"] = float(meta["lambda"])
             coord = meta.get("coord")
             if isinstance(coord, dict):
-                params.update({k: float(v) for k, v in coord.items() if k in ("x", "y") and isinstance(v, (int, float))})
+                params.update({k: float(v) for k, v in coord.items()
+                               if k in ("x", "y") and isinstance(v, (int, float))})
             suffix = "".join(f"_{k}{_number(v)}" for k, v in params.items())
             fname = f"{stem}_frame_{m:03d}{suffix}.png"
             if not cv2.imwrite(str(folder / fname), frame):
