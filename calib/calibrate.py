@@ -17,7 +17,10 @@ the frames have a CFA):
 5. **Saturation**: the output code where over-exposed flats pile up (``saturation_dn``);
    ``full_well_e = (saturation_dn - black) / K`` (well or ADC, whichever clips first, as
    :meth:`CameraProfile.saturation_dn`); the EMVA saturation capacity at the variance
-   maximum is reported too (``saturation_capacity_emva_e``).
+   maximum is reported too (``saturation_capacity_emva_e``), with the mean output there,
+   EMVA's ``mu_y.sat`` (``saturation_mean_dn``, dark level included; called
+   ``saturation_variance_max_dn`` before, a name that read like a variance: older profiles
+   are read with the new name).
 6. **Dark current**: slope of the dark level against exposure time over bias and dark
    frames (at least three exposure times) divided by ``K`` (mean method, stored in the
    profile) and slope of the dark temporal variance divided by ``K^2`` (variance method).
@@ -56,7 +59,7 @@ from typing import Any
 
 import numpy as np
 
-from lfproc._util import check_positive, progress
+from lfproc._util import check_positive, progress, short_repr
 from lfproc._version import __version__
 from lfproc.errors import CalibrationError, InputError, MissingFileError
 
@@ -68,7 +71,7 @@ __all__ = ["calibrate", "find_calibration_input", "CalibrationResult", "DEFAULT_
 
 DEFAULT_ISO_KEY = "default"
 #: EMVA 1288 figures copied into the profile's ``source["emva1288"]`` (per ISO key) for ``profile show``.
-EMVA_SOURCE_KEYS = ("quantum_efficiency", "temporal_dark_noise_dn", "saturation_variance_max_dn",
+EMVA_SOURCE_KEYS = ("quantum_efficiency", "temporal_dark_noise_dn", "saturation_mean_dn",
                     "saturation_capacity_emva_e", "absolute_sensitivity_threshold_e", "snr_max_db",
                     "dynamic_range_emva_db")
 _CLIP_PILE_FRACTION = 0.01  # a frame whose maximum code holds >= 1 % of its pixels is clipped there
@@ -76,6 +79,7 @@ _CLIPPED_PAIR_FRACTION = 1e-4  # flat pairs with more clipped pixels stay out of
 _BLACK_CLIP_FRACTION = 1e-3
 
 
+@short_repr
 @dataclass(frozen=True)
 class CalibrationResult:
     """What :func:`calibrate` measured.
@@ -96,6 +100,10 @@ class CalibrationResult:
     hot_pixels : dict
         ISO -> boolean hot-pixel mask (H, W).
     notes : list of str
+    source : dict
+    iso_keys : dict
+        Key of ``figures`` -> the ISO the profile stores it under (``{"default": 100}`` for EMVA
+        data); each figure dict also holds it as ``"iso"``.
     """
 
     profile: CameraProfile
@@ -106,6 +114,18 @@ class CalibrationResult:
     hot_pixels: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     notes: list[str] = field(default_factory=list)
     source: dict[str, Any] = field(default_factory=dict)
+    iso_keys: dict[str, int] = field(default_factory=dict)
+
+    def iso(self, key: str) -> int | None:
+        """The ISO the profile stores the figures of ``key`` under (``"default"`` -> 100 for EMVA data)."""
+        if key in self.iso_keys:
+            return self.iso_keys[key]
+        return int(key) if str(key).isdigit() else None
+
+    def iso_label(self, key: str) -> str:
+        """``"ISO 100"``: the ISO of ``key`` as the profile stores it."""
+        iso = self.iso(key)
+        return f"ISO {iso if iso is not None else key}"
 
     def to_json(self) -> dict[str, Any]:
         """``{"isos": {ISO: figures}, "read_noise_model", "unknown", "notes", "source"}``."""
@@ -361,11 +381,11 @@ def _calibrate_iso(iso_key: str, records: list[FrameRecord], *, cfa: str | None,
             if saturated:
                 limit = 0.7 * ptc[imax][0]["all"]
                 fit = [p for p in usable if p[0]["all"] <= limit]
-                fig["saturation_variance_max_dn"] = ptc[imax][0]["all"] + dark_mean(ptc[imax][3].exposure_s, "all")
+                fig["saturation_mean_dn"] = ptc[imax][0]["all"] + dark_mean(ptc[imax][3].exposure_s, "all")
             else:
                 fit = usable
-                fig["saturation_variance_max_dn"] = None
-                unk("saturation_variance_max_dn", "the flat variance never falls after its maximum")
+                fig["saturation_mean_dn"] = None
+                unk("saturation_mean_dn", "the flat variance never falls after its maximum")
             if len(fit) < 2:
                 unk("gain_dn_per_e", f"only {len(fit)} unclipped flat pair(s) below 70 % of saturation at ISO "
                     f"{iso_key}; the photon transfer slope needs at least 2")
@@ -430,8 +450,8 @@ def _calibrate_iso(iso_key: str, records: list[FrameRecord], *, cfa: str | None,
             unk("full_well_e", "the gain or the black level is unknown")
         else:
             unk("full_well_e", unknown[f"isos.{iso_key}.saturation_dn"])
-    if K and fig.get("saturation_variance_max_dn") is not None:
-        fig["saturation_capacity_emva_e"] = (fig["saturation_variance_max_dn"] - fig["black_level_dn"]) / K
+    if K and fig.get("saturation_mean_dn") is not None:
+        fig["saturation_capacity_emva_e"] = (fig["saturation_mean_dn"] - fig["black_level_dn"]) / K
     else:
         fig["saturation_capacity_emva_e"] = None
         unk("saturation_capacity_emva_e", "needs the gain and flats beyond the variance maximum")
@@ -506,7 +526,9 @@ def _calibrate_iso(iso_key: str, records: list[FrameRecord], *, cfa: str | None,
         "flat_signal_dn": [p[0]["all"] for p in ptc],
         "flat_var_dn2": [p[1]["all"] for p in ptc],
         "flat_clipped_fraction": [p[2] for p in ptc],
+        "flat_exposure_s": [p[3].exposure_s for p in ptc],
         "gain_dn_per_e": K,
+        "read_noise_e": fig.get("read_noise_e"),
     }
     hot = None if mask is None else ~mask
     return fig, curves, bias_master, hot, checker, (None if flat is None else (flat, flat_relvar))
@@ -822,9 +844,51 @@ def _build(*, figures, curves, hot_pixels, bias_frames, unknown, name, adc_bits,
     source["emva1288"] = {str(iso_keys[key] if iso_keys else key): {k: f.get(k) for k in EMVA_SOURCE_KEYS}
                           for key, f in figures.items()}
     profile = replace(profile, source=dict(source))
-    notes = [f"ISO {k}: {n}" for k, f in figures.items() for n in f.get("notes", [])]
+    keys = {key: int(iso_keys[key] if iso_keys else int(key)) for key in figures}
+    notes = [f"ISO {keys[k]}: {n}" for k, f in figures.items() for n in f.get("notes", [])]
+    for key, f in figures.items():
+        f["iso"] = keys[key]
     return CalibrationResult(profile=profile, figures=figures, unknown=unknown, read_noise_model=read_model,
-                             curves=curves, hot_pixels=hot_pixels, notes=notes, source=source)
+                             curves=curves, hot_pixels=hot_pixels, notes=notes, source=source, iso_keys=keys)
+
+
+def _emva_maps(data, res, fig, iso_int, saturation_dn, cfa_pattern, unknown, key):
+    """Per-pixel maps of an EMVA 1288 data set from its stacks: the master bias (the dark stack's
+    mean image less the mean dark signal of its exposure) and the flat field (bright minus dark
+    stack, mean 1 per CFA position, or overall for a monochrome sensor)."""
+    bias_frames: dict[int, np.ndarray] = {}
+    bias_std: dict[int, float] = {}
+    flat = flat_std = None
+    K = res["K"]
+    if data.dark_image is None:
+        unknown[f"isos.{key}.bias_frame"] = "the descriptor has no dark stack (a 'd' step with more than two images)"
+        unknown[f"isos.{key}.flat_field"] = unknown[f"isos.{key}.bias_frame"]
+        return bias_frames, bias_std, flat, flat_std
+    sd = data.spatial_dark
+    t_dark = sd.get("exposure_ns", 0.0) * 1e-9
+    dark_signal = (res["u_I_mean"] or 0.0) * K * t_dark
+    bias_frames[iso_int] = (data.dark_image - np.float32(dark_signal)).astype(np.float32)
+    bias_std[iso_int] = math.sqrt(sd["var_mean"] / sd["L"])
+    fig["bias_frame_std_dn"] = bias_std[iso_int]
+    if data.bright_image is None:
+        unknown[f"isos.{key}.flat_field"] = "the descriptor has no bright stack (a 'b' step with more than two images)"
+    elif saturation_dn is not None and data.spatial["max_code"] >= saturation_dn:
+        unknown[f"isos.{key}.flat_field"] = (f"the bright stack reaches the saturation code ({saturation_dn:g} DN): "
+                                            "a flat field needs unclipped frames")
+    else:
+        sb = data.spatial
+        signal_image = data.bright_image.astype(np.float64) - data.dark_image
+        signal = float(signal_image.mean())
+        if signal <= 0:
+            unknown[f"isos.{key}.flat_field"] = "the bright stack is not above the dark stack"
+        else:
+            if cfa_pattern in (None, MONO):
+                flat = (signal_image / signal).astype(np.float32)
+            else:
+                flat = _normalise_flat(signal_image, None).astype(np.float32)
+            flat_std = math.sqrt(sb["var_mean"] / sb["L"] + sd["var_mean"] / sd["L"]) / signal
+            fig["flat_field_std"] = flat_std
+    return bias_frames, bias_std, flat, flat_std
 
 
 def _calibrate_emva(desc: EmvaDescriptor, *, name, adc_bits, cfa_pattern, iso) -> CalibrationResult:
@@ -851,7 +915,7 @@ def _calibrate_emva(desc: EmvaDescriptor, *, name, adc_bits, cfa_pattern, iso) -
         "black_level_dn": res["black_level_dn"],
         "full_well_e": full_well,
         "saturation_dn": saturation_dn,
-        "saturation_variance_max_dn": res["u_y_sat"],
+        "saturation_mean_dn": res["u_y_sat"],
         "saturation_capacity_emva_e": res["u_e_sat"],
         "saturation_capacity_emva_photons": res["u_p_sat"],
         "absolute_sensitivity_threshold_e": res["u_e_min"],
@@ -876,7 +940,7 @@ def _calibrate_emva(desc: EmvaDescriptor, *, name, adc_bits, cfa_pattern, iso) -
         fig["notes"].append(f"dark current from the mean is negative ({fig['dark_current_e_per_s']:.4g} e-/s); 0 recorded")
         fig["dark_current_e_per_s"] = 0.0
     for src, dst in (("u_p_sat", "full_well_e"), ("u_e_sat", "saturation_capacity_emva_e"),
-                     ("u_p_sat", "saturation_capacity_emva_photons"), ("u_y_sat", "saturation_variance_max_dn"),
+                     ("u_p_sat", "saturation_capacity_emva_photons"), ("u_y_sat", "saturation_mean_dn"),
                      ("u_I_mean", "dark_current_e_per_s"), ("u_I_var", "dark_current_var_e_per_s"),
                      ("DSNU1288", "dsnu_e"), ("PRNU1288", "prnu"), ("QE", "quantum_efficiency"),
                      ("QE", "absolute_sensitivity_threshold_photons"), ("LE_min", "linearity_error_min_percent"),
@@ -895,6 +959,8 @@ def _calibrate_emva(desc: EmvaDescriptor, *, name, adc_bits, cfa_pattern, iso) -
         "flat_signal_dn": (np.array(c["u_y"]) - np.array(c["u_ydark"])).tolist(),
         "flat_var_dn2": (np.array(c["s2_y"]) - np.array(c["s2_ydark"])).tolist(),
         "flat_clipped_fraction": [0.0] * len(c["u_y"]), "gain_dn_per_e": K,
+        "flat_exposure_s": c["texp_s"], "flat_photons": c["u_p"], "read_noise_e": res["sigma_d"],
+        "flat_dark_var_dn2": c["s2_ydark"],
     }}
     unknown_all = dict(unknown)
     if iso is None:
@@ -905,7 +971,10 @@ def _calibrate_emva(desc: EmvaDescriptor, *, name, adc_bits, cfa_pattern, iso) -
         cfa_pattern = MONO
         extra["cfa_pattern_from"] = "EMVA 1288 data are one channel: recorded as a monochrome sensor (give --cfa " \
                                     "for a Bayer sensor)"
-    return _build(figures={key: fig}, curves=curves, hot_pixels={}, bias_frames={}, unknown=unknown_all,
+    bias_frames, bias_std, flat_field, flat_std = _emva_maps(data, res, fig, iso_int, saturation_dn, cfa_pattern,
+                                                            unknown_all, key)
+    return _build(figures={key: fig}, curves=curves, hot_pixels={}, bias_frames=bias_frames, unknown=unknown_all,
+                  flat_field=flat_field, flat_field_std=flat_std, bias_frame_std_dn=bias_std,
                   name=name or (desc.path.stem if desc.path else "emva1288"), adc_bits=adc_bits or desc.bits,
                   bits_from="argument" if adc_bits else "descriptor 'n' line", max_code=int(saturation_dn or 0),
                   cfa=cfa_pattern, input_path=desc.path, kind="emva1288", iso_keys={key: iso_int},

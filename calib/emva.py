@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from lfproc import _untrusted as ut
-from lfproc._util import progress
+from lfproc._util import progress, short_repr
 from lfproc.errors import CalibrationError, FileFormatError, MissingFileError
 from lfproc.io._atomic import atomic_file
 
@@ -263,10 +263,12 @@ class _StackAccumulator:
         return np.maximum(self.s2 - self.s1 * self.s1 / self.n, 0.0) / (self.n - 1)
 
 
+@short_repr
 @dataclass
 class EmvaData:
     """Reduced EMVA 1288 data: temporal arrays (one entry per bright pair, ordered by
-    photons) and spatial stack figures (``None`` when the descriptor has no stacks)."""
+    photons), spatial stack figures and the stacks' per-pixel mean images (``None`` when the
+    descriptor has no stacks)."""
 
     texp_s: np.ndarray
     u_p: np.ndarray
@@ -281,6 +283,8 @@ class EmvaData:
     notes: list[str] = field(default_factory=list)
     max_code: np.ndarray | None = None
     frac_at_max: np.ndarray | None = None
+    bright_image: np.ndarray | None = None  # per-pixel mean of the bright stack (DN)
+    dark_image: np.ndarray | None = None  # per-pixel mean of the dark stack (DN)
 
     def clip_code(self, min_fraction: float = 0.01) -> float | None:
         """The output code where over-exposed pairs pile up: the largest code that holds at least
@@ -302,13 +306,18 @@ def _read(path: Path, checker: FrameChecker, desc: EmvaDescriptor) -> np.ndarray
     return frame.data
 
 
-def _stack(paths, checker, desc) -> dict[str, float]:
+def _stack(paths, checker, desc) -> tuple[dict[str, float], np.ndarray]:
+    """Figures of a frame stack and its per-pixel mean image (float32)."""
     acc = _StackAccumulator()
+    top = -np.inf
     for p in paths:
-        acc.add(_read(p, checker, desc))
+        frame = _read(p, checker, desc)
+        top = max(top, float(frame.max()))
+        acc.add(frame)
     mean = acc.mean()
-    return {"L": acc.n, "avg_mean": float(mean.mean()), "avg_var": float(mean.var(ddof=1)),
-            "var_mean": float(acc.var().mean())}
+    return ({"L": acc.n, "avg_mean": float(mean.mean()), "avg_var": float(mean.var(ddof=1)),
+             "var_mean": float(acc.var().mean()), "max_code": top},
+            mean.astype(np.float32))
 
 
 def reduce_descriptor(desc: EmvaDescriptor) -> EmvaData:
@@ -363,19 +372,21 @@ def reduce_descriptor(desc: EmvaDescriptor) -> EmvaData:
         rows.append((step.photons or 0.0, step.exposure_ns * 1e-9, u_y, s2_y, u_d, s2_d, top, at_top))
     rows.sort(key=lambda r: (r[0], r[1]))
     arr = np.array(rows, dtype=np.float64)
-    spatial = spatial_dark = None
+    spatial = spatial_dark = bright_image = dark_image = None
     if stacks["bright"]:
         if len(stacks["bright"]) > 1:
             notes.append(f"{len(stacks['bright'])} bright stacks; the first is used")
-        spatial = _stack(stacks["bright"][0].images, checker, desc)
+        spatial, bright_image = _stack(stacks["bright"][0].images, checker, desc)
         spatial["exposure_ns"] = stacks["bright"][0].exposure_ns
     if stacks["dark"]:
         if len(stacks["dark"]) > 1:
             notes.append(f"{len(stacks['dark'])} dark stacks; the first is used")
-        spatial_dark = _stack(stacks["dark"][0].images, checker, desc)
+        spatial_dark, dark_image = _stack(stacks["dark"][0].images, checker, desc)
+        spatial_dark["exposure_ns"] = stacks["dark"][0].exposure_ns
     return EmvaData(texp_s=arr[:, 1], u_p=arr[:, 0], u_y=arr[:, 2], s2_y=arr[:, 3], u_ydark=arr[:, 4],
                     s2_ydark=arr[:, 5], spatial=spatial, spatial_dark=spatial_dark, bits=desc.bits,
-                    shape=(desc.height, desc.width), notes=notes, max_code=arr[:, 6], frac_at_max=arr[:, 7])
+                    shape=(desc.height, desc.width), notes=notes, max_code=arr[:, 6], frac_at_max=arr[:, 7],
+                    bright_image=bright_image, dark_image=dark_image)
 
 
 # -- evaluation -----------------------------------------------------------------------------

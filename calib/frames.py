@@ -32,6 +32,7 @@ import numpy as np
 
 from lfproc import _untrusted as ut
 from lfproc.errors import CalibrationError, FileFormatError, InputError, MissingFileError
+from lfproc._util import short_repr
 
 __all__ = [
     "FrameRecord",
@@ -90,6 +91,7 @@ class FrameRecord:
     where: str = ""
 
 
+@short_repr
 @dataclass(frozen=True)
 class Frame:
     """A frame's counts and what its file says about them.

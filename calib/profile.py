@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from lfproc import _untrusted as ut
-from lfproc._util import FrozenDict, frozen_array
+from lfproc._util import FrozenDict, frozen_array, short_repr
 from lfproc._version import __version__
 from lfproc.errors import FileFormatError, MissingFileError, ProfileError, UnsafeFileError
 from lfproc.io._atomic import atomic_outputs
@@ -66,6 +66,24 @@ BAYER_PATTERNS = ("RGGB", "GRBG", "GBRG", "BGGR")
 _CFA = BAYER_PATTERNS + (MONO,)
 
 
+#: Keys of ``source["emva1288"]`` renamed since they were first written (old -> new); profiles
+#: with the old names are read with the new ones.
+RENAMED_EMVA_KEYS = {"saturation_variance_max_dn": "saturation_mean_dn"}
+
+
+def _upgrade_source(source: dict[str, Any]) -> dict[str, Any]:
+    """``source`` with the EMVA keys of older profiles renamed (:data:`RENAMED_EMVA_KEYS`)."""
+    emva = source.get("emva1288")
+    if isinstance(emva, dict):
+        upgraded = {}
+        for iso, figs in emva.items():
+            if isinstance(figs, dict):
+                figs = {RENAMED_EMVA_KEYS.get(k, k): v for k, v in figs.items()}
+            upgraded[iso] = figs
+        source = {**source, "emva1288": upgraded}
+    return source
+
+
 def paper_gain_dn_per_e(iso: float, *, adc_bits: int, full_well_e: float) -> float:
     """The paper's theoretical gain ``h = (ISO / 100) * (2^bits - 1) / FWD`` in DN per electron."""
     return (float(iso) / 100.0) * (2**adc_bits - 1) / float(full_well_e)
@@ -88,6 +106,7 @@ class IsoFigures:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
+@short_repr
 @dataclass(frozen=True)
 class CameraProfile:
     """A sensor's calibration (see the module documentation).
@@ -388,7 +407,7 @@ class CameraProfile:
             white_level_dn=n["white_level_dn"].as_float(low=1, high=2.0**32),
             black_level_dn=n["black_level_dn"].as_float(low=0, high=2.0**32),
             full_well_e=n["full_well_e"].as_float(low=1, high=_FIGURE_LIMITS["full_well_e"]),
-            source=dict(n.opt_dict("source").value),
+            source=_upgrade_source(dict(n.opt_dict("source").value)),
         )
         try:
             return cls(isos=isos, unknown=unknown, bias_frames=bias_frames or {}, flat_field=flat_field, **kwargs)

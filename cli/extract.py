@@ -11,8 +11,10 @@ def register(sub, common) -> None:
     p = sub.add_parser(
         "extract", parents=[common], help="write the images, depth maps and metadata a Lytro file holds",
         description="Write every section of a Lytro container (.lfp, .LFR) into DIR: embedded JPEGs (focus "
-                    "stacks, thumbnails) as they are, depth and confidence maps as float32 OpenEXR images with PNG "
-                    "previews, the table of contents and the frame metadata as JSON, and extracted.json listing "
+                    "stacks, thumbnails) as they are, the frames of F01 H.264 videos (refocus stacks, parallax sweeps) "
+                    "as PNGs, depth and confidence maps as float32 OpenEXR images with colour-mapped PNG previews "
+                    "with a colour bar, the table of contents and the frame metadata as JSON, and extracted.json "
+                    "listing "
                     "them. For processed files (F01 -stk/-dm .lfp, Illum desktop .LFP) that hold no raw lenslet "
                     "image; raw captures are decoded with 'lfproc decode'.")
     p.add_argument("lfp", type=Path, metavar="LFP", help="Lytro container (.lfp, .lfr)")

@@ -17,7 +17,7 @@ import warnings
 from functools import partial
 
 from lfproc._version import __version__
-from lfproc.errors import LfprocError, LfprocWarning
+from lfproc.errors import LfprocError, LfprocWarning, cli_interface
 
 # One module of lfproc.cli per sub-command, in the order `lfproc --help` lists them.
 COMMANDS = (
@@ -26,6 +26,7 @@ COMMANDS = (
     "convert",
     "synth",
     "preview",
+    "refocus",
     "evaluate",
     "simulate",
     "capture",
@@ -85,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.code or 0)
     kept: list[str] = []
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), cli_interface():  # messages name --options, not arguments
             # lfproc's own warnings are kept (whatever the interpreter's filters say) and shown
             # as one line each once the command has succeeded: a failed command shows its one
             # error line only. Other warnings keep the usual handling.

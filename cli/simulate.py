@@ -43,6 +43,9 @@ def register(sub, common) -> None:
                         "signal (default 0.004); --exposure-s longer than this saturates more, as in a camera")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: drawn and recorded)")
     add_value_policies(p, negative="raise", what="light-field")
+    p.add_argument("--dictionary", default="default", metavar="default|FILE",
+                   help="the dictionary the capture is meant for: a warning when its views differ from the light "
+                        "field's (default: the shipped one)")
     add_json(p)
     p.set_defaults(run=run)
 
@@ -76,6 +79,7 @@ def run(args) -> int:
         random_state=args.seed,
         nonfinite=args.nonfinite,
         negative=args.negative,
+        dictionary=args.dictionary,
     )
     emit(summary, as_json=args.json)
     return 0

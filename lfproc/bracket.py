@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from ._util import freeze
-from .errors import DependencyError, FileFormatError, InputError, MissingFileError
+from .errors import DependencyError, FileFormatError, InputError, MissingFileError, option_name
 from .lightfield import LightField
 
 __all__ = [
@@ -160,7 +160,8 @@ def _read_lytro(path: Path, *, white_db) -> LightField:
     except ImportError:
         raise DependencyError(f"{path}: Lytro decoding (lfproc.lytro.decode) is not available in this build") from None
     if white_db is None:
-        raise InputError(f"{path}: decoding a Lytro capture needs a white-image database (--white-db DB)")
+        raise InputError(f"{path}: decoding a Lytro capture needs a white-image database "
+                         f"({option_name('white_db=DB', '--white-db DB')})")
     return decode_capture(path, white_db=white_db)
 
 
@@ -322,7 +323,7 @@ def merge_files(
     codes8 = any(lf.attrs.get("codes_bits") == 8 for lf in lfs)
     if method == "ml" and not own_variance and not codes8 and isos is None and any(lf.iso is None for lf in lfs):
         bad = next(p for p, lf in zip(paths, lfs) if lf.iso is None)
-        raise InputError(f"{bad}: no ISO in its metadata; method ml needs one (give --isos)")
+        raise InputError(f"{bad}: no ISO in its metadata; method ml needs one (give {option_name('isos=', '--isos')})")
     merged, info = merge_lightfields(lfs, method=method, profile=profile, n_iter=n_iter, random_state=random_state,
                                      n_threads=n_threads)
     merged = merged.replace(attrs=dict(merged.attrs) | {"sources": [str(p) for p in paths]})

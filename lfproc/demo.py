@@ -223,10 +223,20 @@ def stage_merge(ctx: _Context) -> dict[str, Any]:
     }
 
 
+#: Layout of the calibration contact sheet (pixels): tile side, gap, label band above a tile,
+#: ISO column on the left, caption band at the top.
+SHEET_TILE, SHEET_PAD, SHEET_LABEL, SHEET_HEAD, SHEET_CAPTION = 96, 4, 14, 72, 18
+
+
 def _frames_contact_sheet(manifest: Path, out: Path) -> Path:
     """One picture of a simulated calibration frame set: a row per ISO, columns bias, each dark
-    exposure and each flat level (the first frame of each set), each tile stretched to its own
-    1st-99th percentile and labelled."""
+    exposure and each flat level (the first frame of each set), labelled with the set and its mean.
+
+    Every tile has the same display scale (written in the caption): the lowest black code of the
+    bias frames is black, the highest code of any frame (the saturation code when a flat clips)
+    is white, with a square-root display curve so that darks and dim flats stay visible. A dark
+    frame therefore looks dark and a saturated flat white (each tile used to be stretched to its
+    own 1st-99th percentile, which made every frame look alike and a saturated flat black)."""
     import cv2
 
     from .calib.frames import read_frame, read_manifest
@@ -235,28 +245,38 @@ def _frames_contact_sheet(manifest: Path, out: Path) -> Path:
     first: dict[tuple, Any] = {}
     for r in records:
         first.setdefault((int(round(r.iso)), r.kind, r.exposure_s), r)
+    frames = {key: read_frame(rec.path).data.astype(np.float32) for key, rec in first.items()}
     isos = sorted({k[0] for k in first})
     order = {"bias": 0, "dark": 1, "flat": 2}
     columns = sorted({(k[1], k[2]) for k in first}, key=lambda c: (order.get(c[0], 3), c[1]))
-    tile, pad, label = 96, 4, 14
+    biases = [float(np.percentile(x, 1)) for k, x in frames.items() if k[1] == "bias"]
+    lo = min(biases) if biases else min(float(x.min()) for x in frames.values())
+    hi = max(float(x.max()) for x in frames.values())
+    span = max(hi - lo, 1e-6)
+    tile, pad, label = SHEET_TILE, SHEET_PAD, SHEET_LABEL
     rows = []
     for iso in isos:
         cells = []
         for kind, t in columns:
             cell = np.full((tile + label, tile), 255, np.uint8)
-            rec = first.get((iso, kind, t))
-            if rec is not None:
-                x = read_frame(rec.path).data.astype(np.float32)
-                lo, hi = np.percentile(x, (1, 99))
-                img = np.clip((x - lo) / max(hi - lo, 1e-6) * 255, 0, 255).astype(np.uint8)
+            x = frames.get((iso, kind, t))
+            if x is not None:
+                img = (np.sqrt(np.clip((x - lo) / span, 0, 1)) * 255).round().astype(np.uint8)
                 cell[label:] = cv2.resize(img, (tile, tile), interpolation=cv2.INTER_AREA)
-                text = f"{kind} {t:.3g}s" if kind != "bias" else "bias"
-                cv2.putText(cell, text, (2, label - 3), cv2.FONT_HERSHEY_PLAIN, 0.75, 0, 1, cv2.LINE_AA)
+                cv2.rectangle(cell, (0, label), (tile - 1, tile + label - 1), 128, 1)  # a white tile stays visible
+                text = (f"{kind} {t:.3g}s" if kind != "bias" else "bias") + f" {x.mean():.0f}"
+                if np.mean(x >= hi) >= 0.01:
+                    text = f"{kind} {t:.3g}s sat."
+                cv2.putText(cell, text, (2, label - 3), cv2.FONT_HERSHEY_PLAIN, 0.7, 0, 1, cv2.LINE_AA)
             cells.append(np.pad(cell, ((0, pad), (0, pad)), constant_values=255))
-        head = np.full((tile + label + pad, 72), 255, np.uint8)
+        head = np.full((tile + label + pad, SHEET_HEAD), 255, np.uint8)
         cv2.putText(head, f"ISO {iso}", (2, (tile + label) // 2), cv2.FONT_HERSHEY_PLAIN, 0.9, 0, 1, cv2.LINE_AA)
         rows.append(np.hstack([head] + cells))
-    sheet = np.vstack(rows)
+    body = np.vstack(rows)
+    caption = np.full((SHEET_CAPTION, body.shape[1]), 255, np.uint8)
+    cv2.putText(caption, f"one scale for all tiles: {lo:.0f} DN black, {hi:.0f} DN white (square root); "
+                "labels: set, mean DN", (2, SHEET_CAPTION - 5), cv2.FONT_HERSHEY_PLAIN, 0.8, 0, 1, cv2.LINE_AA)
+    sheet = np.vstack([caption, body])
     if not cv2.imwrite(str(out), sheet):
         raise OSError(f"{out}: could not write the contact sheet")
     return out

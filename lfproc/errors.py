@@ -10,6 +10,9 @@ Messages name the file or option, what was expected and what was found.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+
 __all__ = [
     "LfprocError",
     "InputError",
@@ -27,8 +30,38 @@ __all__ = [
     "LfprocWarning",
     "SaturationWarning",
     "ConvergenceWarning",
+    "ViewCountWarning",
     "SATURATION_WARNING_FRACTION",
+    "option_name",
+    "cli_interface",
 ]
+
+#: Which interface is running: ``"python"`` (default) or ``"cli"`` (set by the ``lfproc`` command
+#: with :func:`cli_interface`). Messages that name a setting use :func:`option_name`, so that the
+#: command line says ``--force`` and Python says ``force=True``.
+_INTERFACE: contextvars.ContextVar[str] = contextvars.ContextVar("lfproc_interface", default="python")
+
+
+def option_name(python: str, cli: str) -> str:
+    """The name of a setting for the interface that is running: ``cli`` inside the ``lfproc``
+    command (:func:`cli_interface`), ``python`` otherwise.
+
+    Examples
+    --------
+    >>> f"pass {option_name('force=True', '--force')} to overwrite it"
+    'pass force=True to overwrite it'
+    """
+    return cli if _INTERFACE.get() == "cli" else python
+
+
+@contextlib.contextmanager
+def cli_interface():
+    """Within this block, :func:`option_name` gives the command-line spelling."""
+    token = _INTERFACE.set("cli")
+    try:
+        yield
+    finally:
+        _INTERFACE.reset(token)
 
 #: :class:`SaturationWarning` is emitted when more than this share of the samples has lost its
 #: radiance to saturation: in a coded capture (:func:`lfproc.camera.simulate.simulate_capture`,
@@ -103,3 +136,8 @@ class SaturationWarning(LfprocWarning):
 
 class ConvergenceWarning(LfprocWarning):
     """An iterative solver stopped before reaching its tolerance."""
+
+
+class ViewCountWarning(LfprocWarning):
+    """A light field or capture has a number of views the dictionary it is meant for cannot
+    reconstruct (the dictionary's patch has another angular shape)."""

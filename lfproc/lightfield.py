@@ -223,14 +223,21 @@ class LightField(ReadOnlyState):
 
     # -- views and slices -----------------------------------------------------------
     def view(self, v: int, u: int) -> np.ndarray:
-        """View ``(v, u)`` as an ``(H, W, C)`` array (negative indices allowed)."""
+        """View ``(v, u)`` as a read-only ``(H, W, C)`` float32 array (negative indices allowed).
+
+        An array, not a :class:`LightField`: index it directly (``lf.view(0, 0)[y, x]``).
+        Its ``.data`` attribute is numpy's raw memory buffer, not the values (indexing that
+        buffer with two indices raises ``NotImplementedError``). For a light field of views
+        use :meth:`crop` or :meth:`central`.
+        """
         nv, nu = self.views
         if not (-nv <= v < nv and -nu <= u < nu):
             raise InputError(f"view index: expected v in [0, {nv}) and u in [0, {nu}), got ({v}, {u})")
         return self.data[v, u]
 
     def centre(self) -> np.ndarray:
-        """The centre view ``(H, W, C)``."""
+        """The centre view as a read-only ``(H, W, C)`` array (see :meth:`view`):
+        ``lf.centre()[y, x]`` is a pixel; ``lf.central(1)`` is the centre view as a light field."""
         return self.view(*self.centre_index)
 
     def crop(self, top: int, left: int, height: int, width: int) -> "LightField":

@@ -56,7 +56,7 @@ import numpy as np
 
 from ._util import check_choice, check_random_state, freeze, warn_convergence, warn_saturation
 from ._version import __version__
-from .errors import InputError, ShapeError
+from .errors import InputError, ShapeError, option_name
 from .lightfield import LightField
 
 __all__ = [
@@ -329,7 +329,7 @@ def merge_ml(
         warn_convergence(
             f"ML merge: the weights did not converge in {int(n_iter)} fixed-point update(s): the last update moved "
             f"{n_moved} sample(s) ({100 * n_moved / total:.2g} %) by more than {ML_TOLERANCE_STD:g} of their "
-            "standard deviation; use more iterations (n_iter, --iterations)"
+            f"standard deviation; use more iterations ({option_name('n_iter', '--iterations')})"
         )
     info = _summary(sat_all.reshape(sample_shape), dark_all.reshape(sample_shape))
     info.update({
@@ -1171,10 +1171,12 @@ def merge_lightfields(
             return _finish(lfs, names, method, t, iso, prof, "input-variances", radiance, variance, info, unit,
                            n_iter, per_second_iso=same_iso)
         if prof is None:
-            raise InputError("method ml needs a camera profile (--profile): gain and read noise set its weights")
+            raise InputError(f"method ml needs a camera profile ({option_name('profile=', '--profile')}): gain and "
+                             "read noise set its weights")
         if iso is None:
             missing = next(nm for lf, nm in zip(lfs, names) if lf.iso is None)
-            raise InputError(f"{missing}: no ISO in its metadata; method ml needs one per exposure (give --isos)")
+            raise InputError(f"{missing}: no ISO in its metadata; method ml needs one per exposure "
+                             f"(give {option_name('isos=', '--isos')})")
         if unit != "dn":
             sat = [lf.saturation_level for lf in lfs]
             if any(s is None for s in sat):
@@ -1199,7 +1201,8 @@ def merge_lightfields(
             kwargs = {}
         elif unit == "dn":
             if prof is None:
-                raise InputError("raw (dn) input needs a camera profile (--profile) for its black and white levels")
+                raise InputError(f"raw (dn) input needs a camera profile ({option_name('profile=', '--profile')}) "
+                                 "for its black and white levels")
             stack, kwargs = data, {"white_level": prof.white_level_dn, "black_level": prof.black_level_dn}
         else:
             sat = {lf.saturation_level for lf in lfs}

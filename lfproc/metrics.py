@@ -102,7 +102,7 @@ from typing import Any, Literal
 import numpy as np
 
 from ._util import check_choice, check_positive
-from .errors import InputError, ShapeError
+from .errors import InputError, ShapeError, option_name
 from .lightfield import LightField
 
 __all__ = [
@@ -785,6 +785,9 @@ def _exposure_product(lf: LightField) -> float | None:
     return lf.exposure_s * (lf.iso / 100.0 if lf.iso is not None else 1.0)
 
 
+ALIGN_PYTHON = "align='exposure', or align='gain'"
+
+
 def align_result(result: LightField, reference: LightField, align: str = "none") -> tuple[LightField, dict[str, Any]]:
     """Bring ``result`` to the reference's scale, or refuse a mismatch (``align="none"``).
 
@@ -816,7 +819,7 @@ def align_result(result: LightField, reference: LightField, align: str = "none")
             raise InputError(
                 f"evaluate: result exposure {_describe_exposure(result)} differs from the reference's "
                 f"{_describe_exposure(reference)} ({math.log2(e_res / e_ref):+.2f} stops) in relative units; "
-                "align them (--align exposure, or --align gain)"
+                f"align them ({option_name(ALIGN_PYTHON, '--align exposure, or --align gain')})"
             )
         return result, {"align": "none", "gain": 1.0}
     if align == "exposure":

@@ -181,7 +181,7 @@ def test_report(result, tmp_path):
     files = write_report(result, tmp_path / "rep")
     names = {f.name for f in files}
     assert {"photon_transfer.png", "dark_level.png", "dark_variance.png", "read_noise_vs_iso.png",
-            "summary.md"} <= names
+            "summary.md", "snr.png", "linearity.png", "prnu_dsnu_histograms.png"} <= names
     for f in files:
         assert f.stat().st_size > 0
     assert cv2.imread(str(tmp_path / "rep" / "photon_transfer.png")).shape[2] == 3
@@ -401,3 +401,23 @@ def test_cli_bad_frames_one_line(frames, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "saturated" in err[0]
     assert not (tmp_path / "p.json").exists()
+
+
+def test_demo_contact_sheet_shares_one_scale(frames, tmp_path):
+    """Issue 20, item 5: the demo's sheet of calibration frames uses one display scale for every
+    tile (bias dark, flats brighter with exposure, saturated flats white, not black)."""
+    from lfproc.demo import SHEET_CAPTION, SHEET_HEAD, SHEET_LABEL, SHEET_PAD, SHEET_TILE, _frames_contact_sheet
+
+    sheet = cv2.imread(str(_frames_contact_sheet(frames, tmp_path / "sheet.png")), cv2.IMREAD_GRAYSCALE)
+    rows = {(r["kind"], float(r["exposure_s"])) for r in _rows(frames) if float(r["iso"]) == ISOS[0]}
+    order = {"bias": 0, "dark": 1, "flat": 2}
+    columns = sorted({(r["kind"], float(r["exposure_s"])) for r in _rows(frames)}, key=lambda c: (order[c[0]], c[1]))
+    y0 = SHEET_CAPTION + SHEET_LABEL + 2
+    means = {}
+    for j, col in enumerate(columns):
+        if col in rows:
+            x0 = SHEET_HEAD + j * (SHEET_TILE + SHEET_PAD) + 2
+            means[col] = float(sheet[y0:y0 + SHEET_TILE - 4, x0:x0 + SHEET_TILE - 4].mean())
+    flats = [m for (kind, _), m in sorted(means.items(), key=lambda kv: kv[0][1]) if kind == "flat"]
+    assert means[("bias", min(t for k, t in means if k == "bias"))] < 60
+    assert flats == sorted(flats) and flats[-1] > 250  # brighter with exposure; the saturated one white

@@ -234,7 +234,7 @@ def test_output_exists_without_force(files, tmp_path, capsys):
     out.write_bytes(b"keep me")
     assert main(_argv(files, out)) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "exists.capture.npz: output exists; pass force=True (--force)" in err
+    assert err.count("\n") == 1 and "exists.capture.npz: output exists; pass --force" in err
     assert out.read_bytes() == b"keep me"
 
 

@@ -255,3 +255,36 @@ def test_observation_checks_its_arrays():
         Observation(a, a, np.ones(3), m, m)
     with pytest.raises(InputError, match="observation saturated: expected a boolean mask"):
         Observation(a, a, a, a, m)
+
+
+# -- issue 20, item 6: messages name the argument in Python and the option in the CLI ------------
+
+def test_output_exists_message_names_force_for_the_interface_in_use(tmp_path, capsys):
+    from lfproc.cli.main import main
+    from lfproc.errors import OutputExistsError
+    from lfproc.io import write_lightfield
+
+    lf = LightField(_lf())
+    path = write_lightfield(lf, tmp_path / "lf.exr")
+    with pytest.raises(OutputExistsError) as info:
+        write_lightfield(lf, path)
+    assert "pass force=True to overwrite" in str(info.value) and "--force" not in str(info.value)
+    assert main(["convert", str(path), str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "pass --force to overwrite" in err and "force=True" not in err
+
+
+def test_large_objects_print_a_short_summary():
+    """Issue 20, item 6: str/repr of a capture and the other large objects name shapes, not values."""
+    from lfproc.camera.simulate import simulate_capture
+
+    cap = simulate_capture(np.random.default_rng(0).uniform(0.1, 1, (5, 5, 64, 64, 3)).astype(np.float32),
+                           profile="paper-low", random_state=0)
+    for text in (str(cap), repr(cap)):
+        assert text.count("\n") == 0 and len(text) < 400, text
+        assert text.startswith("Capture(1 shot(s) of 64 x 64 pixels, views=5x5") and "paper-low" in text
+    obs = observations(cap)
+    for obj in (cap.mask, cap.profile, obs, cap.operator(), LightField(_lf())):
+        text = repr(obj)
+        assert str(obj) == text and "\n" not in text and len(text) < 800 and "[[" not in text, text
+    assert "<array 1 x 64 x 64 float32>" in repr(obs)

@@ -287,3 +287,80 @@ def test_emva_sensor_stays_monochrome(emva_set, tmp_path, capsys):
         from lfproc.camera.simulate import simulate_capture
 
         simulate_capture(lf, profile=res.profile, isos=[100], random_state=0)
+
+
+# -- the report of an EMVA 1288 data set (issue 20, item 5) ---------------------------------------
+
+def test_emva_report_names_the_stored_iso_and_draws_the_emva_plots(emva_set, tmp_path):
+    from PIL import Image
+
+    from lfproc.calib.report import write_report
+
+    res = calibrate(emva_set)
+    assert res.iso_label("default") == "ISO 100" and res.figures["default"]["iso"] == 100
+    names = [f.name for f in write_report(res, tmp_path / "rep")]
+    assert {"snr.png", "linearity.png", "prnu_dsnu_histograms.png", "photon_transfer.png"} <= set(names)
+    assert "read_noise_vs_iso.png" not in names  # one ISO: no empty read-noise plot
+    md = (tmp_path / "rep" / "summary.md").read_text()
+    assert "| figure | ISO 100 |" in md and "ISO default" not in md
+    titles = [Image.open(tmp_path / "rep" / n).text["Title"] for n in names if n.endswith(".png")]
+    assert len(set(titles)) == len(titles), titles  # one title per plot
+
+
+def test_report_labels_stay_inside_the_pictures(emva_set, tmp_path):
+    """Wide tick labels (a dark variance near 1e6 DN^2) used to push the y label out of the PNG."""
+    from dataclasses import replace
+
+    from PIL import Image
+
+    from lfproc.calib.report import write_report
+
+    res = calibrate(emva_set)
+    c = dict(res.curves["default"])
+    t = np.asarray(c["dark_var_exposure_s"], float)
+    c["dark_var_dn2"] = (-12345.6 + 912345.6 * t / t.max()).tolist()
+    c["read_var_dn2"] = -12345.6
+    for f in write_report(replace(res, curves={"default": c}), tmp_path / "rep"):
+        if f.suffix == ".png":
+            grey = np.asarray(Image.open(f).convert("L"))
+            border = np.concatenate([grey[:, 0], grey[:, -1], grey[0, :], grey[-1, :]])
+            assert (border > 200).all(), f"{f.name}: something is cut off at the border"
+
+
+def test_emva_data_give_per_pixel_bias_and_flat_maps(tmp_path):
+    from dataclasses import replace
+
+    from lfproc.calib import save_profile
+    from lfproc.camera.sensor import fixed_pattern
+
+    prof = replace(load_profile("paper-high"), prnu=0.01, dsnu_e=1.5, fixed_pattern_seed=2)
+    res = calibrate(simulate_frames(prof, tmp_path / "s", format="emva", size=(64, 64), seed=1))
+    p = res.profile
+    gain, offset = fixed_pattern(prof, (64, 64))
+    assert p.flat_field.shape == (64, 64) and p.flat_field.mean() == pytest.approx(1.0, abs=1e-6)
+    assert (p.flat_field - gain).std() == pytest.approx(p.flat_field_std, rel=0.15)
+    h = prof.isos[100].gain_dn_per_e
+    bias = p.bias_frames[100].astype(np.float64)
+    assert ((bias - bias.mean()) / h - offset).std() == pytest.approx(p.bias_frame_std_dn[100] / h, rel=0.15)
+    assert bias.mean() == pytest.approx(p.black_level_dn, abs=0.05)
+    back = load_profile(save_profile(p, tmp_path / "emva.json"))
+    np.testing.assert_array_equal(back.flat_field, p.flat_field)
+    np.testing.assert_array_equal(back.bias_frames[100], p.bias_frames[100])
+
+
+def test_saturation_mean_key_and_old_profiles(emva_set, tmp_path):
+    from lfproc.calib import save_profile
+
+    res = calibrate(emva_set)
+    f = res.figures["default"]
+    assert "saturation_variance_max_dn" not in f
+    assert f["saturation_mean_dn"] == pytest.approx(f["emva1288"]["u_y_sat"])  # EMVA mu_y.sat, a mean
+    path = save_profile(res.profile, tmp_path / "p.json")
+    doc = json.loads(path.read_text())
+    assert "saturation_mean_dn" in doc["source"]["emva1288"]["100"]
+    figs = doc["source"]["emva1288"]["100"]
+    figs["saturation_variance_max_dn"] = figs.pop("saturation_mean_dn")  # as older lfproc wrote it
+    path.write_text(json.dumps(doc))
+    old = load_profile(path).source["emva1288"]["100"]
+    assert old["saturation_mean_dn"] == pytest.approx(f["saturation_mean_dn"])
+    assert "saturation_variance_max_dn" not in old

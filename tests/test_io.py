@@ -73,7 +73,7 @@ def test_folder_round_trips(tmp_path, fmt, rtol):
 def test_overwrite_needs_force_and_writes_are_atomic(tmp_path):
     lf = random_lf()
     path = write_lightfield(lf, tmp_path / "a.exr")
-    with pytest.raises(OutputExistsError, match="--force"):
+    with pytest.raises(OutputExistsError, match="pass force=True to overwrite"):  # Python's name (CLI: --force)
         write_lightfield(lf, path)
     write_lightfield(lf.replace(source="second"), path, force=True)
     assert read_lightfield(path).source == "second"

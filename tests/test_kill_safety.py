@@ -162,9 +162,9 @@ def test_calibrate_with_report_killed_then_rerun(tmp_path, frames, run_lfproc, c
         assert code == 0, err
     profile = load_profile(tmp_path / "p.json")
     assert profile.bias_frames[100].shape == (32, 32) and profile.flat_field.shape == (32, 32)
-    assert sorted(p.name for p in (tmp_path / "rep").iterdir()) == [
-        "dark_level.png", "dark_variance.png", "figures.json", "photon_transfer.png", "read_noise_vs_iso.png",
-        "summary.md"]
+    assert sorted(p.name for p in (tmp_path / "rep").iterdir()) == [  # one ISO: no read noise against ISO
+        "dark_level.png", "dark_variance.png", "figures.json", "linearity.png", "photon_transfer.png",
+        "prnu_dsnu_histograms.png", "snr.png", "summary.md"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.bias.npz", "p.flat.npz", "p.json", "rep"]
 
 

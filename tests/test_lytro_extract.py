@@ -58,7 +58,7 @@ def test_extract_f01_focal_stack(lytro_dir, tmp_path, capsys):
     # lambda values: the table spans the refocus range of the stack
     lambdas = [e["lambda"] for e in stack]
     assert min(lambdas) - 1 < lut.min() < lut.max() < max(lambdas) + 1
-    assert cv2.imread(str(out / "depth_lut.png"), cv2.IMREAD_GRAYSCALE).shape == (20, 20)
+    assert cv2.imread(str(out / "depth_lut.png")).ndim == 3  # colour-mapped preview with a colour bar
 
 
 def test_extract_f01_depth_map_and_illum_desktop(lytro_dir, tmp_path):
@@ -109,3 +109,34 @@ def test_extract_raw_capture_and_errors(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "x.lfp" in err[0]
     assert not (tmp_path / "c").exists()
+
+
+def test_extract_writes_the_frames_of_f01_videos(lytro_dir, tmp_path):
+    """Issue 20, item 8: the H.264 streams of an F01 focal stack are decoded into frames."""
+    out = tmp_path / "stk"
+    doc = extract_lfp(lytro_dir / "IMG_0002-stk.lfp", out)
+    acc = json.loads((out / "table_of_contents.json").read_text())["picture"]["accelerationArray"]
+    videos = [f for f in doc["files"] if f["kind"] == "video"]
+    assert len(videos) == 2 and all((out / v["file"]).is_file() for v in videos)  # the streams, as stored
+    frames = [f for f in doc["files"] if f["kind"] == "video_frame"]
+    by_stream = {s: [f for f in frames if f["stream"] == s] for s in ("parallax", "refocus_stack")}
+    assert [len(v) for v in by_stream.values()] == [37, 11]
+    meta = {a["type"].rsplit(".", 1)[1]: a["vendorContent"]["blockOfImages"]["metadataArray"] for a in acc}
+    assert [f["params"]["lambda"] for f in by_stream["refocus_stack"]] == pytest.approx(
+        [m["lambda"] for m in meta["refocusStack"]])
+    assert [f["params"]["x"] for f in by_stream["parallax"]] == pytest.approx(
+        [m["coord"]["x"] for m in meta["edofParallax"]])
+    for f in (by_stream["parallax"][0], by_stream["refocus_stack"][-1]):
+        img = cv2.imread(str(out / f["file"]))
+        assert img.shape == (1080, 1080, 3) and img.std() > 10  # a picture, not a blank frame
+    assert by_stream["refocus_stack"][0]["file"] == "refocus_stack_frame_000_lambda-8.81.png"
+
+
+def test_extract_depth_preview_is_colour_mapped_with_a_bar(lytro_dir, tmp_path):
+    doc = extract_lfp(lytro_dir / "IMG_0002-dm.lfp", tmp_path / "dm")
+    entry = next(f for f in doc["files"] if f["kind"] == "depth_map")
+    assert entry["values"] == "depth: Lytro refocus lambda" and entry["min"] < 0 < entry["max"]
+    img = cv2.imread(str(tmp_path / "dm" / entry["preview"]))
+    assert img.shape[1] > img.shape[0]  # the map and, beside it, its colour bar
+    b, g, r = (img[..., i].astype(int) for i in range(3))
+    assert (np.abs(b - g) + np.abs(g - r) > 30).mean() > 0.3  # colours, not grey

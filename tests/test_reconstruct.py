@@ -542,3 +542,14 @@ def test_a_noise_free_sensor_on_a_mostly_black_scene_is_not_returned_black(small
             cap = simulate_capture(lf, profile=profile, shots=2, mask_period=4, random_state=4, exposure_s=0.0005)
             levels[profile] = reconstruct(cap, small_dictionary).data[:, :, 12:20, 12:20].mean()
     assert all(0.95 < v < 1.05 for v in levels.values()), levels
+
+
+def test_view_mismatch_message_says_which_side_has_which():
+    rng = np.random.default_rng(0)
+    lf3 = np.broadcast_to(0.1 + rng.random((1, 1, 16, 16, 3), dtype=np.float32), (3, 3, 16, 16, 3)).copy()
+    capture = simulate_capture(lf3, profile="paper-low", random_state=0)
+    with pytest.raises(ShapeError) as info:
+        reconstruct(capture, "default")
+    message = str(info.value)
+    assert "dictionary 'default' has 5 x 5 views and 3 colours" in message
+    assert "the capture has 3 x 3 views" in message

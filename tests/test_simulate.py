@@ -371,3 +371,34 @@ def test_every_command_reading_light_fields_has_the_value_policies(command, caps
     assert main([*command, "--help"]) == 0
     text = capsys.readouterr().out
     assert "--negative {clip,raise}" in text and "--nonfinite {raise,zero,clip}" in text, command
+# -- views against the dictionary (issue 20, item 7) --------------------------------------------
+
+def test_simulate_warns_when_the_views_do_not_fit_the_shipped_dictionary():
+    from lfproc.errors import ViewCountWarning
+
+    lf3 = _lf(16, 16)[1:4, 1:4]
+    with pytest.warns(ViewCountWarning) as record:
+        capture = simulate_capture(lf3, profile="paper-low", random_state=0, dictionary="default")
+    message = str(record[0].message)
+    assert "3 x 3 views" in message and "shipped dictionary 'default' has 5 x 5 views" in message
+    assert "--" not in message  # Python names the function, not the command's options
+    assert capture.views == (3, 3)  # still made
+    simulate_capture(_lf(16, 16), profile="paper-low", random_state=0, dictionary="default")  # 5 x 5: no warning
+    simulate_capture(lf3, profile="paper-low", random_state=0)  # Python's default: no check
+
+
+def test_cli_simulate_of_3x3_views_warns_in_one_line(tmp_path, capsys):
+    path = tmp_path / "lf3.exr"
+    write_lightfield(LightField(_lf(16, 16)[1:4, 1:4]), path)
+    out = tmp_path / "c.capture.npz"
+    assert main(["simulate", str(path), "-o", str(out), "--seed", "1"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("lfproc simulate: warning: ")
+    assert "3 x 3 views" in err and "'default' has 5 x 5 views" in err and "lfproc dictionary train" in err
+    assert out.is_file()
+    from lfproc.dictionary import dct_dictionary, save_dictionary
+
+    mine = save_dictionary(dct_dictionary((3, 3, 4, 4, 3), 40), tmp_path / "d33.npz")
+    assert main(["simulate", str(path), "-o", str(tmp_path / "c2.capture.npz"), "--seed", "1",
+                 "--dictionary", str(mine)]) == 0
+    assert capsys.readouterr().err == ""  # the dictionary it is meant for fits: no warning

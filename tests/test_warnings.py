@@ -59,7 +59,7 @@ def test_capture_warns_when_its_least_sensitive_pixels_saturate():
 
 
 def test_simulate_warns_once_and_the_summary_does_not_repeat_it(tmp_path, capsys):
-    lf = synthesize("layers", size=(16, 16), views=(3, 3), random_state=0)
+    lf = synthesize("layers", size=(16, 16), views=(5, 5), random_state=0)  # the shipped dictionary's views
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         cap = simulate_capture(lf, radiance_scale=1e9, random_state=0)  # far too bright

@@ -213,6 +213,19 @@ class Capture(ReadOnlyState):
         self.mask.check(views=views, size=(h, w))
 
     # -- figures ------------------------------------------------------------------------
+    def __repr__(self) -> str:
+        """A one-line summary (the arrays are not printed)."""
+        h, w = self.size
+        isos = ", ".join(f"{v:g}" for v in self.isos)
+        times = ", ".join(f"{t:g}" for t in self.exposures_s)
+        truth = (self.ground_truth or {}).get("path")
+        return (f"Capture({self.shots} shot(s) of {h} x {w} pixels, views={self.views[0]}x{self.views[1]}, "
+                f"ISOs=[{isos}], exposures_s=[{times}], profile={self.profile.name!r}, "
+                f"mask={self.mask.kind!r}, cfa={self.cfa_pattern!r}, sampling_rate={100 * self.sampling_rate:.2f} %"
+                + (f", ground_truth={truth!r}" if truth else "") + ")")
+
+    __str__ = __repr__
+
     @property
     def shots(self) -> int:
         return int(self.dn.shape[0])
@@ -476,6 +489,25 @@ def load_capture(path: str | os.PathLike) -> Capture:
     shapes against shots/size/views/mask, total expanded size against the file's size), and
     each array's own header against it, so nothing is allocated that the file does not
     plausibly hold.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A capture file written by :meth:`Capture.save` (``lfproc simulate``, ``lfproc capture``).
+
+    Returns
+    -------
+    Capture
+        With read-only arrays, the camera profile stored in the file, and the file's
+        parameters and ground-truth reference.
+
+    Raises
+    ------
+    MissingFileError
+        No such file.
+    FileFormatError
+        Not a capture file, another schema version, a field or array that is missing, of the
+        wrong type or shape, or larger than the file can hold.
     """
     from ..calib import CameraProfile
 

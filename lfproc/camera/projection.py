@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._util import ReadOnlyState, check_choice, check_random_state, freeze, frozen_array
+from .._util import ReadOnlyState, check_choice, check_random_state, freeze, frozen_array, short_repr
 from ..errors import InputError, ShapeError
 
 __all__ = [
@@ -130,6 +130,7 @@ def check_transmittances(values: np.ndarray, name: str) -> None:
         raise InputError(f"{name}: expected transmittances in [0, 1], found {n} values outside (range [{lo:.4g}, {hi:.4g}])")
 
 
+@short_repr
 @dataclass(frozen=True, eq=False)
 class MaskCode(ReadOnlyState):
     """The mask codes of all shots (see the module documentation for the layouts).
@@ -603,6 +604,7 @@ def patch_grid(size: tuple[int, int], patch: int, stride: int) -> tuple[np.ndarr
     return out[0], out[1]
 
 
+@short_repr
 @dataclass(frozen=True, eq=False)
 class PatchOperators:
     """The distinct patch matrices ``Phi_p`` of a set of patches, and which patch uses which.

@@ -40,7 +40,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import numpy as np
 
-from .._util import ReadOnlyState, check_positive, check_random_state, freeze, frozen_array
+from .._util import ReadOnlyState, check_positive, check_random_state, freeze, frozen_array, short_repr
 from ..calib import load_profile
 from ..errors import InputError, ShapeError
 
@@ -78,6 +78,7 @@ def fixed_pattern(profile, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarr
     return prnu, dsnu
 
 
+@short_repr
 @dataclass(frozen=True)
 class FixedPattern:
     """Fixed-pattern maps of one sensor image and how well they are known (all ``(H, W)``).
@@ -256,6 +257,7 @@ def expose(
     return dn.astype(np.uint16)
 
 
+@short_repr
 @dataclass(frozen=True, eq=False)
 class Observation(ReadOnlyState):
     """Calibrated observations of a sensor image (all arrays ``(H, W)``, or ``(S, H, W)`` for

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -54,7 +55,7 @@ from .._version import __version__
 from .iso import DEFAULT_BLOCK_PX, DEFAULT_ISOS, ISO_PATTERNS, _num, describe_iso_pattern, iso_pattern
 from .capture import MAX_SHOTS, Capture, _warn_saturation, file_sha256, observations
 from ..calib import load_profile
-from ..errors import InputError, ShapeError
+from ..errors import InputError, ShapeError, ViewCountWarning, option_name
 from ..lightfield import LightField, clean_nonfinite
 from .projection import MASK_KINDS, build_operator, make_mask
 from .sensor import expose
@@ -142,6 +143,19 @@ def _check_memory(shots: int, nv: int, nu: int, h: int, w: int) -> None:
                     f"{h} x {w} pixels: the projection operator", error=InputError)
 
 
+def _check_dictionary_views(dictionary, views: tuple[int, int]) -> None:
+    """Warn when ``dictionary``'s patch has other views than the light field (reconstruct would refuse)."""
+    from ..dictionary import SHIPPED, dictionary_patch
+
+    name, patch = dictionary_patch(dictionary)
+    if tuple(patch[:2]) != tuple(views):
+        label = f"the shipped dictionary {name!r}" if name in SHIPPED else f"dictionary {name!r}"
+        warnings.warn(ViewCountWarning(
+            f"the light field has {views[0]} x {views[1]} views; {label} has {patch[0]} x {patch[1]} views, so "
+            f"reconstruct will refuse this capture with it (train a dictionary for {views[0]} x {views[1]} views: "
+            f"{option_name('lfproc.dictionary.train_dictionary', 'lfproc dictionary train')})"), stacklevel=3)
+
+
 def simulate_capture(
     lf: LightField | np.ndarray,
     *,
@@ -162,6 +176,7 @@ def simulate_capture(
     noise: bool = True,
     random_state=None,
     ground_truth: dict | None = None,
+    dictionary=None,
 ) -> Capture:
     """Simulate a capture of a light field (see the module documentation).
 
@@ -203,10 +218,24 @@ def simulate_capture(
         Seeds the mask, the random ISO map and the noise. None draws a seed and records it.
     ground_truth : dict, optional
         ``{"path", "sha256"}`` of the light-field file, recorded in the capture.
+    dictionary : Dictionary, shipped name, path or None
+        The dictionary the capture is meant to be reconstructed with (``"default"``: the shipped
+        one). When its views differ from the light field's, a
+        :class:`~lfproc.errors.ViewCountWarning` names both (the capture is still made, but
+        :func:`lfproc.recon.reconstruct` will refuse it with that dictionary). None (default):
+        no check; :func:`simulate_file` and ``lfproc simulate`` check against ``"default"``.
 
     Returns
     -------
     Capture
+
+    Warns
+    -----
+    ViewCountWarning
+        The light field's views do not match ``dictionary``'s patch.
+    SaturationWarning
+        More than :data:`lfproc.errors.SATURATION_WARNING_FRACTION` of the least sensitive pixels
+        are saturated.
     """
     profile = load_profile(profile)
     if isinstance(lf, LightField):
@@ -327,6 +356,8 @@ def simulate_capture(
         parameters=parameters,
     )
     _warn_saturation(capture, stacklevel=4)
+    if dictionary is not None:  # last: a capture that cannot be made is refused first
+        _check_dictionary_views(dictionary, (nv, nu))
     return capture
 
 
@@ -371,9 +402,13 @@ def simulate_file(
     force: bool = False,
     nonfinite: str = "raise",
     negative: str = "raise",
+    dictionary="default",
     **options,
 ) -> tuple[Capture, dict[str, Any]]:
     """Read a light field, simulate a capture (:func:`simulate_capture` ``options``), write it.
+
+    ``dictionary`` (default: the shipped ``"default"``) is the dictionary the capture is meant
+    for: a :class:`~lfproc.errors.ViewCountWarning` when its views differ (None: no check).
 
     NaN/Inf or negative radiance in the input is refused unless ``nonfinite`` (``"zero"``,
     ``"clip"``) or ``negative`` (``"clip"``: set to 0, as for the tiny negatives of lossy EXR
@@ -390,6 +425,6 @@ def simulate_file(
     check_output(output_path, force=force)
     lf = read_lightfield(input_path, nonfinite=nonfinite, negative=negative)
     truth = {"path": str(Path(input_path).resolve()), "sha256": file_sha256(input_path)}
-    capture = simulate_capture(lf, ground_truth=truth, **options)
+    capture = simulate_capture(lf, ground_truth=truth, dictionary=dictionary, **options)
     capture.save(output_path, force=force)
     return capture, capture_summary(capture, path=output_path)

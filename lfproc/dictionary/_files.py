@@ -42,7 +42,7 @@ from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 from ..io import atomic_file
 
 __all__ = ["is_dictionary_file", "Dictionary", "load_dictionary", "save_dictionary", "SCHEMA", "SCHEMA_VERSION", "SHIPPED",
-           "shipped_path"]
+           "shipped_path", "dictionary_patch"]
 
 SCHEMA = "lfproc.dictionary"
 SCHEMA_VERSION = 1
@@ -290,6 +290,30 @@ def _read_header(zf: zipfile.ZipFile, where: str) -> dict:
         raise FileFormatError(f"{where}: field 'schema_version': expected {SCHEMA_VERSION}, found "
                               f"{str(header.get('schema_version'))[:20]} (written by another lfproc version)")
     return header
+
+
+def dictionary_patch(source: "str | os.PathLike | Dictionary" = "default") -> tuple[str, tuple[int, ...]]:
+    """Name and patch shape ``(V, U, P, P, C)`` of a dictionary, reading only a file's header.
+
+    Cheap (the atoms are not read); used to check a capture's views against the dictionary it is
+    meant for before reconstructing.
+    """
+    if isinstance(source, Dictionary):
+        return str(source.name or source.preset), tuple(source.patch)
+    name = str(source)
+    shipped = name in SHIPPED and not Path(name).exists()
+    path = shipped_path(name) if shipped else Path(source)
+    if not path.is_file() or not zipfile.is_zipfile(path):
+        raise MissingFileError(f"{path}: no such dictionary file") if not path.exists() else \
+            FileFormatError(f"{path}: not an lfproc dictionary (expected a .npz archive with {HEADER_NAME})")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            patch = _field(_read_header(zf, str(path)), "patch", list, str(path))
+    except zipfile.BadZipFile as exc:
+        raise FileFormatError(f"{path}: corrupt dictionary archive ({exc})") from None
+    if len(patch) != 5 or not all(isinstance(p, int) and not isinstance(p, bool) and p >= 1 for p in patch):
+        raise FileFormatError(f"{path}: field 'patch': expected 5 positive integers, found {str(patch)[:80]}")
+    return (name if shipped else str(path)), tuple(patch)
 
 
 def load_dictionary(source: str | os.PathLike | Dictionary = "default") -> Dictionary:

@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_random_state, progress, realign
+from .._util import check_random_state, progress, realign, short_repr
 from ..errors import FileFormatError, InputError, ShapeError
 from ..io import atomic_file
 from ._omp import gram_matrix, omp_codes
@@ -102,6 +102,7 @@ class TrainingSignals:
         return h.hexdigest()[:16]
 
 
+@short_repr
 @dataclass
 class KsvdResult:
     """What :func:`ksvd` returns."""

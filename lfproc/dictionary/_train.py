@@ -30,7 +30,7 @@ import numpy as np
 
 from .._util import check_choice, progress
 from .._version import __version__
-from ..errors import InputError
+from ..errors import InputError, option_name
 from ..lightfield import LightField
 from ._dct import dct_dictionary
 from ._files import Dictionary, load_dictionary
@@ -155,7 +155,7 @@ def train_dictionary(
         data_desc["synthetic"] = {"scenes": p.synthetic_scenes, "size": list(p.synthetic_size), "seed": int(seed),
                                   "baselines_px": list(SYNTHETIC_BASELINES), "lfproc_version": __version__}
     if not lfs:
-        raise InputError("training: no light fields (give files, or --synthetic)")
+        raise InputError(f"training: no light fields (give files, or {option_name('synthetic=True', '--synthetic')})")
     x, info = training_patches(lfs, patch=patch, n_patches=n_patches, normalise=normalise, random_state=seed)
     del lfs
     result = ksvd(x, atoms, sparsity, iterations, random_state=seed, checkpoint=checkpoint, scheduler=scheduler)

@@ -38,7 +38,13 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..errors import InputError, OutputExistsError
+from ..errors import InputError, OutputExistsError, option_name
+
+
+
+def _exists(path) -> str:
+    """The message of an existing output, naming force in the words of the interface in use."""
+    return f"{path}: output exists; pass {option_name('force=True', '--force')} to overwrite it"
 
 __all__ = ["check_output", "atomic_file", "atomic_dir", "atomic_outputs", "clean_stale"]
 
@@ -202,7 +208,7 @@ def check_output(path: str | os.PathLike, *, force: bool = False) -> Path:
         raise InputError(f"{path}: the output folder {parent} does not exist")
     clean_stale(parent)
     if (path.exists() or path.is_symlink()) and not force:
-        raise OutputExistsError(f"{path}: output exists; pass force=True (--force) to overwrite it")
+        raise OutputExistsError(_exists(path))
     return path
 
 
@@ -227,7 +233,7 @@ def atomic_file(path: str | os.PathLike, *, force: bool = False):
         if not tmp.exists() or tmp.stat().st_size == 0:
             raise OSError(f"{path}: the writer produced no data")
         if path.exists() and not force:  # appeared while we were working
-            raise OutputExistsError(f"{path}: output exists; pass force=True (--force) to overwrite it")
+            raise OutputExistsError(_exists(path))
         _publish_mode(tmp, 0o666)
         _checkpoint("file-written")
         os.replace(tmp, path)
@@ -252,7 +258,7 @@ def atomic_dir(path: str | os.PathLike, *, force: bool = False):
         old = None
         if path.exists():
             if not force:
-                raise OutputExistsError(f"{path}: output exists; pass force=True (--force) to overwrite it")
+                raise OutputExistsError(_exists(path))
             old = path.with_name(f".lfproc-old-{os.getpid()}-{path.name}-{secrets.token_hex(4)}")
             os.replace(path, old)
             _checkpoint("dir-aside")
@@ -296,7 +302,7 @@ def atomic_outputs(paths: Sequence[str | os.PathLike], *, force: bool = False):
             if not (s.exists() or s.is_symlink()):
                 raise OSError(f"{p}: the writer produced no output")
             if p.exists() and not force:
-                raise OutputExistsError(f"{p}: output exists; pass force=True (--force) to overwrite it")
+                raise OutputExistsError(_exists(p))
         _checkpoint("staged")
         _publish(finals, staged, list(stage_dirs.values()))
     finally:

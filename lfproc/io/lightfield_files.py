@@ -33,7 +33,7 @@ import numpy as np
 from .. import _untrusted as ut
 from .._util import freeze
 from .._version import __version__
-from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
+from ..errors import FileFormatError, InputError, MissingFileError, ShapeError, option_name
 from ..lightfield import LightField, clean_nonfinite
 from ._atomic import atomic_dir, atomic_file, check_output
 from .images import IMAGE_SUFFIXES, read_image, write_image
@@ -388,6 +388,9 @@ def write_lightfield(
     return path
 
 
+_TONEMAP_PYTHON = "lfproc.tonemap.display_transform(lf, exposure_ev=, tonemap=)"
+
+
 def _warn_clipping(lf: LightField, path: Path) -> None:
     import warnings
 
@@ -397,7 +400,8 @@ def _warn_clipping(lf: LightField, path: Path) -> None:
     if frac > 0:
         warnings.warn(SaturationWarning(
             f"{path}: {frac:.1%} of the samples exceed 1 and are clipped by the 8/16-bit encoding "
-            "(lower the exposure or tone map: --exposure-ev, --tonemap)"), stacklevel=3)
+            f"(lower the exposure or tone map: {option_name(_TONEMAP_PYTHON, '--exposure-ev, --tonemap')})"),
+            stacklevel=3)
 
 
 def _write_pfm(path: Path, disparity: np.ndarray) -> None:

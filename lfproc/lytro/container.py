@@ -34,6 +34,7 @@ from .._version import __version__
 from ..errors import InputError, LfpFormatError, MissingFileError, ShapeError
 from ..io import atomic_file
 from .raw import pack_raw10
+from .._util import short_repr
 
 __all__ = [
     "LFP_MAGIC",
@@ -57,6 +58,7 @@ _SHA1_RE = re.compile(rb"sha1-[0-9a-fA-F]{40}")
 MAX_LFP_BYTES = 4 << 30
 
 
+@short_repr
 @dataclass(frozen=True)
 class LfpSection:
     """One section of a Lytro container.
@@ -95,6 +97,7 @@ class LfpSection:
         return _parse_json(self.data, f"section {self.name or self.sha1}")
 
 
+@short_repr
 @dataclass(frozen=True)
 class LfpContainer:
     """A parsed LFP/LFR file: its sections, table of contents and verification state."""

@@ -45,7 +45,7 @@ import numpy as np
 
 from .._util import check_choice, freeze
 from .._version import __version__
-from ..errors import InputError, ShapeError
+from ..errors import InputError, ShapeError, option_name
 from ..lightfield import LightField
 from .grid import LensletGrid
 from .virtual import VIEW_STEP_DIVISOR, output_shape
@@ -485,7 +485,8 @@ def decode_capture(capture: str | os.PathLike, *, white_db: str | os.PathLike | 
     check_choice("demosaic method", demosaic_method, DEMOSAIC_METHODS)
     cap = read_capture(capture, verify=verify)  # first: a file without a raw image is named as such
     if white_db is None and white is None:
-        raise InputError("decode: give a white-image database (--white-db DB_DIR) or a white image (--white FILE)")
+        raise InputError(f"decode: give a white-image database ({option_name('white_db=DB_DIR', '--white-db DB_DIR')}) "
+                         f"or a white image ({option_name('white=FILE', '--white FILE')})")
     if white is not None:
         wraw, entry = read_white_file(white)
         how = "explicit file"

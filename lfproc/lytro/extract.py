@@ -17,8 +17,13 @@ JPEG / PNG images           the embedded bytes as they are: ``focus_stack_00_lam
                             ``thumbnail_00.jpg``, ``image_00.jpg``...
 depth maps, depth LUTs,     float32 little-endian samples as an OpenEXR image (channel ``Y``,
 confidence maps             lossless; depths are Lytro's refocus ``lambda`` and can be negative:
-                            ``read_image(path, negative="keep")``) plus an 8-bit PNG preview
-                            stretched to its range
+                            ``read_image(path, negative="keep")``) plus a colour-mapped PNG
+                            preview with a colour bar in those units
+F01 videos (H.264 streams   the stream as stored (``section_NN_video.h264``) and its frames
+of a refocus stack or a     decoded by OpenCV as 8-bit PNGs, named by what they hold:
+parallax sweep)             ``refocus_stack_frame_000_lambda-8.81.png``,
+                            ``parallax_frame_000_x0.21_y0.121.png`` (the frame's
+                            ``metadataArray`` entry)
 raw lenslet image           ``raw_lenslet.bin`` (packed bytes as stored; ``lfproc decode``
                             turns a capture into views)
 anything else               ``section_<n>_<kind>.bin`` / ``.json``
@@ -49,6 +54,11 @@ __all__ = ["lfp_contents", "contents_summary", "has_raw_image", "require_raw_ima
 #: Table-of-contents keys of float32 maps (depth, confidence), and their file names.
 FLOAT_MAP_KEYS = {"depthMap": "depth_map", "depthLut": "depth_lut", "confidenceMap": "confidence_map"}
 _FRAME_JSON = {"metadataRef": "metadata", "privateMetadataRef": "private_metadata"}
+#: File-name stem of the frames of a first-generation (F01) video, by the type of its acceleration.
+_VIDEO_NAMES = {"refocusStack": "refocus_stack", "edofParallax": "parallax"}
+#: Colour bar label of the float maps' previews.
+_MAP_LABELS = {"depth_map": "depth: Lytro refocus lambda", "depth_lut": "depth: Lytro refocus lambda",
+               "confidence_map": "confidence"}
 
 
 def has_raw_image(c: LfpContainer) -> bool:
@@ -131,6 +141,10 @@ def lfp_contents(c: LfpContainer) -> list[dict[str, Any]]:
                         break
         elif rep == "h264":
             item["kind"] = "video"
+            meta = parent.get("metadataArray") if isinstance(parent, dict) else None
+            item["frames"] = [m for m in meta if isinstance(m, dict)] if isinstance(meta, list) else []
+            kind_of = next((n.get("type") for n in chain if isinstance(n, dict) and isinstance(n.get("type"), str)), "")
+            item["video"] = _VIDEO_NAMES.get(kind_of.rsplit(".", 1)[-1], "video")
         elif rep == "json":
             item["kind"] = "json"
         else:
@@ -174,6 +188,67 @@ def contents_summary(items: list[dict[str, Any]]) -> str:
 def _float_map(data: bytes, shape) -> np.ndarray:
     a = np.frombuffer(data, dtype="<f4").astype(np.float32)
     return a.reshape(shape) if shape else a.reshape(1, -1)
+
+
+def _map_preview(values: np.ndarray, out: Path, *, label: str, title: str) -> None:
+    """A colour-mapped PNG of a float map with a colour bar in its units (viridis; nearest
+    neighbour, so the map's own pixels show)."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+    h, w = values.shape
+    side = 4.0 * max(h, w) / min(h, w) if min(h, w) else 4.0
+    fig = Figure(figsize=(min(side, 8.0) * w / max(h, w) + 1.6, min(side, 8.0) * h / max(h, w) + 0.6),
+                 layout="constrained")
+    ax = fig.add_subplot()
+    shown = ax.imshow(values, cmap="viridis", interpolation="nearest")
+    ax.set_title(title, fontsize=9)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    fig.colorbar(shown, ax=ax, label=label)
+    fig.savefig(out, dpi=100)
+
+
+def _video_frames(video: Path, folder: Path, stem: str, frames_meta: list, files: list) -> dict[str, Any]:
+    """Decode an embedded H.264 stream (OpenCV) into ``<stem>_frame_NNN[_lambda..|_x.._y..].png``
+    files (8-bit, lossless from the decoded frames); each frame gets its ``metadataArray`` entry
+    (``lambda`` of a refocus stack, ``coord`` of a parallax sweep) as parameters."""
+    import cv2
+
+    cap = cv2.VideoCapture(str(video))
+    written = []
+    try:
+        while True:
+            ok, frame = cap.read()
+            if not ok:
+                break
+            m = len(written)
+            meta = frames_meta[m] if m < len(frames_meta) else {}
+            params: dict[str, float] = {}
+            if isinstance(meta.get("lambda"), (int, float)):
+                params["lambda"] = float(meta["lambda"])
+            coord = meta.get("coord")
+            if isinstance(coord, dict):
+                params.update({k: float(v) for k, v in coord.items()
+                               if k in ("x", "y") and isinstance(v, (int, float))})
+            suffix = "".join(f"_{k}{_number(v)}" for k, v in params.items())
+            fname = f"{stem}_frame_{m:03d}{suffix}.png"
+            if not cv2.imwrite(str(folder / fname), frame):
+                raise OSError(f"{folder / fname}: could not write a video frame")
+            files.append({"file": fname, "kind": "video_frame", "video": video.name, "stream": stem,
+                          "index": m, "params": params, "shape": list(frame.shape[:2])})
+            written.append(fname)
+    finally:
+        cap.release()
+    out: dict[str, Any] = {"frames": len(written), "frame_files": f"{stem}_frame_*.png" if written else None}
+    if not written:
+        out["frames_note"] = "OpenCV could not decode the stream (no H.264 decoder in this build?); kept as is"
+    elif frames_meta and len(frames_meta) != len(written):
+        out["frames_note"] = (f"the table of contents describes {len(frames_meta)} frames, the stream holds "
+                              f"{len(written)}")
+    return out
 
 
 def extract_lfp(path: str | os.PathLike, out_dir: str | os.PathLike, *, force: bool = False,
@@ -237,10 +312,9 @@ def extract_lfp(path: str | os.PathLike, out_dir: str | os.PathLike, *, force: b
                 fname = f"{base}.exr"
                 write_image(tmp / fname, values[..., None])
                 lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
-                preview = np.clip((values - lo) / (hi - lo if hi > lo else 1.0) * 255 + 0.5, 0, 255).astype(np.uint8)
-                cv2.imwrite(str(tmp / f"{base}.png"), preview)
+                _map_preview(values, tmp / f"{base}.png", label=_MAP_LABELS[kind], title=f"{base} ({path.name})")
                 entry.update({"shape": list(values.shape), "min": lo, "max": hi, "preview": f"{base}.png",
-                              "encoding": "float32 little-endian"})
+                              "encoding": "float32 little-endian", "values": _MAP_LABELS[kind]})
             elif kind == "raw_lenslet":
                 fname = "raw_lenslet.bin" if n == 0 else f"raw_lenslet_{n:02d}.bin"
                 (tmp / fname).write_bytes(data)
@@ -251,6 +325,12 @@ def extract_lfp(path: str | os.PathLike, out_dir: str | os.PathLike, *, force: b
                 ext = {"video": "h264"}.get(kind, "bin")
                 fname = f"section_{len(files):02d}_{re.sub(r'[^a-z0-9]+', '_', kind)}.{ext}"
                 (tmp / fname).write_bytes(data)
+                if kind == "video":  # its frames too, named by what the stream holds
+                    name = item["video"]
+                    k = counters.get(f"video:{name}", 0)
+                    counters[f"video:{name}"] = k + 1
+                    stem = name if k == 0 else f"{name}_{k:02d}"
+                    entry.update(_video_frames(tmp / fname, tmp, stem, item["frames"], files))
             entry["file"] = fname
             written_sha[item["sha1"]] = fname
             files.append(entry)

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from .._util import warn_convergence
+from .._util import warn_convergence, short_repr
 from ..errors import CalibrationError, InputError, ShapeError
 
 __all__ = ["LensletGrid", "estimate_grid", "ILLUM_SPACING_PX", "F01_SPACING_PX"]
@@ -46,6 +46,7 @@ F01_SPACING_PX = 1.3899e-5 / 1.4e-6
 _SQRT3_2 = math.sqrt(3.0) / 2.0
 
 
+@short_repr
 @dataclass(frozen=True)
 class LensletGrid:
     """A hexagonal grid of micro-image centres on a sensor (see the module documentation).

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from .. import _untrusted as ut
-from .._util import progress
+from .._util import progress, short_repr
 from .._version import __version__
 from ..errors import (CalibrationError, FileFormatError, InputError, MissingFileError, NoWhiteImageError,
                       UnsafeFileError)
@@ -126,6 +126,7 @@ class WhiteEntry:
         return ut.read_npz(path, names=["raw"], expect={"raw": (tuple(self.grid.image_size), "uint16")})["raw"]
 
 
+@short_repr
 @dataclass(frozen=True)
 class WhiteDatabase:
     """A loaded white-image database (:func:`load_white_db`)."""

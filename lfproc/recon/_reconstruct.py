@@ -375,10 +375,15 @@ def reconstruct(
 ) -> LightField:
     """Reconstruct the HDR light field of a coded multi-ISO capture (method.md section 4).
 
-    Per patch ``p`` (the dictionary's patch: ``V x U`` views of ``P x P`` pixels, 3 colours):
-    ``a* = argmin_a 1/2 ||W (Phi_p D a - T_p)||^2 + mu ||a||_1`` with ``T`` the calibrated
-    observations of every shot (e-/s) and ``W = 1/std(T)``, zero where a pixel is saturated or
-    black-clipped; the patch estimate is ``D a*``; overlapping estimates are averaged.
+    Per patch ``p`` (the dictionary's patch: ``V x U`` views of ``P x P`` pixels, 3 colours), with
+    the defaults: ``a* = argmin_a 1/2 ||W (Phi_p D a - T_p)||^2 + lambda_p ||a||_1`` with ``T`` the
+    calibrated observations of every shot (e-/s), ``W = 1/std(T)`` from a photon-noise variance of
+    each measurement's same-colour neighbours (``variance="local"``), zero where a pixel is
+    saturated or black-clipped, and ``lambda_p = mu sqrt(2 ln K) s_p`` at the noise level of the
+    patch (``scale="universal"``); the patch estimate is ``D a*``; overlapping estimates are
+    weighted by scale, a centre window and their fit (``overlap="scale-window-fit"``). The
+    paper's plain form (per-patch units, plain averages) is ``scale="patch", overlap="mean"``
+    (:data:`PAPER`); the module notes describe every option.
 
     Parameters
     ----------
@@ -484,8 +489,9 @@ def reconstruct(
     v_n, u_n, size, _, c_n = dictionary.patch
     if (v_n, u_n) != tuple(capture.views) or c_n != 3:
         raise ShapeError(
-            f"dictionary {dictionary.name or dictionary.preset!r}: patch {list(dictionary.patch)} does not fit the "
-            f"capture: expected {capture.views[0]} x {capture.views[1]} views and 3 colours")
+            f"dictionary {dictionary.name or dictionary.preset!r} has {v_n} x {u_n} views and {c_n} colours "
+            f"(patch {list(dictionary.patch)}); the capture has {capture.views[0]} x {capture.views[1]} views and "
+            f"3 colours: use a dictionary trained for {capture.views[0]} x {capture.views[1]} views")
     h, w = capture.size
     if size > min(h, w):
         raise ShapeError(f"dictionary patch of {size} x {size} pixels does not fit the capture's sensor of {h} x {w}")
