@@ -542,3 +542,85 @@ def test_a_noise_free_sensor_on_a_mostly_black_scene_is_not_returned_black(small
             cap = simulate_capture(lf, profile=profile, shots=2, mask_period=4, random_state=4, exposure_s=0.0005)
             levels[profile] = reconstruct(cap, small_dictionary).data[:, :, 12:20, 12:20].mean()
     assert all(0.95 < v < 1.05 for v in levels.values()), levels
+
+
+# -- BLAS threads, factors, empty patches (issue 19) ---------------------------------------------
+
+def _blas_threads():
+    from threadpoolctl import threadpool_info
+
+    return [(i["internal_api"], i["num_threads"]) for i in threadpool_info()]
+
+
+def test_one_blas_limit_around_the_pool_and_outputs_identical_for_any_thread_count(smooth_capture,
+                                                                                   small_dictionary, monkeypatch):
+    """threadpoolctl changes the BLAS state of the whole process and is not thread-safe: the limit is set once
+    around the pool (not per block, where overlapping enter/exit pairs restored the wrong count), every block
+    runs on one BLAS thread, the process's BLAS thread count is the same after reconstruct, and the output does
+    not depend on the number of threads."""
+    import threadpoolctl
+
+    import lfproc.recon._reconstruct as rr
+
+    before = _blas_threads()
+    entered = []
+    seen = []
+    real_limits, real_block = threadpoolctl.threadpool_limits, rr._solve_block_here
+
+    def counting_limits(*args, **kwargs):
+        entered.append(args)
+        return real_limits(*args, **kwargs)
+
+    def block(task, shared):
+        seen.append({n for _, n in _blas_threads()})
+        return real_block(task, shared)
+
+    monkeypatch.setattr(threadpoolctl, "threadpool_limits", counting_limits)
+    monkeypatch.setattr(rr, "threadpool_limits", counting_limits)
+    monkeypatch.setattr(rr, "_solve_block_here", block)
+    outs = {t: reconstruct(smooth_capture, small_dictionary, max_iter=20, block_patches=4, threads=t).data
+            for t in (1, 2, 4)}
+    assert np.array_equal(outs[1], outs[2]) and np.array_equal(outs[1], outs[4])
+    assert len(seen) >= 3 * 3 and all(s == {1} for s in seen)
+    assert len(entered) <= 2 * 3  # per reconstruction: the pool, and the factors of the phases (not per block)
+    assert _blas_threads() == before
+
+
+def test_the_admm_factor_of_a_phase_is_built_once_per_reconstruction(smooth_capture, small_dictionary, monkeypatch):
+    from lfproc.recon import _solvers
+
+    built = []
+    real = _solvers._Factor.build.__func__
+
+    def counting(cls, gram):
+        built.append(np.shape(gram))
+        return real(cls, gram)
+
+    monkeypatch.setattr(_solvers._Factor, "build", classmethod(counting))
+    out = reconstruct(smooth_capture, small_dictionary, max_iter=10, block_patches=4, threads=1)
+    phases = out.attrs["reconstruction"]["operators"]
+    assert len(built) == phases < out.attrs["reconstruction"]["patches"]
+
+
+def test_patches_without_a_usable_measurement_are_left_out_of_the_plain_mean(small_dictionary):
+    """Known answer: a flat scene (level 1, the dictionary's constant atom, noise-free) with a square 2^14
+    brighter that saturates every shot. The patches inside the square have no usable measurement; the patches
+    that overlap it fit the flat level from their unsaturated pixels and extrapolate it. With the paper's plain
+    mean, the pixels of the square covered by both had the empty patches averaged in as zeros (0.25-0.75 of
+    the level); left out, every pixel covered by a non-empty patch is at the level, and the pixels covered by
+    empty patches only are 0 (nothing was measured there)."""
+    import warnings
+
+    data = np.ones((5, 5, 32, 32, 3), np.float32)
+    data[:, :, 8:24, 8:24] = 2.0**14
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the square saturates: expected
+        cap = simulate_capture(lfproc.LightField(data, units="relative"), profile="paper-none", noise=False,
+                               shots=2, mask_period=4, random_state=4, radiance_scale=SMOOTH_SCALE)
+        out = reconstruct(cap, small_dictionary, solver="omp", sparsity=1, overlap="mean", scale="patch").data
+    rec_empty = np.zeros((32, 32), bool)
+    rec_empty[12:20, 12:20] = True  # covered by the empty patches (tops and lefts 8, 12, 16) only
+    level = out.mean(axis=(0, 1, 4))
+    assert out.max() > 0.5
+    np.testing.assert_allclose(level[~rec_empty], 1.0, rtol=0.03)
+    assert not level[rec_empty].any()

@@ -13,15 +13,18 @@ columns in :func:`admm`), small systems are factorised in float64.
 Written by hand because no library solves many small weighted lasso problems that share
 (or do not share) a sensing matrix in one batch: scikit-learn, skglm and celer solve one
 problem at a time (reconstruction.md section 3.4).
+
+The solvers set no BLAS thread limit: threadpoolctl changes the BLAS library's state for the
+whole process and is not thread-safe, so the caller sets it once (:func:`lfproc.recon.reconstruct`
+runs every block on one BLAS thread).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.linalg.blas import saxpy, sgemm
-from threadpoolctl import threadpool_limits
 
-__all__ = ["SharedOperator", "BatchOperator", "admm", "admm_patch", "fista", "omp", "auto_rho", "SOLVERS"]
+__all__ = ["SharedOperator", "BatchOperator", "admm", "fista", "omp", "auto_rho", "SOLVERS"]
 
 SOLVERS = ("admm", "fista", "omp")
 
@@ -36,14 +39,17 @@ class SharedOperator:
     A : ndarray of shape (m, K), float32
     gram : ndarray of shape (m, m), optional
         ``A A^T`` (float64) if already computed (it is computed once per phase).
+    factor : optional
+        The ADMM factor of ``A`` (:meth:`factor`) if already computed (:func:`lfproc.recon.reconstruct`
+        builds one per phase for the whole reconstruction, not one per block).
     """
 
-    def __init__(self, A: np.ndarray, gram: np.ndarray | None = None):
+    def __init__(self, A: np.ndarray, gram: np.ndarray | None = None, factor: "_Factor | None" = None):
         self.A = np.ascontiguousarray(A, dtype=np.float32)
         self.AT = np.ascontiguousarray(self.A.T)
         self._gram = gram
         self._sq = None
-        self._factor = None
+        self._factor = factor
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -188,96 +194,6 @@ _BALANCE_EVERY = 5
 _BALANCE_RATIO = 10.0
 
 
-def admm_patch(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho=None,
-               compact_fraction: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
-    """Scaled ADMM for the weighted lasso, Woodbury solve through one ``m x m`` eigendecomposition per patch.
-
-    The first implementation (the paper's splitting ``a = z`` with the weighted data term in the
-    ``a`` step), kept for comparison (benchmarks/reconstruct.py): its per-patch eigendecomposition
-    costs as much as ~70 iterations' GEMMs, and its element-wise passes cost more than the
-    GEMMs; :func:`admm` is the default.
-
-    Splitting ``a = z``: ``a <- (B^T B + rho I)^-1 (B^T c + rho (z - u))`` with ``B = W A``,
-    ``c = W y``, through ``(B^T B + rho I)^-1 q = (q - B^T (rho I + B B^T)^-1 B q) / rho``;
-    ``B B^T = W (A A^T) W`` (with a shared ``A`` the Gram matrix ``A A^T`` is computed once per
-    phase) is diagonalised once per patch, ``Q diag(l) Q^T``, so ``(rho I + B B^T)^-1`` is
-    ``Q diag(1 / (rho + l)) Q^T`` for any ``rho`` and the penalty can adapt (residual balancing)
-    at no cost. ``z <- soft(a + u, mu / rho)``; ``u <- u + a - z``. A patch stops when
-    ``||z_k - z_{k-1}|| <= tol ||z_k||`` and ``||a_k - z_k|| <= tol ||z_k||``.
-
-    Parameters and returns as :func:`admm` (without ``alpha`` and ``chunk``), except ``rho``:
-    the initial penalty per patch in the data's units, default :func:`auto_rho`.
-    """
-    w = np.asarray(w, dtype=np.float32)
-    y = np.asarray(y, dtype=np.float32)
-    b_n, m = w.shape
-    k_n = op.shape[1]
-    mu = np.broadcast_to(np.asarray(mu, dtype=np.float64).reshape(-1), (b_n,)).astype(np.float32)[:, None]
-    btc = op.adj(w * w * y)  # B^T c, (B, K)
-    g = op.gram()
-    s = w[:, :, None].astype(np.float64) * g * w[:, None, :].astype(np.float64)
-    with threadpool_limits(1):  # small LAPACK calls: 8x faster on one thread than on two (measured)
-        ev, vec = np.linalg.eigh(s)
-    ev = np.maximum(ev, 0.0)
-    rho = auto_rho(ev) if rho is None else np.asarray(rho, dtype=np.float64).reshape(b_n)
-    rho = rho.astype(np.float32)[:, None]
-    q_t = np.ascontiguousarray(vec.transpose(0, 2, 1), dtype=np.float32)  # Q^T
-    q_m = np.ascontiguousarray(vec, dtype=np.float32)
-    ev = ev.astype(np.float32)
-    inv = 1.0 / (rho + ev)
-    p0 = op.fwd(btc)  # A B^T c
-    h = btc / rho
-    z = np.zeros((b_n, k_n), dtype=np.float32)
-    u = np.zeros_like(z)
-    act = _Active(b_n, k_n)
-    pending = 0
-    it = 0
-    for it in range(1, max_iter + 1):
-        v = z - u
-        bq = w * (p0 + rho * op.fwd(v))
-        # (rho I + B B^T)^-1 bq = Q diag(1 / (rho + l)) Q^T bq; einsum: numpy's stacked matmul of
-        # matrix-vector products is ~30x slower here (measured, numpy 2 + OpenBLAS)
-        r = np.einsum("bij,bj->bi", q_m, inv * np.einsum("bij,bj->bi", q_t, bq))
-        a = h + v - op.adj(w * r / rho)
-        x = a + u
-        z_new = _soft(x, mu / rho)
-        u = x - z_new
-        if it % _BALANCE_EVERY and it != max_iter:  # residuals and stops every few iterations only
-            z = z_new
-            continue
-        znorm = np.sqrt(np.einsum("bk,bk->b", z_new, z_new))
-        dz = z_new - z
-        change = np.sqrt(np.einsum("bk,bk->b", dz, dz))
-        pr = a - z_new
-        primal = np.sqrt(np.einsum("bk,bk->b", pr, pr))
-        floor = np.maximum(znorm, _TINY)
-        done = (change <= tol * floor) & (primal <= tol * floor)
-        z = z_new
-        pending += int(done.sum())
-        if it == max_iter:
-            break
-        dual = rho[:, 0] * change
-        up = primal > _BALANCE_RATIO * dual
-        down = dual > _BALANCE_RATIO * primal
-        if up.any() or down.any():
-            factor = np.where(up, 2.0, np.where(down, 0.5, 1.0)).astype(np.float32)[:, None]
-            rho = rho * factor
-            u = u / factor
-            inv = 1.0 / (rho + ev)
-            h = btc / rho
-        if pending and pending >= max(1, compact_fraction * len(act.rows)):
-            keep = act.retire(done, z, it)
-            pending = 0
-            if not keep.all():
-                if not keep.any():
-                    return act.out, act.iters
-                z, u, w, p0, h, btc, q_m, q_t, ev, inv, rho, mu = (
-                    t[keep] for t in (z, u, w, p0, h, btc, q_m, q_t, ev, inv, rho, mu))
-                op = op.subset(keep)
-    act.retire(np.ones(len(act.rows), dtype=bool), z, it)
-    return act.out, act.iters
-
-
 class _Factor:
     """What :func:`admm` needs of ``G = A A^T``: ``beta``, ``N = beta (I + beta G)^-1`` and ``G`` (float32).
 
@@ -295,8 +211,7 @@ class _Factor:
         m = gram.shape[-1]
         beta = m / np.maximum(np.trace(gram, axis1=-2, axis2=-1), 1e-30)
         sys_ = np.asarray(beta)[..., None, None] * gram + np.eye(m)
-        with threadpool_limits(1):  # small LAPACK calls: much faster on one thread (measured)
-            inv = np.linalg.inv(sys_)
+        inv = np.linalg.inv(sys_)  # small LAPACK calls: reconstruct() runs them on one BLAS thread
         n_mat = (np.asarray(beta)[..., None, None] * inv).astype(np.float32)
         return cls(np.asarray(beta, dtype=np.float32), n_mat, gram.astype(np.float32))
 
@@ -503,8 +418,7 @@ def fista(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float,
     k_n = op.shape[1]
     g = op.gram()
     s = w[:, :, None].astype(np.float64) * g * w[:, None, :].astype(np.float64)
-    with threadpool_limits(1):
-        lip = np.linalg.eigvalsh(s)[:, -1]
+    lip = np.linalg.eigvalsh(s)[:, -1]
     step = (1.0 / np.maximum(lip, 1e-30)).astype(np.float32)[:, None]
     kappa = np.broadcast_to(np.asarray(mu, dtype=np.float32), (b_n,))[:, None] * step
     w2 = w * w
@@ -536,15 +450,14 @@ def fista(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float,
     return act.out, act.iters
 
 
-def omp(op, w: np.ndarray, y: np.ndarray, sparsity: int, *, tol2: np.ndarray | None = None
-        ) -> tuple[np.ndarray, np.ndarray]:
+def omp(op, w: np.ndarray, y: np.ndarray, sparsity: int) -> tuple[np.ndarray, np.ndarray]:
     """Orthogonal matching pursuit on the weighted problem ``B = W A``, columns normalised for the selection.
 
     Each step picks the atom whose normalised column of ``B`` correlates most with the
     weighted residual, then refits all chosen atoms by weighted least squares (float64
-    normal equations with a tiny ridge). A patch stops after ``sparsity`` atoms or when
-    its squared weighted residual is at most ``tol2[b]`` (e.g. the number of usable
-    measurements: a chi-square stop).
+    normal equations with a tiny ridge). A patch stops after ``sparsity`` atoms, or earlier
+    when no atom correlates with its residual any more (an exact fit). There is no
+    residual (chi-square) stop.
 
     Returns
     -------
@@ -566,8 +479,6 @@ def omp(op, w: np.ndarray, y: np.ndarray, sparsity: int, *, tol2: np.ndarray | N
     coef = np.zeros((b_n, t_n))
     used = np.zeros(b_n, dtype=np.int32)
     active = np.ones(b_n, dtype=bool)
-    if tol2 is not None:
-        active &= np.einsum("bm,bm->b", c, c) > tol2
     for k in range(t_n):
         if not active.any():
             break
@@ -583,13 +494,10 @@ def omp(op, w: np.ndarray, y: np.ndarray, sparsity: int, *, tol2: np.ndarray | N
         ridge = 1e-10 * np.maximum(np.trace(gram, axis1=1, axis2=2), 1e-30) / (k + 1)
         gram[:, np.arange(k + 1), np.arange(k + 1)] += ridge[:, None]
         rhs = np.matmul(bk.transpose(0, 2, 1), c[:, :, None])
-        with threadpool_limits(1):
-            sol = np.linalg.solve(gram, rhs)[:, :, 0]
+        sol = np.linalg.solve(gram, rhs)[:, :, 0]
         coef[active, :k + 1] = sol[active]
         used[active] = k + 1
         r = c - np.matmul(cols[:, :, :k + 1], coef[:, :k + 1, None])[:, :, 0]
-        if tol2 is not None:
-            active &= np.einsum("bm,bm->b", r, r) > tol2
     out = np.zeros((b_n, k_n), dtype=np.float32)
     for k in range(t_n):
         has = used > k
