@@ -624,3 +624,57 @@ def test_patches_without_a_usable_measurement_are_left_out_of_the_plain_mean(sma
     assert out.max() > 0.5
     np.testing.assert_allclose(level[~rec_empty], 1.0, rtol=0.03)
     assert not level[rec_empty].any()
+
+
+def _lsq_problem(seed=5, m=60, k=120, b=3):
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((m, k)).astype(np.float32)
+    w = (0.5 + rng.random((b, m))).astype(np.float32)
+    y = rng.standard_normal((b, m)).astype(np.float32)
+    return A, w, y
+
+
+@pytest.mark.parametrize("mu", [0.0, 1e-30])
+def test_admm_with_mu_0_solves_the_weighted_least_squares_problem(mu):
+    """mu = 0 (and a threshold below float32's resolution) is weighted least squares: with m < K and positive
+    weights ADMM started from 0 reaches the minimum-norm solution. Before: the threshold floored at 1e-30 and
+    the state kept in its units overflowed float32 (inf norms), every patch "converged" after 5 iterations
+    with a weighted residual of 1.41."""
+    from lfproc.recon._solvers import BatchOperator, SharedOperator, admm
+
+    A, w, y = _lsq_problem()
+    for op in (SharedOperator(A), BatchOperator(np.stack([A] * 3))):
+        z, it = admm(op, w, y, mu, max_iter=3000, tol=1e-6)
+        assert np.isfinite(z).all() and (it > 5).all()
+        for b in range(3):
+            wa = w[b, :, None].astype(np.float64) * A
+            ref = np.linalg.pinv(wa) @ (w[b] * y[b].astype(np.float64))
+            assert np.linalg.norm(wa @ z[b] - w[b] * y[b]) < 1e-3 * np.linalg.norm(w[b] * y[b])
+            assert np.linalg.norm(z[b] - ref) < 1e-3 * np.linalg.norm(ref)
+
+
+def test_admm_stops_at_once_when_the_code_is_zero_and_soon_when_it_is_small():
+    """Relative plus absolute stopping (Boyd et al. 2011, 3.3.1). A mu above ||A^T W^2 y||_inf makes 0 the exact
+    answer: 0 iterations (before: 300 of 300, a zero code never passed the relative test). Just below it the
+    code is tiny and nonzero: it stops well before max_iter, within tolerance of the optimum."""
+    from lfproc.recon._solvers import SharedOperator, admm
+
+    A, w, y = _lsq_problem(seed=6)
+    op = SharedOperator(A)
+    lam = np.abs((w * w * y) @ A).max(axis=1)
+    z, it = admm(op, w, y, 1.5 * lam, max_iter=300, tol=2.0**-15)
+    assert not z.any() and not it.any()
+    z, it = admm(op, w, y, 0.999 * lam, max_iter=300, tol=1e-3)
+    assert z.any() and (it < 300).all()
+
+
+def test_admm_norms_do_not_overflow_for_large_data():
+    """Data of 1e20 (squares overflow float32): the same codes, scaled, as for data of 1."""
+    from lfproc.recon._solvers import SharedOperator, admm
+
+    A, w, y = _lsq_problem(seed=7)
+    op = SharedOperator(A)
+    z1, it1 = admm(op, w, y, 0.5, max_iter=500, tol=1e-5)
+    zb, itb = admm(op, w, y * np.float32(1e20), 0.5e20, max_iter=500, tol=1e-5)
+    assert np.isfinite(zb).all()
+    np.testing.assert_allclose(zb / 1e20, z1, rtol=1e-3, atol=1e-4 * np.abs(z1).max())

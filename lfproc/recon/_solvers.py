@@ -238,6 +238,10 @@ class _Factor:
 ADMM_ALPHA = 1.6
 #: Penalty of :func:`admm` in its scale-free units (``rho beta``; measured, README).
 ADMM_RHO = 1.0
+#: Absolute tolerance of :func:`admm`, in units of ``tol`` times a patch's code scale (Boyd et al. 2011, 3.3.1).
+_ABS_TOL = 1e-2
+#: A soft threshold below this fraction of a patch's code scale is under float32's resolution: taken as 0.
+_LSQ_THRESHOLD = 1e-7
 #: Patches iterated together in :func:`admm`: the ``(K, B)`` state arrays stay small enough for the cache.
 _ADMM_CHUNK_BYTES = 8 * 2**20
 
@@ -262,9 +266,14 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
     in the ``z``, ``s`` and dual steps. State arrays are kept as ``(K, B)`` columns, in units
     of each patch's threshold, and updated in place (``out=``, ``saxpy``, ``sgemm`` adding into
     its output): four element-wise passes per iteration besides the two GEMMs; patches run in
-    chunks that keep them small. A patch stops when ``||z_k - z_{k-1}|| <= tol ||z_k||`` and
-    its primal residual is at most ``tol ||z_k||`` (checked every 5 iterations); converged
-    patches leave the batch.
+    chunks that keep them small. A patch stops when ``||z_k - z_{k-1}||`` and its primal residual
+    are at most ``tol ||z_k|| + eps_abs`` (relative plus absolute, Boyd et al. 2011, section
+    3.3.1; ``eps_abs`` is ``0.01 tol`` times the patch's code scale, ``||W y||`` over the rms norm
+    of the columns of ``W A``), checked every 5 iterations; converged patches leave the batch.
+    A patch whose optimal code is 0 (``||A^T W^2 y||_inf <= mu``) is not iterated (0 iterations).
+    ``mu = 0`` (or a threshold below float32's resolution of the code) solves the weighted
+    least-squares problem; started from 0 the iterates stay in the row space of ``A``, so with
+    positive weights the answer is the minimum-norm solution.
 
     Parameters
     ----------
@@ -299,8 +308,11 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
         chunk = max(4 if not fac.shared else 16, _ADMM_CHUNK_BYTES // per_patch)
     codes = np.zeros((b_n, k_n), dtype=np.float32)
     iters = np.zeros(b_n, dtype=np.int32)
-    for start in range(0, b_n, chunk):
-        rows = np.arange(start, min(start + chunk, b_n))
+    # the zero code is optimal exactly when ||A^T W^2 y||_inf <= mu (the lasso's optimality condition at 0):
+    # such patches stop at once, with 0 iterations (with a large mu they ran to max_iter)
+    todo = np.flatnonzero(~(np.abs(op.adj(w * w * y)).max(axis=1) <= mu))
+    for start in range(0, len(todo), chunk):
+        rows = todo[start:start + chunk]
         sub_op = op if fac.shared else op.subset(rows)
         sub_fac = fac if fac.shared else fac.subset(rows)
         codes[rows], iters[rows] = _admm_chunk(sub_op, sub_fac, w[rows], y[rows], mu[rows], rho[rows],
@@ -323,7 +335,19 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
     w2y = np.ascontiguousarray((w * w * y).T)
     rb = rho_rel.astype(np.float32)[None, :]  # rho beta: the penalty of s = A a
     kappa = (mu[None, :] * beta / rb).astype(np.float32)  # mu / rho, the soft threshold
-    kappa = np.maximum(kappa, _TINY)
+    # the code scale of each patch: ||W y|| over the rms norm of the columns of W A (the size of a one-atom
+    # fit); the absolute tolerance is a fraction of it
+    diag_g = np.diagonal(fac.G, axis1=-2, axis2=-1).astype(np.float64)  # ||A_i||^2, (m,) or (B, m)
+    col2 = (diag_g @ w2.astype(np.float64) if fac.shared else np.einsum("bm,mb->b", diag_g, w2)) / k_n
+    ref = np.sqrt(np.einsum("mb,mb->b", w2y, y.T, dtype=np.float64) / np.maximum(col2, 1e-300))
+    ref = np.where(ref > 0, ref, 1.0)[None, :]
+    atol = (_ABS_TOL * tol * ref[0]).astype(np.float64)
+    # the state is in units of kappa (below); a threshold under float32's resolution of the code (mu = 0
+    # included: the weighted least-squares problem) has no units: those columns are in units of ref and
+    # their threshold is 0, so no state overflows (mu = 0 gave inf norms and a wrong answer "converged")
+    lsq = ~(kappa > _LSQ_THRESHOLD * ref)
+    unit = np.where(lsq, ref, kappa).astype(np.float32)
+    lsq_cols = np.flatnonzero(lsq[0])
     denom = w2 + rb
     z = np.zeros((k_n, b_n), dtype=np.float32)  # z / kappa
     u = np.zeros_like(z)  # u / kappa (scaled dual of a = z)
@@ -339,15 +363,17 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
         check = it % _BALANCE_EVERY == 0 or it == max_iter
         np.subtract(z, u, out=v)  # v = z - u
         t = op.fwd_t(v)
-        t *= kappa  # A v
+        t *= unit  # A v
         e = fac.times(fac.N, (s - d) - t)  # the a step: a = v + A^T e
         a_m = t + fac.times(fac.G, e)  # A a
         if check:
             z_old, u_old, d_old, s_old = z.copy(), u.copy(), d, s
         # x = alpha a + (1 - alpha) z + u = v + (2 - alpha) u + alpha A^T e, built in v
         _axpy(u, v, 2 - alpha)
-        op.adj_t_add((alpha / kappa) * e, v)
+        op.adj_t_add((alpha / unit) * e, v)
         np.clip(v, -1.0, 1.0, out=u)  # u_new = x - soft(x, kappa) = clip(x, -kappa, kappa)
+        if lsq_cols.size:
+            u[:, lsq_cols] = 0.0  # threshold 0
         np.subtract(v, u, out=z)  # z_new = soft(x, kappa)
         ah = alpha * a_m + (1 - alpha) * s  # relaxed A a
         ah += d
@@ -355,31 +381,33 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
         d = ah - s
         if not check:
             continue
-        k_row = kappa[0]
+        k_row = unit[0].astype(np.float64)
         np.subtract(z, z_old, out=z_old)
-        change = k_row * np.sqrt(np.einsum("kb,kb->b", z_old, z_old))
+        change = k_row * np.sqrt(_sumsq(z_old))
         np.subtract(u, u_old, out=u_old)
         dd = d - d_old  # relaxed A a - s
-        primal = np.sqrt(k_row**2 * np.einsum("kb,kb->b", u_old, u_old) + beta[0] * np.einsum("mb,mb->b", dd, dd))
-        floor = np.maximum(k_row * np.sqrt(np.einsum("kb,kb->b", z, z)), _TINY)
-        done = (change <= tol * floor) & (primal <= tol * floor)
+        primal = np.sqrt(k_row**2 * _sumsq(u_old) + beta[0] * _sumsq(dd))
+        # relative plus absolute (Boyd et al. 2011, section 3.3.1): a code near 0 stops too
+        eps = tol * k_row * np.sqrt(_sumsq(z)) + atol
+        done = (change <= eps) & (primal <= eps)
         pending += int(done.sum())
         if it == max_iter:
             break
         if balance:  # residual balancing (Boyd et al. 2011, 3.4.1); the factor does not depend on rho
             ds = s - s_old
-            dual = (rb[0] / beta[0]) * np.sqrt(change * change + beta[0] * np.einsum("mb,mb->b", ds, ds))
+            dual = (rb[0] / beta[0]) * np.sqrt(change * change + beta[0] * _sumsq(ds))
             up = primal > _BALANCE_RATIO * dual
             down = dual > _BALANCE_RATIO * primal
             if up.any() or down.any():
                 f = np.where(up, 2.0, np.where(down, 0.5, 1.0)).astype(np.float32)[None, :]
                 rb = rb * f
-                kappa = kappa / f
+                f_unit = np.where(lsq, np.float32(1.0), f)  # a threshold-0 column keeps its units
+                unit = unit / f_unit
                 denom = w2 + rb
-                z *= f  # z / kappa with the new kappa; u / kappa is unchanged
+                z *= f_unit  # z / kappa with the new kappa; u / kappa is unchanged (0 with threshold 0)
                 d = d / f
         if pending and pending >= max(1, compact_fraction * len(act.rows)):
-            out_t[:, act.rows[done]] = z[:, done] * kappa[:, done]
+            out_t[:, act.rows[done]] = z[:, done] * unit[:, done]
             act.iters[act.rows[done]] = it
             keep = ~done
             act.rows = act.rows[keep]
@@ -387,13 +415,22 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
             if not keep.any():
                 return out_t.T, act.iters
             z, u, s, d, w2, w2y, denom = (np.ascontiguousarray(x[:, keep]) for x in (z, u, s, d, w2, w2y, denom))
-            beta, rb, kappa = beta[:, keep], rb[:, keep], kappa[:, keep]
+            beta, rb, unit, lsq, atol = beta[:, keep], rb[:, keep], unit[:, keep], lsq[:, keep], atol[keep]
+            lsq_cols = np.flatnonzero(lsq[0])
             v = np.empty_like(z)
             op = op.subset(keep)
             fac = fac.subset(keep)
-    out_t[:, act.rows] = z * kappa
+    out_t[:, act.rows] = z * unit
     act.iters[act.rows] = it
     return np.ascontiguousarray(out_t.T), act.iters
+
+
+def _sumsq(x: np.ndarray) -> np.ndarray:
+    """Squared norms of the columns of ``x`` ``(n, B)`` in float64 (float32 sums, redone in float64 if one overflowed)."""
+    out = np.einsum("kb,kb->b", x, x)
+    if not np.isfinite(out).all():
+        out = np.einsum("kb,kb->b", x, x, dtype=np.float64)
+    return out.astype(np.float64)
 
 
 def _axpy(x: np.ndarray, y: np.ndarray, a) -> None:
