@@ -81,6 +81,47 @@ def test_batch_omp_single_signal_chunks_and_zero_signal():
     assert not zero.any()
 
 
+def _coherent_dictionary(n, pairs, coherence, seed=0):
+    """Pairs of unit atoms at the given coherence (the shipped dictionary has atoms at 0.99)."""
+    rng = np.random.default_rng(seed)
+    base = rng.standard_normal((n, pairs))
+    base /= np.linalg.norm(base, axis=0)
+    other = rng.standard_normal((n, pairs))
+    other -= base * (base * other).sum(axis=0)
+    other /= np.linalg.norm(other, axis=0)
+    twin = coherence * base + np.sqrt(1 - coherence**2) * other
+    return np.concatenate([base, twin], axis=1).astype(np.float32)
+
+
+@pytest.mark.parametrize("coherence", [0.99, 1 - 1e-6])
+def test_batch_omp_on_a_coherent_dictionary_neither_fails_nor_gives_nan(coherence):
+    """Pairs of atoms at coherence 0.99 (and near-duplicates at 1 - 1e-6, below float32's resolution of the
+    Gram matrix): finite codes, a residual no larger than the signal, and the same supports as scikit-learn
+    (float64) for almost every signal at 0.99."""
+    from sklearn.linear_model import orthogonal_mp_gram
+
+    d = _coherent_dictionary(64, 96, coherence)
+    rng = np.random.default_rng(8)
+    a = np.zeros((192, 2000))
+    for i in range(2000):  # signals using both atoms of a pair
+        p = rng.choice(96, 3, replace=False)
+        a[np.r_[p, p + 96], i] = rng.standard_normal(6)
+    x = (d.astype(np.float64) @ a + 0.01 * rng.standard_normal((64, 2000))).astype(np.float32)
+    coef = batch_omp(d, x, 10)
+    assert np.isfinite(coef).all()
+    resid = x.astype(np.float64) - d.astype(np.float64) @ coef
+    assert ((resid**2).sum(axis=0) <= 1.0001 * (x.astype(np.float64) ** 2).sum(axis=0)).all()
+    if coherence == 0.99:
+        d64 = d.astype(np.float64)
+        ref = orthogonal_mp_gram(d64.T @ d64, d64.T @ x.astype(np.float64), n_nonzero_coefs=10)
+        assert ((coef != 0) == (ref != 0)).all(axis=0).mean() >= 0.99
+        ref_err = ((x.astype(np.float64) - d64 @ ref) ** 2).sum(axis=0)
+        np.testing.assert_allclose((resid**2).sum(axis=0).mean(), ref_err.mean(), rtol=1e-3)
+    else:  # a near-duplicate is dependent: never both atoms of a pair, and no coefficient blow-up
+        assert not ((coef[:96] != 0) & (coef[96:] != 0)).any()
+        assert np.abs(coef).max() < 100
+
+
 @pytest.mark.parametrize("args, match", [
     (("bad-d",), "2-D array"),
     (("nan-d",), "NaN"),
