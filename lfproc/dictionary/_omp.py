@@ -95,8 +95,7 @@ def omp_codes(D, X_rows, n_nonzero_coefs: int, *, tol: float | None = None, gram
     rows = min(chunk_size, big_n)
     # work arrays reused by every chunk: fresh ones cost a page fault per 4 KiB on every chunk (measured:
     # a third of the time at n = 1200, K = 3240)
-    work = (np.empty((t, rows, k_atoms), dtype=np.float32), np.empty((rows, k_atoms), dtype=np.float32),
-            np.empty((rows, k_atoms), dtype=np.float32))
+    work = (np.empty((t + 1, rows, k_atoms), dtype=np.float32), np.empty((rows, k_atoms), dtype=np.float32))
     for start in range(0, big_n, chunk_size):
         stop = min(start + chunk_size, big_n)
         idx, val = _omp_chunk(D32, G, X_rows[start:stop], t, tol, work)
@@ -107,21 +106,25 @@ def omp_codes(D, X_rows, n_nonzero_coefs: int, *, tol: float | None = None, gram
 
 def _omp_chunk(D32, G, X, t, tol, work):
     """Batch-OMP on one chunk of signals (rows of ``X``); see the module notes. ``work``: buffers
-    ``(t, B', K)``, ``(B', K)`` and ``(B', K)`` float32 with ``B' >= B``."""
+    ``(t + 1, B', K)`` and ``(B', K)`` float32 with ``B' >= B``.
+
+    ``gsub[0]`` holds ``alpha0 = D^T x`` and ``gsub[1 + i]`` the Gram row of the ``i``-th selected atom,
+    so ``alpha = alpha0 - G[:, I] c`` is one batched product with the coefficients ``(1, -c)``."""
     b = X.shape[0]
     X32 = np.asarray(X, dtype=np.float32)
     out_idx = np.full((b, t), -1, dtype=np.int32)
     out_val = np.zeros((b, t), dtype=np.float32)
-    alpha0 = np.matmul(X32, D32, out=work[2][:b])  # (B, K): the one GEMM of the chunk
+    gsub = work[0][:, :b]
+    alpha0 = np.matmul(X32, D32, out=gsub[0])  # (B, K): the one GEMM of the chunk
     xnorm2 = np.einsum("ij,ij->i", X32, X32, dtype=np.float64)
     live = np.arange(b)  # chunk rows still being coded; finished ones leave the batch
     keep = xnorm2 > (0.0 if tol is None else tol)
     if not keep.all():
-        live, alpha0, xnorm2 = live[keep], alpha0[keep], xnorm2[keep]
+        gsub = np.ascontiguousarray(gsub[:, keep])
+        live, alpha0, xnorm2 = live[keep], gsub[0], xnorm2[keep]
     alpha = alpha0
     na = len(live)
     sel = np.zeros((na, t), dtype=np.intp)
-    gsub = work[0][:, :na]  # rows G[j] of the selected atoms, step-major
     chol = np.zeros((na, t, t))  # L, G[I, I] = L L^T (float64), grown by one row per step
     a0_sel = np.zeros((na, t))  # alpha0[I]
     fwd = np.zeros((na, t))  # L^-1 alpha0[I], grown by one entry per step
@@ -135,7 +138,7 @@ def _omp_chunk(D32, G, X, t, tol, work):
         j = np.where(hi >= -lo, j_hi, j_lo)
         amax = np.where(hi >= -lo, hi, lo).astype(np.float64)
         ok = amax * amax > tiny  # a residual at rounding level: done
-        gj = gsub[k]
+        gj = gsub[k + 1]
         np.take(G, j, axis=0, out=gj, mode="clip")  # rows G[j], (B, K), gathered in place (unbuffered)
         g_jj = gj[r, j].astype(np.float64)
         if k:
@@ -148,8 +151,9 @@ def _omp_chunk(D32, G, X, t, tol, work):
             ok &= schur > _DEPENDENT * g_jj  # dependent on the support at float32 precision: done
         if not ok.all():
             gsub = np.ascontiguousarray(gsub[:, ok])
-            live, alpha0, alpha, sel, chol, a0_sel, fwd, xnorm2, tiny, j, g_jj = (
-                v[ok] for v in (live, alpha0, alpha, sel, chol, a0_sel, fwd, xnorm2, tiny, j, g_jj))
+            alpha0 = gsub[0]
+            live, sel, chol, a0_sel, fwd, xnorm2, tiny, j, g_jj = (
+                v[ok] for v in (live, sel, chol, a0_sel, fwd, xnorm2, tiny, j, g_jj))
             if k:
                 w, schur = w[ok], schur[ok]
             na = len(live)
@@ -168,8 +172,10 @@ def _omp_chunk(D32, G, X, t, tol, work):
         c = np.empty((na, k + 1))
         for i in range(k, -1, -1):
             c[:, i] = (fwd[:, i] - np.einsum("bl,bl->b", chol[:, i + 1:k + 1, i], c[:, i + 1:k + 1])) / chol[:, i, i]
-        beta = np.einsum("bk,kbj->bj", c.astype(np.float32), gsub[:k + 1], out=work[1][:na])  # (B, K)
-        alpha = np.subtract(alpha0, beta, out=beta)
+        c_ext = np.empty((na, k + 2), dtype=np.float32)
+        c_ext[:, 0] = 1.0
+        c_ext[:, 1:] = -c
+        alpha = np.einsum("bk,kbj->bj", c_ext, gsub[:k + 2], out=work[1][:na])  # alpha0 - G[:, I] c, (B, K)
         alpha[r[:, None], sel[:, :k + 1]] = 0.0  # never pick an atom twice
         out_idx[live, :k + 1] = sel[:, :k + 1]
         out_val[live, :k + 1] = c
@@ -177,8 +183,9 @@ def _omp_chunk(D32, G, X, t, tol, work):
             more = xnorm2 - np.einsum("bi,bi->b", c, a0_sel[:, :k + 1]) > tol
             if not more.all():
                 gsub = np.ascontiguousarray(gsub[:, more])
-                live, alpha0, alpha, sel, chol, a0_sel, fwd, xnorm2, tiny = (
-                    v[more] for v in (live, alpha0, alpha, sel, chol, a0_sel, fwd, xnorm2, tiny))
+                alpha0 = gsub[0]
+                live, alpha, sel, chol, a0_sel, fwd, xnorm2, tiny = (
+                    v[more] for v in (live, alpha, sel, chol, a0_sel, fwd, xnorm2, tiny))
                 na = len(live)
     return out_idx, out_val
 

@@ -152,9 +152,9 @@ def _soft(x: np.ndarray, kappa: np.ndarray) -> np.ndarray:
 
 def _rel_change(new: np.ndarray, old: np.ndarray) -> np.ndarray:
     d = new - old
-    num = np.einsum("bk,bk->b", d, d)
-    den = np.einsum("bk,bk->b", new, new)
-    return np.sqrt(num / np.maximum(den, _TINY))
+    num = _sumsq(d.T)
+    den = _sumsq(new.T)
+    return np.sqrt(num / np.maximum(den, 1e-300))
 
 
 class _Active:
