@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg.blas import saxpy, sgemm
 
-__all__ = ["SharedOperator", "BatchOperator", "admm", "fista", "omp", "auto_rho", "SOLVERS"]
+__all__ = ["SharedOperator", "BatchOperator", "admm", "fista", "omp", "SOLVERS"]
 
 SOLVERS = ("admm", "fista", "omp")
 
@@ -172,19 +172,6 @@ class _Active:
         keep = ~done
         self.rows = self.rows[keep]
         return keep
-
-
-def auto_rho(eigenvalues: np.ndarray) -> np.ndarray:
-    """Initial ADMM penalty per patch: ``sqrt(l_min l_max)`` of ``B B^T`` (eigenvalues ``(B, m)``, ascending).
-
-    The geometric mean of the extreme eigenvalues is the optimal penalty of ADMM on quadratic
-    problems (Ghadimi et al., IEEE TAC 2015); ``l_min`` is taken over the measurements that
-    have weight (zero rows give zero eigenvalues). :func:`admm` then adapts it (residual
-    balancing).
-    """
-    top = np.maximum(eigenvalues[:, -1], 1e-30)
-    low = np.where(eigenvalues > 1e-7 * top[:, None], eigenvalues, np.inf).min(axis=1)
-    return np.sqrt(low * top)
 
 
 #: Residual balancing of :func:`admm` (Boyd et al. 2011, section 3.4.1): every ``_BALANCE_EVERY``
