@@ -252,25 +252,45 @@ def _clear_atoms(atoms_t, signals: TrainingSignals, resid, idx, unused, *, min_u
     err = np.concatenate([np.einsum("ij,ij->i", resid[s0:s0 + step], resid[s0:s0 + step], dtype=np.float64)
                           for s0 in range(0, n_sig, step)])
     worst = np.argsort(-err, kind="stable")
+    worst = worst[err[worst] > 0]
+    todo = sorted(replace)
     staying = np.ones(n_atoms, dtype=bool)
-    staying[list(replace)] = False
+    staying[todo] = False
+    accepted: list[np.ndarray] = []  # normalised signals put in, in order
     done = []
-    candidates = iter(worst[:min(n_sig, 20 * len(replace) + 1000)])
-    for j in sorted(replace):
-        for s in candidates:
-            x = signals.rows(int(s), int(s) + 1)[0].astype(np.float64)
-            nx = np.linalg.norm(x)
-            if not nx > 0 or not err[s] > 0:
-                continue
-            x = (x / nx).astype(np.float32)
-            if np.abs(atoms_t[staying] @ x).max(initial=0.0) > max_coherence:
+    # candidates in blocks: their coherence with the staying atoms, with the signals already put in and with
+    # each other are GEMMs (one pass over the dictionary per block; a product per candidate read it whole)
+    limit = min(len(worst), 2 * len(todo) + 64)
+    block = 1024
+    for c0 in range(0, limit, block):
+        if len(done) == len(todo):
+            break
+        cand = worst[c0:min(c0 + block, limit)]
+        x = np.stack([signals.rows(int(i), int(i) + 1)[0] for i in cand]).astype(np.float64)
+        nx = np.linalg.norm(x, axis=1)
+        good = nx > 0
+        x = (x[good] / nx[good, None]).astype(np.float32)
+        if not len(x):
+            continue
+        coh = np.zeros(len(x), dtype=np.float32)
+        for r0 in range(0, n_atoms, 4096):
+            rows = np.flatnonzero(staying[r0:r0 + 4096]) + r0
+            if rows.size:
+                coh = np.maximum(coh, np.abs(atoms_t[rows] @ x.T).max(axis=0))
+        if accepted:
+            coh = np.maximum(coh, np.abs(np.stack(accepted) @ x.T).max(axis=0))
+        mutual = np.abs(x @ x.T)
+        taken: list[int] = []
+        for i in range(len(x)):
+            if len(done) == len(todo):
+                break
+            if coh[i] > max_coherence or (taken and mutual[i, taken].max() > max_coherence):
                 continue  # (nearly) an atom already
-            atoms_t[j] = x
-            staying[j] = True
+            j = todo[len(done)]
+            atoms_t[j] = x[i]
+            taken.append(i)
+            accepted.append(x[i])
             done.append(j)
-            break
-        else:
-            break
     return done
 
 
