@@ -549,7 +549,7 @@ def test_a_noise_free_sensor_on_a_mostly_black_scene_is_not_returned_black(small
 def _blas_threads():
     from threadpoolctl import threadpool_info
 
-    return [(i["internal_api"], i["num_threads"]) for i in threadpool_info()]
+    return [(i["filepath"], i["num_threads"]) for i in threadpool_info() if i["user_api"] == "blas"]
 
 
 def test_one_blas_limit_around_the_pool_and_outputs_identical_for_any_thread_count(smooth_capture,
