@@ -81,6 +81,47 @@ def test_batch_omp_single_signal_chunks_and_zero_signal():
     assert not zero.any()
 
 
+def _coherent_dictionary(n, pairs, coherence, seed=0):
+    """Pairs of unit atoms at the given coherence (the shipped dictionary has atoms at 0.99)."""
+    rng = np.random.default_rng(seed)
+    base = rng.standard_normal((n, pairs))
+    base /= np.linalg.norm(base, axis=0)
+    other = rng.standard_normal((n, pairs))
+    other -= base * (base * other).sum(axis=0)
+    other /= np.linalg.norm(other, axis=0)
+    twin = coherence * base + np.sqrt(1 - coherence**2) * other
+    return np.concatenate([base, twin], axis=1).astype(np.float32)
+
+
+@pytest.mark.parametrize("coherence", [0.99, 1 - 1e-6])
+def test_batch_omp_on_a_coherent_dictionary_neither_fails_nor_gives_nan(coherence):
+    """Pairs of atoms at coherence 0.99 (and near-duplicates at 1 - 1e-6, below float32's resolution of the
+    Gram matrix): finite codes, a residual no larger than the signal, and the same supports as scikit-learn
+    (float64) for almost every signal at 0.99."""
+    from sklearn.linear_model import orthogonal_mp_gram
+
+    d = _coherent_dictionary(64, 96, coherence)
+    rng = np.random.default_rng(8)
+    a = np.zeros((192, 2000))
+    for i in range(2000):  # signals using both atoms of a pair
+        p = rng.choice(96, 3, replace=False)
+        a[np.r_[p, p + 96], i] = rng.standard_normal(6)
+    x = (d.astype(np.float64) @ a + 0.01 * rng.standard_normal((64, 2000))).astype(np.float32)
+    coef = batch_omp(d, x, 10)
+    assert np.isfinite(coef).all()
+    resid = x.astype(np.float64) - d.astype(np.float64) @ coef
+    assert ((resid**2).sum(axis=0) <= 1.0001 * (x.astype(np.float64) ** 2).sum(axis=0)).all()
+    if coherence == 0.99:
+        d64 = d.astype(np.float64)
+        ref = orthogonal_mp_gram(d64.T @ d64, d64.T @ x.astype(np.float64), n_nonzero_coefs=10)
+        assert ((coef != 0) == (ref != 0)).all(axis=0).mean() >= 0.99
+        ref_err = ((x.astype(np.float64) - d64 @ ref) ** 2).sum(axis=0)
+        np.testing.assert_allclose((resid**2).sum(axis=0).mean(), ref_err.mean(), rtol=1e-3)
+    else:  # a near-duplicate is dependent: never both atoms of a pair, and no coefficient blow-up
+        assert not ((coef[:96] != 0) & (coef[96:] != 0)).any()
+        assert np.abs(coef).max() < 100
+
+
 @pytest.mark.parametrize("args, match", [
     (("bad-d",), "2-D array"),
     (("nan-d",), "NaN"),
@@ -170,6 +211,68 @@ def test_ksvd_on_a_dask_cluster_gives_the_in_process_result():
                                    silence_logs=40) as cluster:
         remote = ksvd(x, 50, 3, 2, random_state=1, chunk_size=400, scheduler=cluster.scheduler_address)
     np.testing.assert_array_equal(remote.atoms, local.atoms)
+
+
+def test_ksvd_atom_update_reads_the_residual_in_chunks_and_matches_the_formula(monkeypatch):
+    """The approximate K-SVD update of an atom every signal uses: the result of the formula (float64 reference:
+    E_j = E_I + g d_j^T, d = E_j^T g / ||.||, g = E_j d, E_I = E_j - g d^T) with a peak of extra memory far below
+    the residual's size (before: E_I copied whole, plus two outer-product temporaries of its size)."""
+    import tracemalloc
+
+    from lfproc.dictionary import _ksvd
+
+    monkeypatch.setattr(_ksvd, "_UPDATE_CHUNK_BYTES", 2**20, raising=False)
+    rng = np.random.default_rng(9)
+    n_sig, n, k = 40000, 128, 4
+    atoms_t = _random_dictionary(n, k, seed=9).T.copy()
+    idx = np.tile(np.arange(2, dtype=np.int32), (n_sig, 1))  # atoms 0 and 1 used by every signal
+    val = rng.standard_normal((n_sig, 2)).astype(np.float32)
+    resid = (0.1 * rng.standard_normal((n_sig, n))).astype(np.float32)
+    ref_atoms, ref_resid, ref_val = atoms_t.astype(np.float64), resid.astype(np.float64), val.astype(np.float64)
+    order = np.random.default_rng(1).permutation(k)
+    for j in order:
+        if j > 1:
+            continue
+        g = ref_val[:, j]
+        e = ref_resid + np.outer(g, ref_atoms[j])
+        d = e.T @ g
+        d /= np.linalg.norm(d)
+        g = e @ d
+        ref_resid = e - np.outer(g, d)
+        ref_atoms[j], ref_val[:, j] = d, g
+    tracemalloc.start()
+    unused = _ksvd._update_atoms(atoms_t, idx, val, resid, np.random.default_rng(1), 2)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert sorted(unused) == [2, 3]
+    assert peak < 0.25 * resid.nbytes, (peak, resid.nbytes)
+    np.testing.assert_allclose(atoms_t[:2], ref_atoms[:2], atol=1e-5)
+    np.testing.assert_allclose(val, ref_val, atol=1e-4)
+    np.testing.assert_allclose(resid, ref_resid, atol=1e-4)
+
+
+def test_ksvd_replaces_atoms_by_the_worst_represented_signals_without_duplicates():
+    """Known answer: signals 7 and 3 have the largest residuals, signal 5 (third) is a copy of signal 7 and
+    signal 11 (fourth) is within 0.99 of a staying atom: two unused atoms become signals 7 and 3; a third one
+    skips 5 and 11 and takes the fifth worst, 2."""
+    from lfproc.dictionary._ksvd import TrainingSignals, _clear_atoms
+
+    rng = np.random.default_rng(10)
+    n, k, n_sig = 32, 6, 20
+    x = rng.standard_normal((n_sig, n)).astype(np.float32)
+    atoms_t = _random_dictionary(n, k, seed=11).T.copy()
+    x[5] = 2 * x[7]
+    x[11] = 3 * atoms_t[0]
+    resid = np.full((n_sig, n), 0.01, np.float32)
+    for rank, s in enumerate([7, 3, 5, 11, 2]):
+        resid[s] = 1.0 - 0.1 * rank
+    idx = np.zeros((n_sig, 1), np.int32)  # atoms 0, 1 and 5 used, 2..4 unused
+    idx[:8] = 1
+    idx[8:12] = 5
+    done = _clear_atoms(atoms_t, TrainingSignals(x), resid, idx, [2, 3, 4], min_usage=1, max_coherence=0.99)
+    assert done == [2, 3, 4]
+    for j, s in zip(done, [7, 3, 2]):
+        np.testing.assert_allclose(atoms_t[j], x[s] / np.linalg.norm(x[s]), rtol=1e-5, atol=1e-6)
 
 
 def test_ksvd_bad_input():

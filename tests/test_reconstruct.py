@@ -553,3 +553,139 @@ def test_view_mismatch_message_says_which_side_has_which():
     message = str(info.value)
     assert "dictionary 'default' has 5 x 5 views and 3 colours" in message
     assert "the capture has 3 x 3 views" in message
+
+
+# -- BLAS threads, factors, empty patches (issue 19) ---------------------------------------------
+
+def _blas_threads():
+    from threadpoolctl import threadpool_info
+
+    return [(i["filepath"], i["num_threads"]) for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+def test_one_blas_limit_around_the_pool_and_outputs_identical_for_any_thread_count(smooth_capture,
+                                                                                   small_dictionary, monkeypatch):
+    """threadpoolctl changes the BLAS state of the whole process and is not thread-safe: the limit is set once
+    around the pool (not per block, where overlapping enter/exit pairs restored the wrong count), every block
+    runs on one BLAS thread, the process's BLAS thread count is the same after reconstruct, and the output does
+    not depend on the number of threads."""
+    import threadpoolctl
+
+    import lfproc.recon._reconstruct as rr
+
+    before = _blas_threads()
+    entered = []
+    seen = []
+    real_limits, real_block = threadpoolctl.threadpool_limits, rr._solve_block_here
+
+    def counting_limits(*args, **kwargs):
+        entered.append(args)
+        return real_limits(*args, **kwargs)
+
+    def block(task, shared):
+        seen.append({n for _, n in _blas_threads()})
+        return real_block(task, shared)
+
+    monkeypatch.setattr(threadpoolctl, "threadpool_limits", counting_limits)
+    monkeypatch.setattr(rr, "threadpool_limits", counting_limits)
+    monkeypatch.setattr(rr, "_solve_block_here", block)
+    outs = {t: reconstruct(smooth_capture, small_dictionary, max_iter=20, block_patches=4, threads=t).data
+            for t in (1, 2, 4)}
+    assert np.array_equal(outs[1], outs[2]) and np.array_equal(outs[1], outs[4])
+    assert len(seen) >= 3 * 3 and all(s == {1} for s in seen)
+    assert len(entered) <= 2 * 3  # per reconstruction: the pool, and the factors of the phases (not per block)
+    assert _blas_threads() == before
+
+
+def test_the_admm_factor_of_a_phase_is_built_once_per_reconstruction(smooth_capture, small_dictionary, monkeypatch):
+    from lfproc.recon import _solvers
+
+    built = []
+    real = _solvers._Factor.build.__func__
+
+    def counting(cls, gram):
+        built.append(np.shape(gram))
+        return real(cls, gram)
+
+    monkeypatch.setattr(_solvers._Factor, "build", classmethod(counting))
+    out = reconstruct(smooth_capture, small_dictionary, max_iter=10, block_patches=4, threads=1)
+    phases = out.attrs["reconstruction"]["operators"]
+    assert len(built) == phases < out.attrs["reconstruction"]["patches"]
+
+
+def test_patches_without_a_usable_measurement_are_left_out_of_the_plain_mean(small_dictionary):
+    """Known answer: a flat scene (level 1, the dictionary's constant atom, noise-free) with a square 2^14
+    brighter that saturates every shot. The patches inside the square have no usable measurement; the patches
+    that overlap it fit the flat level from their unsaturated pixels and extrapolate it. With the paper's plain
+    mean, the pixels of the square covered by both had the empty patches averaged in as zeros (0.25-0.75 of
+    the level); left out, every pixel covered by a non-empty patch is at the level, and the pixels covered by
+    empty patches only are 0 (nothing was measured there)."""
+    import warnings
+
+    data = np.ones((5, 5, 32, 32, 3), np.float32)
+    data[:, :, 8:24, 8:24] = 2.0**14
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the square saturates: expected
+        cap = simulate_capture(lfproc.LightField(data, units="relative"), profile="paper-none", noise=False,
+                               shots=2, mask_period=4, random_state=4, radiance_scale=SMOOTH_SCALE)
+        out = reconstruct(cap, small_dictionary, solver="omp", sparsity=1, overlap="mean", scale="patch").data
+    rec_empty = np.zeros((32, 32), bool)
+    rec_empty[12:20, 12:20] = True  # covered by the empty patches (tops and lefts 8, 12, 16) only
+    level = out.mean(axis=(0, 1, 4))
+    assert out.max() > 0.5
+    np.testing.assert_allclose(level[~rec_empty], 1.0, rtol=0.03)
+    assert not level[rec_empty].any()
+
+
+def _lsq_problem(seed=5, m=60, k=120, b=3):
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((m, k)).astype(np.float32)
+    w = (0.5 + rng.random((b, m))).astype(np.float32)
+    y = rng.standard_normal((b, m)).astype(np.float32)
+    return A, w, y
+
+
+@pytest.mark.parametrize("mu", [0.0, 1e-30])
+def test_admm_with_mu_0_solves_the_weighted_least_squares_problem(mu):
+    """mu = 0 (and a threshold below float32's resolution) is weighted least squares: with m < K and positive
+    weights ADMM started from 0 reaches the minimum-norm solution. Before: the threshold floored at 1e-30 and
+    the state kept in its units overflowed float32 (inf norms), every patch "converged" after 5 iterations
+    with a weighted residual of 1.41."""
+    from lfproc.recon._solvers import BatchOperator, SharedOperator, admm
+
+    A, w, y = _lsq_problem()
+    for op in (SharedOperator(A), BatchOperator(np.stack([A] * 3))):
+        z, it = admm(op, w, y, mu, max_iter=3000, tol=1e-6)
+        assert np.isfinite(z).all() and (it > 5).all()
+        for b in range(3):
+            wa = w[b, :, None].astype(np.float64) * A
+            ref = np.linalg.pinv(wa) @ (w[b] * y[b].astype(np.float64))
+            assert np.linalg.norm(wa @ z[b] - w[b] * y[b]) < 1e-3 * np.linalg.norm(w[b] * y[b])
+            assert np.linalg.norm(z[b] - ref) < 1e-3 * np.linalg.norm(ref)
+
+
+def test_admm_stops_at_once_when_the_code_is_zero_and_soon_when_it_is_small():
+    """Relative plus absolute stopping (Boyd et al. 2011, 3.3.1). A mu above ||A^T W^2 y||_inf makes 0 the exact
+    answer: 0 iterations (before: 300 of 300, a zero code never passed the relative test). Just below it the
+    code is tiny and nonzero: it stops well before max_iter, within tolerance of the optimum."""
+    from lfproc.recon._solvers import SharedOperator, admm
+
+    A, w, y = _lsq_problem(seed=6)
+    op = SharedOperator(A)
+    lam = np.abs((w * w * y) @ A).max(axis=1)
+    z, it = admm(op, w, y, 1.5 * lam, max_iter=300, tol=2.0**-15)
+    assert not z.any() and not it.any()
+    z, it = admm(op, w, y, 0.999 * lam, max_iter=300, tol=1e-3)
+    assert z.any() and (it < 300).all()
+
+
+def test_admm_norms_do_not_overflow_for_large_data():
+    """Data of 1e20 (squares overflow float32): the same codes, scaled, as for data of 1."""
+    from lfproc.recon._solvers import SharedOperator, admm
+
+    A, w, y = _lsq_problem(seed=7)
+    op = SharedOperator(A)
+    z1, it1 = admm(op, w, y, 0.5, max_iter=500, tol=1e-5)
+    zb, itb = admm(op, w, y * np.float32(1e20), 0.5e20, max_iter=500, tol=1e-5)
+    assert np.isfinite(zb).all()
+    np.testing.assert_allclose(zb / 1e20, z1, rtol=1e-3, atol=1e-4 * np.abs(z1).max())

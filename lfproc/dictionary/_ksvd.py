@@ -11,15 +11,20 @@ Each iteration:
    ``E = X - D Gamma`` (signals as rows, float32);
 2. the approximate K-SVD update of Rubinstein et al. (2008) for every atom ``j`` in a random
    order, written on the residual so no product with the whole dictionary is needed: for
-   the signals ``I`` that use ``j`` with coefficients ``g``, ``E_j = E_I + g d_j^T`` (the residual
-   without atom ``j``), ``d = E_j^T g / ||E_j^T g||``, ``g = E_j d``, then ``E_I = E_j - g d^T``;
+   the signals ``I`` that use ``j`` with coefficients ``g``, ``d = E_I^T g + d_j (g . g)`` (that is
+   ``X_I^T g - D Gamma_I g + d_j (g . g)``), normalised, ``g <- E_I d + g (d_j . d)``, then
+   ``E_I <- E_I + g_old d_j^T - g d^T``, reading ``E_I`` in bounded chunks;
 3. atoms used by no signal, used by fewer than ``min_usage`` signals, or too close to
    another atom (``|<d_i, d_j>| > max_coherence``) are replaced by the training signals with
-   the largest residual (KSVD-box's ``cleardict``).
+   the largest residual among all of them, skipping a signal within ``max_coherence`` of an
+   atom (KSVD-box's ``cleardict``).
 
 Memory: the training signals can be a ``.npy`` file read in chunks; what stays in memory is
-the residual (``N x n`` float32), the dictionary, its Gram matrix and the codes. For the
-paper's preset (300,000 x 6075) that is about 9 GB (measured: peak RSS 10.3 GB, README).
+the residual (``N x n`` float32), the dictionary, its Gram matrix and the codes. The atom
+update reads the residual rows of an atom's users in chunks of 32 MiB and never copies
+``E_I`` (the previous update did, with two outer-product temporaries of the same size: the
+peak of 10.3 GB measured at the paper's size, README). For the paper's preset (300,000 x 6075)
+the residual alone is 7.3 GB.
 
 Checkpoints: after every finished iteration the dictionary, the iteration count, the random
 generator's state and the error history are written (atomically) to ``checkpoint``; a run
@@ -175,11 +180,23 @@ def _atom_users(idx: np.ndarray, n_atoms: int) -> tuple[np.ndarray, np.ndarray]:
     return order, bounds
 
 
+#: Bytes of residual rows gathered at once by the atom update (:func:`_update_atoms`).
+_UPDATE_CHUNK_BYTES = 32 * 2**20
+
+
 def _update_atoms(atoms_t, idx, val, resid, rng, sparsity) -> list[int]:
-    """The approximate K-SVD update of every atom (in place on atoms_t, val, resid); returns unused atoms."""
-    n_atoms = atoms_t.shape[0]
+    """The approximate K-SVD update of every atom (in place on atoms_t, val, resid); returns unused atoms.
+
+    For atom ``j``, its users ``I`` and their coefficients ``g`` (Rubinstein et al. 2008; KSVD-box's
+    ``optimize_atom``): ``d = E_I^T g + d_j (g . g)`` (``E_I^T g = X_I^T g - D Gamma_I g``: the residual without
+    atom ``j`` times ``g``), ``d /= ||d||``, ``g <- E_I d + g (d_j . d)``, ``E_I <- E_I + g_old d_j^T - g d^T``.
+    The residual rows of ``I`` are read in bounded chunks (two passes): ``E_I`` is never copied whole
+    (a popular atom's ``E_I`` and its outer-product temporaries were gigabytes at the paper's size).
+    """
+    n_atoms, n = atoms_t.shape
     order, bounds = _atom_users(idx, n_atoms)
     val_flat = val.reshape(-1)
+    step = max(1, _UPDATE_CHUNK_BYTES // (4 * n))
     unused = []
     for j in rng.permutation(n_atoms):
         pos = order[bounds[j]:bounds[j + 1]]
@@ -188,27 +205,39 @@ def _update_atoms(atoms_t, idx, val, resid, rng, sparsity) -> list[int]:
             continue
         sig = pos // sparsity
         g = val_flat[pos]
-        e_i = resid[sig]
-        dj = atoms_t[j]
-        e_i += np.outer(g, dj)  # residual without atom j
-        d = e_i.T @ g
-        nd = float(np.linalg.norm(d))
+        dj = atoms_t[j].copy()
+        d = dj * np.float32(np.dot(g, g))
+        for s0 in range(0, len(sig), step):  # d = E_I^T g + d_j (g . g)
+            d += resid[sig[s0:s0 + step]].T @ g[s0:s0 + step]
+        nd = float(np.linalg.norm(d.astype(np.float64)))
         if not nd > 0:
             unused.append(int(j))
-            e_i -= np.outer(g, dj)
             continue
-        d /= nd
-        g_new = e_i @ d
-        e_i -= np.outer(g_new, d)
-        resid[sig] = e_i
+        d /= np.float32(nd)
+        djd = np.float32(np.dot(dj, d))
+        g_new = np.empty_like(g)
+        pair = np.stack([dj, d])  # (2, n)
+        for s0 in range(0, len(sig), step):  # g = E_I d + g (d_j . d); E_I <- E_I + g_old d_j^T - g d^T
+            rows = sig[s0:s0 + step]
+            part = resid[rows]
+            gc = g[s0:s0 + step]
+            gn = part @ d + gc * djd
+            part += np.stack([gc, -gn], axis=1) @ pair
+            resid[rows] = part
+            g_new[s0:s0 + step] = gn
         atoms_t[j] = d
         val_flat[pos] = g_new
     return unused
 
 
-def _clear_atoms(atoms_t, signals: TrainingSignals, resid, idx, unused, *, min_usage, max_coherence, rng):
-    """Replace unused, rarely used and near-duplicate atoms with the worst-represented signals."""
-    n_atoms = atoms_t.shape[0]
+def _clear_atoms(atoms_t, signals: TrainingSignals, resid, idx, unused, *, min_usage, max_coherence):
+    """Replace unused, rarely used and near-duplicate atoms with the worst-represented signals (KSVD-box's ``cleardict``).
+
+    The candidates are all training signals in decreasing order of their residual energy; a candidate
+    whose normalised signal has ``|<x, d_i>| > max_coherence`` with an atom that stays (or one already put in)
+    is skipped, so the replacements are neither duplicates of each other nor of the dictionary.
+    """
+    n_atoms, n = atoms_t.shape
     usage = np.bincount(idx[idx >= 0], minlength=n_atoms)
     replace = set(unused) | set(np.flatnonzero(usage < min_usage).tolist())
     # near-duplicates: of each close pair (a < b), replace b; the Gram matrix in row blocks (bounded memory)
@@ -220,17 +249,49 @@ def _clear_atoms(atoms_t, signals: TrainingSignals, resid, idx, unused, *, min_u
     if not replace:
         return []
     n_sig = resid.shape[0]
-    pool = rng.choice(n_sig, size=min(n_sig, max(5000, 4 * len(replace))), replace=False)
-    err = np.einsum("ij,ij->i", resid[pool], resid[pool], dtype=np.float64)
-    worst = pool[np.argsort(-err, kind="stable")]
+    step = max(1, _UPDATE_CHUNK_BYTES // (4 * n))
+    err = np.concatenate([np.einsum("ij,ij->i", resid[s0:s0 + step], resid[s0:s0 + step], dtype=np.float64)
+                          for s0 in range(0, n_sig, step)])
+    worst = np.argsort(-err, kind="stable")
+    worst = worst[err[worst] > 0]
+    todo = sorted(replace)
+    staying = np.ones(n_atoms, dtype=bool)
+    staying[todo] = False
+    accepted: list[np.ndarray] = []  # normalised signals put in, in order
     done = []
-    for j, s in zip(sorted(replace), worst):
-        x = signals.rows(int(s), int(s) + 1)[0].astype(np.float64)
-        nx = np.linalg.norm(x)
-        if not nx > 0:
+    # candidates in blocks: their coherence with the staying atoms, with the signals already put in and with
+    # each other are GEMMs (one pass over the dictionary per block; a product per candidate read it whole)
+    limit = min(len(worst), 2 * len(todo) + 64)
+    block = 1024
+    for c0 in range(0, limit, block):
+        if len(done) == len(todo):
+            break
+        cand = worst[c0:min(c0 + block, limit)]
+        x = np.stack([signals.rows(int(i), int(i) + 1)[0] for i in cand]).astype(np.float64)
+        nx = np.linalg.norm(x, axis=1)
+        good = nx > 0
+        x = (x[good] / nx[good, None]).astype(np.float32)
+        if not len(x):
             continue
-        atoms_t[j] = (x / nx).astype(np.float32)
-        done.append(j)
+        coh = np.zeros(len(x), dtype=np.float32)
+        for r0 in range(0, n_atoms, 4096):
+            rows = np.flatnonzero(staying[r0:r0 + 4096]) + r0
+            if rows.size:
+                coh = np.maximum(coh, np.abs(atoms_t[rows] @ x.T).max(axis=0))
+        if accepted:
+            coh = np.maximum(coh, np.abs(np.stack(accepted) @ x.T).max(axis=0))
+        mutual = np.abs(x @ x.T)
+        taken: list[int] = []
+        for i in range(len(x)):
+            if len(done) == len(todo):
+                break
+            if coh[i] > max_coherence or (taken and mutual[i, taken].max() > max_coherence):
+                continue  # (nearly) an atom already
+            j = todo[len(done)]
+            atoms_t[j] = x[i]
+            taken.append(i)
+            accepted.append(x[i])
+            done.append(j)
     return done
 
 
@@ -302,8 +363,8 @@ def ksvd(
     n_iter : int
         Iterations.
     random_state : int, Generator or None
-        Seeds the initial atoms (``K`` distinct training signals), the order of the atom
-        updates and the replacement of unused atoms.
+        Seeds the initial atoms (``K`` distinct training signals) and the order of the atom
+        updates (the replacement of atoms is deterministic: the worst-represented signals).
     checkpoint : path of a folder, optional
         Save after every iteration and resume from what is there.
     scheduler : str, optional
@@ -364,7 +425,7 @@ def ksvd(
             errors.append(err)
             unused = _update_atoms(atoms_t, idx, val, resid, rng, int(sparsity))
             cleared = _clear_atoms(atoms_t, signals, resid, idx, unused, min_usage=int(min_usage),
-                                   max_coherence=float(max_coherence), rng=rng)
+                                   max_coherence=float(max_coherence))
             replaced.append(len(cleared))
             del idx, val, resid
             if ckpt is not None:

@@ -57,12 +57,15 @@ relative to its norm, so a dark pixel is taken from the patches without a bright
 ``"scale-window-fit"``, the default: both and ``1 / max(1, chi2_p / m_p)``, so a patch that
 fits its own measurements worse than their noise (reduced chi-square above 1: an edge the
 dictionary does not represent, a light the lasso cut) counts less where others overlap it).
+In every mode a patch without any usable measurement (all saturated or clipped) is left out:
+it has no estimate, and averaging it in as zeros darkened saturated regions.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import threading
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -75,7 +78,7 @@ from ..errors import InputError, ShapeError
 from ..lightfield import LightField
 from threadpoolctl import threadpool_limits
 
-from ._solvers import SOLVERS, BatchOperator, SharedOperator, admm, fista, omp
+from ._solvers import SOLVERS, BatchOperator, SharedOperator, _Factor, admm, fista, omp
 
 __all__ = ["reconstruct", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "VARIANCES", "patch_count"]
 
@@ -125,13 +128,6 @@ def _int_option(name: str, value, *, low: int = 1) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or int(value) < low:
         raise InputError(f"{name}: expected an integer >= {low}, got {value!r}")
     return int(value)
-
-
-def _coverage(n: int, starts: np.ndarray, patch: int) -> np.ndarray:
-    count = np.zeros(n + 1, dtype=np.int64)
-    np.add.at(count, starts, 1)
-    np.add.at(count, starts + patch, -1)
-    return np.cumsum(count)[:n]
 
 
 def _gather(array: np.ndarray, tops: np.ndarray, lefts: np.ndarray, size: int) -> np.ndarray:
@@ -207,8 +203,7 @@ def _debias(op, w, y, z, k_max: int) -> np.ndarray:
     ridge = 1e-8 * np.maximum(np.trace(gram, axis1=1, axis2=2), 1e-30) / k
     gram[:, np.arange(k), np.arange(k)] += ridge[:, None]
     rhs = np.matmul(cols.transpose(0, 2, 1), (w * y).astype(np.float64)[:, :, None])
-    with threadpool_limits(1):
-        sol = np.linalg.solve(gram, rhs)[:, :, 0] * keep
+    sol = np.linalg.solve(gram, rhs)[:, :, 0] * keep
     out = np.zeros_like(z)
     np.put_along_axis(out, idx, sol.astype(np.float32), axis=1)
     return out
@@ -245,18 +240,39 @@ def _operator_times(ops, sel: np.ndarray, atoms: np.ndarray, atoms_by_pixel: np.
 
 
 def _solve_block(task: dict, shared: dict) -> dict:
-    """Solve the patches of one block; return its accumulator and figures (runs in a worker or in process).
+    """Solve the patches of one block; return its accumulator and figures (the Dask task).
 
     BLAS runs on one thread: the same sums whoever runs the block (so Dask and in-process outputs
     are identical), and on a shared machine a two-thread GEMM spends most of its time waiting
     for its other thread (median 590 us instead of 5-40 us for one batch's ``A V``, measured
-    at a load average of 15); cores are used by solving blocks in parallel instead.
+    at a load average of 15); cores are used by solving blocks in parallel instead. The limit
+    is set once: in this process by :func:`reconstruct` around its thread pool, in a Dask worker
+    process by the first block it runs (:func:`_limit_worker_blas`), never per block:
+    threadpoolctl changes the BLAS library's state for the whole process and is not thread-safe,
+    so overlapping enter/exit pairs of concurrent blocks restored the wrong thread count.
     """
-    from threadpoolctl import threadpool_limits
+    _limit_worker_blas()
+    return _solve_block_here(realign(task), realign(shared))
 
-    with threadpool_limits(1):
-        return _solve_block_here(realign(task), realign(shared))
 
+_WORKER_BLAS = {"limited": False}
+_WORKER_BLAS_LOCK = threading.Lock()
+
+
+def _limit_worker_blas() -> None:
+    """One BLAS thread in a Dask worker process, set once for the process's life (a worker is lfproc's)."""
+    if _WORKER_BLAS["limited"]:
+        return
+    try:
+        from distributed import get_worker
+
+        get_worker()
+    except (ImportError, ValueError):
+        return  # not in a Dask worker: reconstruct() sets the limit around its pool
+    with _WORKER_BLAS_LOCK:
+        if not _WORKER_BLAS["limited"]:
+            threadpool_limits(1)  # not a context: the worker process keeps it
+            _WORKER_BLAS["limited"] = True
 
 
 def _solve_block_here(task: dict, shared: dict) -> dict:
@@ -279,7 +295,8 @@ def _solve_block_here(task: dict, shared: dict) -> dict:
         index = task["phase"]
         for g in np.unique(index):
             sel = np.flatnonzero(index == g)
-            op = SharedOperator(shared["A"][g], shared["gram"][g])
+            op = SharedOperator(shared["A"][g], shared["gram"][g],
+                                factor=shared["factor"][g] if shared.get("factor") else None)
             rowsum = shared["rowsum"][g][None, :]
             codes, cp, it, chi2[sel] = _solve_group(op, y_all[sel], w_all[sel], rowsum, settings, n)
             estimates[sel] = (codes @ atoms.T) * cp[:, None].astype(np.float32)
@@ -301,12 +318,15 @@ def _solve_block_here(task: dict, shared: dict) -> dict:
     width = task["width"]
     acc = np.zeros((v_n, u_n, rows, width, c_n), dtype=np.float32)
     weight = _overlap_weights(settings.overlap, codes_scale / settings.c_median, size, chi2)  # (B, P, P) or None
-    wacc = None if weight is None else np.zeros((rows, width), dtype=np.float32)
+    wacc = np.zeros((rows, width), dtype=np.float32)
     patches = estimates.reshape(b_n, v_n, u_n, size, size, c_n)
     for b in range(b_n):  # fixed order: the block's patches as listed
+        if codes_scale[b] == 0:  # no usable measurement: no estimate (not a zero one) in any overlap mode
+            continue
         t, l = int(tops[b] - row0), int(lefts[b])
         if weight is None:
             acc[:, :, t:t + size, l:l + size, :] += patches[b]
+            wacc[t:t + size, l:l + size] += 1.0
         else:
             acc[:, :, t:t + size, l:l + size, :] += patches[b] * weight[b][:, :, None]
             wacc[t:t + size, l:l + size] += weight[b]
@@ -328,7 +348,7 @@ def _overlap_weights(overlap: str, scale: np.ndarray, size: int, chi2=None) -> n
         # a patch's error is about relative to its own l2 norm c_p (the dictionary's coding error and the
         # lasso's): inverse-variance weights 1 / c_p^2 let the patches whose scale matches a pixel win
         good = scale > 0
-        inv = np.full(b_n, 1e-12)  # an empty patch (no usable measurement) counts only where nothing else does
+        inv = np.zeros(b_n)  # an empty patch (no usable measurement) is left out (_solve_block_here)
         inv[good] = np.minimum(1.0 / scale[good] ** 2, 1e12)
         w *= inv.astype(np.float32)[:, None, None]
     if "fit" in parts:
@@ -391,7 +411,7 @@ def reconstruct(
     dictionary : Dictionary, ``"default"`` (the shipped one) or path of a dictionary file
     solver : {"admm", "fista", "omp"}
         ``admm`` (default; Woodbury solve, one ``m x m`` system per patch), ``fista`` (step
-        ``1/L``), ``omp`` (greedy, ``sparsity`` atoms or a chi-square residual: the fast mode).
+        ``1/L``), ``omp`` (greedy, ``sparsity`` atoms: the fast mode).
     stride : int
         Patch spacing in pixels (1 .. patch size; 4 as the paper). Any stride works with the
         Bayer CFA: patch operators carry their CFA phase.
@@ -541,6 +561,8 @@ def reconstruct(
         A = ops.times(atoms)  # (G, m, K): the distinct patch matrices times D
         shared["A"] = A
         shared["gram"] = [a.astype(np.float64) @ a.T.astype(np.float64) for a in A]
+        with threadpool_limits(1):  # the ADMM factor of every phase, once per reconstruction (small LAPACK calls)
+            shared["factor"] = [_Factor.build(g) for g in shared["gram"]] if solver == "admm" else None
         shared["rowsum"] = ops.row_sums()
         n_operators = ops.n_operators
     tasks = []
@@ -562,7 +584,7 @@ def reconstruct(
         return task
 
     acc = np.zeros((v_n, u_n, h, w, c_n), dtype=np.float32)
-    wsum = np.zeros((h, w), dtype=np.float32) if overlap != "mean" else None
+    wsum = np.zeros((h, w), dtype=np.float32)  # with "mean": the number of non-empty patches over each pixel
     empty = 0
     iterations: list[np.ndarray] = []
     bar = progress(total=len(grid_t), desc="reconstruct", unit="patch",
@@ -573,25 +595,22 @@ def reconstruct(
         r0 = result["row0"]
         part = result["acc"]
         acc[:, :, r0:r0 + part.shape[2]] += part
-        if wsum is not None:
-            wsum[r0:r0 + part.shape[2]] += result["weight"]
+        wsum[r0:r0 + part.shape[2]] += result["weight"]
         empty += result["empty"]
         iterations.append(result["iterations"])
 
     use_dask = workers is not None or (scheduler is not None and scheduler != "synchronous")
     try:
         if not use_dask:
-            _run_threads(tasks, shared, attach_operators, add, bar, threads=threads)
+            with threadpool_limits(1):  # once around the pool, never per block (_solve_block)
+                _run_threads(tasks, shared, attach_operators, add, bar, threads=threads)
         else:
             _run_dask(tasks, shared, attach_operators, add, bar, workers=workers, scheduler=scheduler)
     finally:
         bar.close()
 
-    if wsum is None:
-        count = _coverage(h, tops, size)[:, None] * _coverage(w, lefts, size)[None, :]
-    else:
-        count = np.maximum(wsum, np.float32(1e-30))
-    data = acc / count[None, None, :, :, None].astype(np.float32)
+    count = np.maximum(wsum, np.float32(1e-30))  # a pixel of empty patches only: 0 (nothing was measured)
+    data = acc / count[None, None, :, :, None]
     negative = float((data < 0).mean())
     np.maximum(data, 0, out=data)
     radiance_scale = capture.radiance_scale
@@ -647,13 +666,13 @@ def _run_threads(tasks, shared, attach_operators, add, bar, *, threads: int) -> 
 
     if threads == 1:
         for task in tasks:
-            add(_solve_block(attach_operators(task), shared))
+            add(_solve_block_here(realign(attach_operators(task)), shared))
             bar.update(len(task["tops"]))
         return
     window: deque = deque()
     with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="lfproc-recon") as pool:
         for task in tasks:
-            window.append((pool.submit(_solve_block, attach_operators(task), shared), len(task["tops"])))
+            window.append((pool.submit(_solve_block_here, realign(attach_operators(task)), shared), len(task["tops"])))
             while len(window) > threads:  # a bounded number of blocks in memory
                 future, count = window.popleft()
                 add(future.result())

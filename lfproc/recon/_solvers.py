@@ -13,15 +13,18 @@ columns in :func:`admm`), small systems are factorised in float64.
 Written by hand because no library solves many small weighted lasso problems that share
 (or do not share) a sensing matrix in one batch: scikit-learn, skglm and celer solve one
 problem at a time (reconstruction.md section 3.4).
+
+The solvers set no BLAS thread limit: threadpoolctl changes the BLAS library's state for the
+whole process and is not thread-safe, so the caller sets it once (:func:`lfproc.recon.reconstruct`
+runs every block on one BLAS thread).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.linalg.blas import saxpy, sgemm
-from threadpoolctl import threadpool_limits
 
-__all__ = ["SharedOperator", "BatchOperator", "admm", "admm_patch", "fista", "omp", "auto_rho", "SOLVERS"]
+__all__ = ["SharedOperator", "BatchOperator", "admm", "fista", "omp", "SOLVERS"]
 
 SOLVERS = ("admm", "fista", "omp")
 
@@ -36,14 +39,17 @@ class SharedOperator:
     A : ndarray of shape (m, K), float32
     gram : ndarray of shape (m, m), optional
         ``A A^T`` (float64) if already computed (it is computed once per phase).
+    factor : optional
+        The ADMM factor of ``A`` (:meth:`factor`) if already computed (:func:`lfproc.recon.reconstruct`
+        builds one per phase for the whole reconstruction, not one per block).
     """
 
-    def __init__(self, A: np.ndarray, gram: np.ndarray | None = None):
+    def __init__(self, A: np.ndarray, gram: np.ndarray | None = None, factor: "_Factor | None" = None):
         self.A = np.ascontiguousarray(A, dtype=np.float32)
         self.AT = np.ascontiguousarray(self.A.T)
         self._gram = gram
         self._sq = None
-        self._factor = None
+        self._factor = factor
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -146,9 +152,9 @@ def _soft(x: np.ndarray, kappa: np.ndarray) -> np.ndarray:
 
 def _rel_change(new: np.ndarray, old: np.ndarray) -> np.ndarray:
     d = new - old
-    num = np.einsum("bk,bk->b", d, d)
-    den = np.einsum("bk,bk->b", new, new)
-    return np.sqrt(num / np.maximum(den, _TINY))
+    num = _sumsq(d.T)
+    den = _sumsq(new.T)
+    return np.sqrt(num / np.maximum(den, 1e-300))
 
 
 class _Active:
@@ -168,114 +174,11 @@ class _Active:
         return keep
 
 
-def auto_rho(eigenvalues: np.ndarray) -> np.ndarray:
-    """Initial ADMM penalty per patch: ``sqrt(l_min l_max)`` of ``B B^T`` (eigenvalues ``(B, m)``, ascending).
-
-    The geometric mean of the extreme eigenvalues is the optimal penalty of ADMM on quadratic
-    problems (Ghadimi et al., IEEE TAC 2015); ``l_min`` is taken over the measurements that
-    have weight (zero rows give zero eigenvalues). :func:`admm` then adapts it (residual
-    balancing).
-    """
-    top = np.maximum(eigenvalues[:, -1], 1e-30)
-    low = np.where(eigenvalues > 1e-7 * top[:, None], eigenvalues, np.inf).min(axis=1)
-    return np.sqrt(low * top)
-
-
 #: Residual balancing of :func:`admm` (Boyd et al. 2011, section 3.4.1): every ``_BALANCE_EVERY``
 #: iterations ``rho`` is doubled when the primal residual exceeds ``_BALANCE_RATIO`` times the
 #: dual one, halved in the opposite case; the stopping test runs at the same iterations.
 _BALANCE_EVERY = 5
 _BALANCE_RATIO = 10.0
-
-
-def admm_patch(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho=None,
-               compact_fraction: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
-    """Scaled ADMM for the weighted lasso, Woodbury solve through one ``m x m`` eigendecomposition per patch.
-
-    The first implementation (the paper's splitting ``a = z`` with the weighted data term in the
-    ``a`` step), kept for comparison (benchmarks/reconstruct.py): its per-patch eigendecomposition
-    costs as much as ~70 iterations' GEMMs, and its element-wise passes cost more than the
-    GEMMs; :func:`admm` is the default.
-
-    Splitting ``a = z``: ``a <- (B^T B + rho I)^-1 (B^T c + rho (z - u))`` with ``B = W A``,
-    ``c = W y``, through ``(B^T B + rho I)^-1 q = (q - B^T (rho I + B B^T)^-1 B q) / rho``;
-    ``B B^T = W (A A^T) W`` (with a shared ``A`` the Gram matrix ``A A^T`` is computed once per
-    phase) is diagonalised once per patch, ``Q diag(l) Q^T``, so ``(rho I + B B^T)^-1`` is
-    ``Q diag(1 / (rho + l)) Q^T`` for any ``rho`` and the penalty can adapt (residual balancing)
-    at no cost. ``z <- soft(a + u, mu / rho)``; ``u <- u + a - z``. A patch stops when
-    ``||z_k - z_{k-1}|| <= tol ||z_k||`` and ``||a_k - z_k|| <= tol ||z_k||``.
-
-    Parameters and returns as :func:`admm` (without ``alpha`` and ``chunk``), except ``rho``:
-    the initial penalty per patch in the data's units, default :func:`auto_rho`.
-    """
-    w = np.asarray(w, dtype=np.float32)
-    y = np.asarray(y, dtype=np.float32)
-    b_n, m = w.shape
-    k_n = op.shape[1]
-    mu = np.broadcast_to(np.asarray(mu, dtype=np.float64).reshape(-1), (b_n,)).astype(np.float32)[:, None]
-    btc = op.adj(w * w * y)  # B^T c, (B, K)
-    g = op.gram()
-    s = w[:, :, None].astype(np.float64) * g * w[:, None, :].astype(np.float64)
-    with threadpool_limits(1):  # small LAPACK calls: 8x faster on one thread than on two (measured)
-        ev, vec = np.linalg.eigh(s)
-    ev = np.maximum(ev, 0.0)
-    rho = auto_rho(ev) if rho is None else np.asarray(rho, dtype=np.float64).reshape(b_n)
-    rho = rho.astype(np.float32)[:, None]
-    q_t = np.ascontiguousarray(vec.transpose(0, 2, 1), dtype=np.float32)  # Q^T
-    q_m = np.ascontiguousarray(vec, dtype=np.float32)
-    ev = ev.astype(np.float32)
-    inv = 1.0 / (rho + ev)
-    p0 = op.fwd(btc)  # A B^T c
-    h = btc / rho
-    z = np.zeros((b_n, k_n), dtype=np.float32)
-    u = np.zeros_like(z)
-    act = _Active(b_n, k_n)
-    pending = 0
-    it = 0
-    for it in range(1, max_iter + 1):
-        v = z - u
-        bq = w * (p0 + rho * op.fwd(v))
-        # (rho I + B B^T)^-1 bq = Q diag(1 / (rho + l)) Q^T bq; einsum: numpy's stacked matmul of
-        # matrix-vector products is ~30x slower here (measured, numpy 2 + OpenBLAS)
-        r = np.einsum("bij,bj->bi", q_m, inv * np.einsum("bij,bj->bi", q_t, bq))
-        a = h + v - op.adj(w * r / rho)
-        x = a + u
-        z_new = _soft(x, mu / rho)
-        u = x - z_new
-        if it % _BALANCE_EVERY and it != max_iter:  # residuals and stops every few iterations only
-            z = z_new
-            continue
-        znorm = np.sqrt(np.einsum("bk,bk->b", z_new, z_new))
-        dz = z_new - z
-        change = np.sqrt(np.einsum("bk,bk->b", dz, dz))
-        pr = a - z_new
-        primal = np.sqrt(np.einsum("bk,bk->b", pr, pr))
-        floor = np.maximum(znorm, _TINY)
-        done = (change <= tol * floor) & (primal <= tol * floor)
-        z = z_new
-        pending += int(done.sum())
-        if it == max_iter:
-            break
-        dual = rho[:, 0] * change
-        up = primal > _BALANCE_RATIO * dual
-        down = dual > _BALANCE_RATIO * primal
-        if up.any() or down.any():
-            factor = np.where(up, 2.0, np.where(down, 0.5, 1.0)).astype(np.float32)[:, None]
-            rho = rho * factor
-            u = u / factor
-            inv = 1.0 / (rho + ev)
-            h = btc / rho
-        if pending and pending >= max(1, compact_fraction * len(act.rows)):
-            keep = act.retire(done, z, it)
-            pending = 0
-            if not keep.all():
-                if not keep.any():
-                    return act.out, act.iters
-                z, u, w, p0, h, btc, q_m, q_t, ev, inv, rho, mu = (
-                    t[keep] for t in (z, u, w, p0, h, btc, q_m, q_t, ev, inv, rho, mu))
-                op = op.subset(keep)
-    act.retire(np.ones(len(act.rows), dtype=bool), z, it)
-    return act.out, act.iters
 
 
 class _Factor:
@@ -295,8 +198,7 @@ class _Factor:
         m = gram.shape[-1]
         beta = m / np.maximum(np.trace(gram, axis1=-2, axis2=-1), 1e-30)
         sys_ = np.asarray(beta)[..., None, None] * gram + np.eye(m)
-        with threadpool_limits(1):  # small LAPACK calls: much faster on one thread (measured)
-            inv = np.linalg.inv(sys_)
+        inv = np.linalg.inv(sys_)  # small LAPACK calls: reconstruct() runs them on one BLAS thread
         n_mat = (np.asarray(beta)[..., None, None] * inv).astype(np.float32)
         return cls(np.asarray(beta, dtype=np.float32), n_mat, gram.astype(np.float32))
 
@@ -323,6 +225,10 @@ class _Factor:
 ADMM_ALPHA = 1.6
 #: Penalty of :func:`admm` in its scale-free units (``rho beta``; measured, README).
 ADMM_RHO = 1.0
+#: Absolute tolerance of :func:`admm`, in units of ``tol`` times a patch's code scale (Boyd et al. 2011, 3.3.1).
+_ABS_TOL = 1e-2
+#: A soft threshold below this fraction of a patch's code scale is under float32's resolution: taken as 0.
+_LSQ_THRESHOLD = 1e-7
 #: Patches iterated together in :func:`admm`: the ``(K, B)`` state arrays stay small enough for the cache.
 _ADMM_CHUNK_BYTES = 8 * 2**20
 
@@ -347,9 +253,14 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
     in the ``z``, ``s`` and dual steps. State arrays are kept as ``(K, B)`` columns, in units
     of each patch's threshold, and updated in place (``out=``, ``saxpy``, ``sgemm`` adding into
     its output): four element-wise passes per iteration besides the two GEMMs; patches run in
-    chunks that keep them small. A patch stops when ``||z_k - z_{k-1}|| <= tol ||z_k||`` and
-    its primal residual is at most ``tol ||z_k||`` (checked every 5 iterations); converged
-    patches leave the batch.
+    chunks that keep them small. A patch stops when ``||z_k - z_{k-1}||`` and its primal residual
+    are at most ``tol ||z_k|| + eps_abs`` (relative plus absolute, Boyd et al. 2011, section
+    3.3.1; ``eps_abs`` is ``0.01 tol`` times the patch's code scale, ``||W y||`` over the rms norm
+    of the columns of ``W A``), checked every 5 iterations; converged patches leave the batch.
+    A patch whose optimal code is 0 (``||A^T W^2 y||_inf <= mu``) is not iterated (0 iterations).
+    ``mu = 0`` (or a threshold below float32's resolution of the code) solves the weighted
+    least-squares problem; started from 0 the iterates stay in the row space of ``A``, so with
+    positive weights the answer is the minimum-norm solution.
 
     Parameters
     ----------
@@ -384,8 +295,11 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
         chunk = max(4 if not fac.shared else 16, _ADMM_CHUNK_BYTES // per_patch)
     codes = np.zeros((b_n, k_n), dtype=np.float32)
     iters = np.zeros(b_n, dtype=np.int32)
-    for start in range(0, b_n, chunk):
-        rows = np.arange(start, min(start + chunk, b_n))
+    # the zero code is optimal exactly when ||A^T W^2 y||_inf <= mu (the lasso's optimality condition at 0):
+    # such patches stop at once, with 0 iterations (with a large mu they ran to max_iter)
+    todo = np.flatnonzero(~(np.abs(op.adj(w * w * y)).max(axis=1) <= mu))
+    for start in range(0, len(todo), chunk):
+        rows = todo[start:start + chunk]
         sub_op = op if fac.shared else op.subset(rows)
         sub_fac = fac if fac.shared else fac.subset(rows)
         codes[rows], iters[rows] = _admm_chunk(sub_op, sub_fac, w[rows], y[rows], mu[rows], rho[rows],
@@ -408,7 +322,19 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
     w2y = np.ascontiguousarray((w * w * y).T)
     rb = rho_rel.astype(np.float32)[None, :]  # rho beta: the penalty of s = A a
     kappa = (mu[None, :] * beta / rb).astype(np.float32)  # mu / rho, the soft threshold
-    kappa = np.maximum(kappa, _TINY)
+    # the code scale of each patch: ||W y|| over the rms norm of the columns of W A (the size of a one-atom
+    # fit); the absolute tolerance is a fraction of it
+    diag_g = np.diagonal(fac.G, axis1=-2, axis2=-1).astype(np.float64)  # ||A_i||^2, (m,) or (B, m)
+    col2 = (diag_g @ w2.astype(np.float64) if fac.shared else np.einsum("bm,mb->b", diag_g, w2)) / k_n
+    ref = np.sqrt(np.einsum("mb,mb->b", w2y, y.T, dtype=np.float64) / np.maximum(col2, 1e-300))
+    ref = np.where(ref > 0, ref, 1.0)[None, :]
+    atol = (_ABS_TOL * tol * ref[0]).astype(np.float64)
+    # the state is in units of kappa (below); a threshold under float32's resolution of the code (mu = 0
+    # included: the weighted least-squares problem) has no units: those columns are in units of ref and
+    # their threshold is 0, so no state overflows (mu = 0 gave inf norms and a wrong answer "converged")
+    lsq = ~(kappa > _LSQ_THRESHOLD * ref)
+    unit = np.where(lsq, ref, kappa).astype(np.float32)
+    lsq_cols = np.flatnonzero(lsq[0])
     denom = w2 + rb
     z = np.zeros((k_n, b_n), dtype=np.float32)  # z / kappa
     u = np.zeros_like(z)  # u / kappa (scaled dual of a = z)
@@ -424,15 +350,17 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
         check = it % _BALANCE_EVERY == 0 or it == max_iter
         np.subtract(z, u, out=v)  # v = z - u
         t = op.fwd_t(v)
-        t *= kappa  # A v
+        t *= unit  # A v
         e = fac.times(fac.N, (s - d) - t)  # the a step: a = v + A^T e
         a_m = t + fac.times(fac.G, e)  # A a
         if check:
             z_old, u_old, d_old, s_old = z.copy(), u.copy(), d, s
         # x = alpha a + (1 - alpha) z + u = v + (2 - alpha) u + alpha A^T e, built in v
         _axpy(u, v, 2 - alpha)
-        op.adj_t_add((alpha / kappa) * e, v)
+        op.adj_t_add((alpha / unit) * e, v)
         np.clip(v, -1.0, 1.0, out=u)  # u_new = x - soft(x, kappa) = clip(x, -kappa, kappa)
+        if lsq_cols.size:
+            u[:, lsq_cols] = 0.0  # threshold 0
         np.subtract(v, u, out=z)  # z_new = soft(x, kappa)
         ah = alpha * a_m + (1 - alpha) * s  # relaxed A a
         ah += d
@@ -440,31 +368,33 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
         d = ah - s
         if not check:
             continue
-        k_row = kappa[0]
+        k_row = unit[0].astype(np.float64)
         np.subtract(z, z_old, out=z_old)
-        change = k_row * np.sqrt(np.einsum("kb,kb->b", z_old, z_old))
+        change = k_row * np.sqrt(_sumsq(z_old))
         np.subtract(u, u_old, out=u_old)
         dd = d - d_old  # relaxed A a - s
-        primal = np.sqrt(k_row**2 * np.einsum("kb,kb->b", u_old, u_old) + beta[0] * np.einsum("mb,mb->b", dd, dd))
-        floor = np.maximum(k_row * np.sqrt(np.einsum("kb,kb->b", z, z)), _TINY)
-        done = (change <= tol * floor) & (primal <= tol * floor)
+        primal = np.sqrt(k_row**2 * _sumsq(u_old) + beta[0] * _sumsq(dd))
+        # relative plus absolute (Boyd et al. 2011, section 3.3.1): a code near 0 stops too
+        eps = tol * k_row * np.sqrt(_sumsq(z)) + atol
+        done = (change <= eps) & (primal <= eps)
         pending += int(done.sum())
         if it == max_iter:
             break
         if balance:  # residual balancing (Boyd et al. 2011, 3.4.1); the factor does not depend on rho
             ds = s - s_old
-            dual = (rb[0] / beta[0]) * np.sqrt(change * change + beta[0] * np.einsum("mb,mb->b", ds, ds))
+            dual = (rb[0] / beta[0]) * np.sqrt(change * change + beta[0] * _sumsq(ds))
             up = primal > _BALANCE_RATIO * dual
             down = dual > _BALANCE_RATIO * primal
             if up.any() or down.any():
                 f = np.where(up, 2.0, np.where(down, 0.5, 1.0)).astype(np.float32)[None, :]
                 rb = rb * f
-                kappa = kappa / f
+                f_unit = np.where(lsq, np.float32(1.0), f)  # a threshold-0 column keeps its units
+                unit = unit / f_unit
                 denom = w2 + rb
-                z *= f  # z / kappa with the new kappa; u / kappa is unchanged
+                z *= f_unit  # z / kappa with the new kappa; u / kappa is unchanged (0 with threshold 0)
                 d = d / f
         if pending and pending >= max(1, compact_fraction * len(act.rows)):
-            out_t[:, act.rows[done]] = z[:, done] * kappa[:, done]
+            out_t[:, act.rows[done]] = z[:, done] * unit[:, done]
             act.iters[act.rows[done]] = it
             keep = ~done
             act.rows = act.rows[keep]
@@ -472,13 +402,22 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
             if not keep.any():
                 return out_t.T, act.iters
             z, u, s, d, w2, w2y, denom = (np.ascontiguousarray(x[:, keep]) for x in (z, u, s, d, w2, w2y, denom))
-            beta, rb, kappa = beta[:, keep], rb[:, keep], kappa[:, keep]
+            beta, rb, unit, lsq, atol = beta[:, keep], rb[:, keep], unit[:, keep], lsq[:, keep], atol[keep]
+            lsq_cols = np.flatnonzero(lsq[0])
             v = np.empty_like(z)
             op = op.subset(keep)
             fac = fac.subset(keep)
-    out_t[:, act.rows] = z * kappa
+    out_t[:, act.rows] = z * unit
     act.iters[act.rows] = it
     return np.ascontiguousarray(out_t.T), act.iters
+
+
+def _sumsq(x: np.ndarray) -> np.ndarray:
+    """Squared norms of the columns of ``x`` ``(n, B)`` in float64 (float32 sums, redone in float64 if one overflowed)."""
+    out = np.einsum("kb,kb->b", x, x)
+    if not np.isfinite(out).all():
+        out = np.einsum("kb,kb->b", x, x, dtype=np.float64)
+    return out.astype(np.float64)
 
 
 def _axpy(x: np.ndarray, y: np.ndarray, a) -> None:
@@ -503,8 +442,7 @@ def fista(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float,
     k_n = op.shape[1]
     g = op.gram()
     s = w[:, :, None].astype(np.float64) * g * w[:, None, :].astype(np.float64)
-    with threadpool_limits(1):
-        lip = np.linalg.eigvalsh(s)[:, -1]
+    lip = np.linalg.eigvalsh(s)[:, -1]
     step = (1.0 / np.maximum(lip, 1e-30)).astype(np.float32)[:, None]
     kappa = np.broadcast_to(np.asarray(mu, dtype=np.float32), (b_n,))[:, None] * step
     w2 = w * w
@@ -536,15 +474,14 @@ def fista(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float,
     return act.out, act.iters
 
 
-def omp(op, w: np.ndarray, y: np.ndarray, sparsity: int, *, tol2: np.ndarray | None = None
-        ) -> tuple[np.ndarray, np.ndarray]:
+def omp(op, w: np.ndarray, y: np.ndarray, sparsity: int) -> tuple[np.ndarray, np.ndarray]:
     """Orthogonal matching pursuit on the weighted problem ``B = W A``, columns normalised for the selection.
 
     Each step picks the atom whose normalised column of ``B`` correlates most with the
     weighted residual, then refits all chosen atoms by weighted least squares (float64
-    normal equations with a tiny ridge). A patch stops after ``sparsity`` atoms or when
-    its squared weighted residual is at most ``tol2[b]`` (e.g. the number of usable
-    measurements: a chi-square stop).
+    normal equations with a tiny ridge). A patch stops after ``sparsity`` atoms, or earlier
+    when no atom correlates with its residual any more (an exact fit). There is no
+    residual (chi-square) stop.
 
     Returns
     -------
@@ -566,8 +503,6 @@ def omp(op, w: np.ndarray, y: np.ndarray, sparsity: int, *, tol2: np.ndarray | N
     coef = np.zeros((b_n, t_n))
     used = np.zeros(b_n, dtype=np.int32)
     active = np.ones(b_n, dtype=bool)
-    if tol2 is not None:
-        active &= np.einsum("bm,bm->b", c, c) > tol2
     for k in range(t_n):
         if not active.any():
             break
@@ -583,13 +518,10 @@ def omp(op, w: np.ndarray, y: np.ndarray, sparsity: int, *, tol2: np.ndarray | N
         ridge = 1e-10 * np.maximum(np.trace(gram, axis1=1, axis2=2), 1e-30) / (k + 1)
         gram[:, np.arange(k + 1), np.arange(k + 1)] += ridge[:, None]
         rhs = np.matmul(bk.transpose(0, 2, 1), c[:, :, None])
-        with threadpool_limits(1):
-            sol = np.linalg.solve(gram, rhs)[:, :, 0]
+        sol = np.linalg.solve(gram, rhs)[:, :, 0]
         coef[active, :k + 1] = sol[active]
         used[active] = k + 1
         r = c - np.matmul(cols[:, :, :k + 1], coef[:, :k + 1, None])[:, :, 0]
-        if tol2 is not None:
-            active &= np.einsum("bm,bm->b", r, r) > tol2
     out = np.zeros((b_n, k_n), dtype=np.float32)
     for k in range(t_n):
         has = used > k
