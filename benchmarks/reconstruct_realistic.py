@@ -77,7 +77,7 @@ def figures(result, truth, floor: float) -> dict:
 
 def main() -> None:
     from lfproc.camera.simulate import simulate_capture
-    from lfproc.recon import reconstruct
+    from lfproc.recon import reconstruct, reconstruct_gmm
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--set", choices=sorted(quality_scenes.SETS), default="test")
@@ -88,13 +88,18 @@ def main() -> None:
     parser.add_argument("--data", type=Path, default=quality_scenes.DATA)
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--save", type=Path, default=None, help="write truth and results as .npy here (for pictures)")
+    parser.add_argument("--method", choices=("dictionary", "gmm"), default="dictionary",
+                        help="lfproc.recon.reconstruct (dictionary) or lfproc.recon.reconstruct_gmm (gmm)")
+    parser.add_argument("--options", default="{}", help="JSON keywords for the reconstruction function")
     args = parser.parse_args()
     os.environ.setdefault("LFPROC_PROGRESS", "0")
     warnings.simplefilter("ignore")  # saturation warnings of the brightest scenes: expected
     period = None if args.mask_period.lower() == "none" else int(args.mask_period)
+    method = reconstruct_gmm if args.method == "gmm" else reconstruct
+    options = json.loads(args.options)
     names = [c.strip() for c in args.captures.split(",")]
     scenes = args.scenes.split(",") if args.scenes else list(quality_scenes.SETS[args.set])
-    print(f"5x5 x {args.size[0]}x{args.size[1]}, mask period {period}; per cell: PU21-PSNR dB / SSIM / worst decade "
+    print(f"{args.method} {options}, 5x5 x {args.size[0]}x{args.size[1]}, mask period {period}; per cell: PU21-PSNR dB / SSIM / worst decade "
           "(stops) / zeros / highlight energy / detail ratio / seconds")
     print("| scene | stops | " + " | ".join(names) + " |")
     print("|---|---|" + "---|" * len(names))
@@ -109,7 +114,7 @@ def main() -> None:
         for name in names:
             cap = simulate_capture(lf, mask_period=period, random_state=seed, **parse_capture(name))
             t = time.perf_counter()
-            out = reconstruct(cap)
+            out = method(cap, **options)
             seconds = time.perf_counter() - t
             f = figures(out, lf, noise_floor(cap))
             f["seconds"] = seconds

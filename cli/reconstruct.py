@@ -18,6 +18,19 @@ def register(sub, common) -> None:
                     "compares directly.")
     p.add_argument("capture", type=Path, metavar="CAPTURE", help="capture file (lfproc simulate / capture import)")
     add_output(p, help="light field to write (OUT.exr, or a folder of EXR views)")
+    p.add_argument("--method", default="dictionary", choices=("dictionary", "gmm"),
+                   help="dictionary: the sparse code of a learned dictionary per patch (the paper's method, "
+                        "default); gmm: disparity-sheared Gaussian patch models (lfproc.recon.reconstruct_gmm; needs "
+                        "a periodic mask, simulate --mask-period)")
+    p.add_argument("--model", default=None, metavar="default|FILE",
+                   help="with --method gmm: the patch model, the shipped 'default' or a .npz of "
+                        "lfproc.recon.train_patch_model")
+    p.add_argument("--disparities", default=None, metavar="D,D,...",
+                   help="with --method gmm: disparities tried per patch, pixels per view step (default "
+                        "-1,-0.75,...,1)")
+    p.add_argument("--scales", default=None, metavar="S,S,...",
+                   help="with --method gmm: multipliers of the model's covariances tried per patch (default "
+                        "0.1,1,10)")
     p.add_argument("--dictionary", default="default", metavar="default|FILE",
                    help="dictionary: the shipped 'default' or a dictionary .npz file")
     p.add_argument("--solver", default="admm", metavar="admm|fista|omp",
@@ -62,7 +75,57 @@ def register(sub, common) -> None:
     p.set_defaults(run=run)
 
 
+def _numbers(text: str, option: str) -> list[float]:
+    from lfproc.errors import InputError
+
+    try:
+        return [float(v) for v in text.split(",")]
+    except ValueError:
+        raise InputError(f"{option}: expected comma-separated numbers, got {text!r}") from None
+
+
+def _run_gmm(args) -> int:
+    from lfproc.camera.capture import load_capture
+    from lfproc.errors import InputError
+    from lfproc.io import check_output, write_lightfield
+    from lfproc.recon import load_patch_model, reconstruct_gmm
+
+    ignored = [f"--{name.replace('_', '-')}" for name in ("mu", "tol", "max_iter", "sparsity", "scale", "overlap",
+                                                           "variance", "per_shot", "workers", "scheduler", "threads")
+               if getattr(args, name) is not None]
+    ignored += ["--paper"] if args.paper else []
+    ignored += ["--dictionary"] if args.dictionary != "default" else []
+    ignored += ["--solver"] if args.solver != "admm" else []
+    if ignored:
+        raise InputError(f"{', '.join(ignored)}: options of --method dictionary; --method gmm takes --model, "
+                         "--disparities, --scales and --stride")
+    check_output(args.output, force=args.force)
+    capture = load_capture(args.capture)
+    model = load_patch_model(args.model or "default")
+    options = {"stride": args.stride}
+    if args.disparities is not None:
+        options["disparities"] = _numbers(args.disparities, "--disparities")
+    if args.scales is not None:
+        options["scales"] = _numbers(args.scales, "--scales")
+    lf = reconstruct_gmm(capture, model, **options).replace(source=str(args.capture))
+    write_lightfield(lf, args.output, force=args.force)
+    rec = lf.attrs["reconstruction"]
+    emit({"output": str(args.output), "capture": str(args.capture), "method": "gmm", "model": rec["model"],
+          "patches": rec["patches"], "stride": rec["stride"], "disparities": rec["disparities"],
+          "disparity_counts": rec["disparity_counts"], "scales": rec["scales"], "units": lf.units,
+          "shape": list(lf.shape), "seconds": rec["seconds"]}, as_json=args.json)
+    return 0
+
+
 def run(args) -> int:
+    from lfproc.errors import InputError
+
+    if args.method == "gmm":
+        return _run_gmm(args)
+    given = [o for o, v in (("--model", args.model), ("--disparities", args.disparities), ("--scales", args.scales))
+             if v is not None]
+    if given:
+        raise InputError(f"{', '.join(given)}: options of --method gmm, not of --method dictionary")
     from lfproc.camera.capture import load_capture
     from lfproc.dictionary import load_dictionary
     from lfproc.io import check_output, write_lightfield

@@ -8,6 +8,7 @@ solvers' work is matrix-matrix products; blocks of patches run in this process o
 """
 
 from ._reconstruct import DEFAULTS, OVERLAPS, PAPER, SCALES, VARIANCES, patch_count, reconstruct
+from ._gmm import PatchModel, load_patch_model, reconstruct_gmm, train_patch_model
 from ._solvers import SOLVERS
 
-__all__ = ["reconstruct", "patch_count", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "VARIANCES", "SOLVERS"]
+__all__ = ["reconstruct", "reconstruct_gmm", "PatchModel", "load_patch_model", "train_patch_model", "patch_count", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "VARIANCES", "SOLVERS"]

@@ -1,0 +1,538 @@
+"""Reconstruction with disparity-sheared Gaussian patch models (piecewise-linear estimation).
+
+Why: a patch of a Lambertian surface is, in every view, a translated copy of the centre view's
+patch, ``L(v, u, y, x, c) = C(y - dv d, x - du d, c)`` for a disparity ``d`` (pixels per view
+step; ``dv, du`` the view's offset from the centre, the convention of :mod:`lfproc.synth`). So
+a 4-D patch of ``V x U x P x P x 3`` samples is fixed by a 2-D patch ``x`` of the centre view,
+extended by a margin ``R`` (``E = P + 2R`` pixels square, 3 colours) and one disparity:
+``L_p = S_d x`` with ``S_d`` a bilinear translation per view. With two shots there are two
+measurements per pixel against three colours per pixel: the problem is close to demosaicing,
+not to recovering 75 samples per pixel from 2 as a generic dictionary must.
+
+The prior on ``x / s`` (``s`` the patch's mean level, so dark and bright patches share one
+model) is a Gaussian mixture (``k`` components, a mean and a full covariance each) learned
+from real HDR photographs (:func:`train_patch_model`). For a capture ``y = A_d x + n`` of a
+patch (``A_d = Phi_p S_d``, ``n`` Gaussian with the calibrated variances) every pair
+(disparity, component) gives the linear MMSE estimate (Wiener filter)
+``x = mu + Sigma A^T (A Sigma A^T + N)^-1 (y - A mu)`` and its evidence ``log N(y; A mu,
+A Sigma A^T + N)``; the pair of largest evidence wins (the piecewise-linear estimator of Yu,
+Sapiro and Mallat, IEEE TIP 2012, with the disparity as part of the model, as the sheared
+atoms of Vagharshakyan et al., TPAMI 2018). The systems are ``m x m`` (``m`` measurements of a
+patch, 128 for two 8 x 8 shots), solved by batched Cholesky factorisations in the whitened
+form ``W K W + I`` (``W = diag(w)``), which keeps saturated measurements out exactly.
+
+Saturated measurements are lower bounds, not missing data: after a first estimate, a saturated
+measurement whose prediction falls below its saturation level joins the data at that level
+(with its photon-noise weight) and the patch is solved again (``saturation="bound"``), so
+lights are not shrunk below what the sensor saw.
+
+Overlapping patches are combined per pixel with weights ``window / (s^2 max(1, chi2))``: a
+centre-weighted window, the inverse of the patch's scale (an error relative to the level) and
+the patch's reduced chi-square (a patch that fits its data badly, an occlusion edge, counts
+less).
+
+The mask must be periodic (``mask_period``): every patch of a phase then shares ``A_d`` and
+``A_d Sigma A_d^T`` (computed once per phase, disparity and component).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._util import check_choice, progress
+from .._version import __version__
+from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
+from ..lightfield import LightField
+
+__all__ = ["PatchModel", "train_patch_model", "load_patch_model", "reconstruct_gmm", "shear_matrix",
+           "DEFAULT_DISPARITIES", "SATURATION_MODES"]
+
+#: Disparities tried by default (pixels per view step): a lenslet camera's range, in quarter pixels.
+DEFAULT_DISPARITIES = (-1.0, -0.75, -0.5, -0.25, 0.0, 0.25, 0.5, 0.75, 1.0)
+SATURATION_MODES = ("bound", "ignore")
+#: Multipliers of the model's covariances tried per patch (a Gaussian scale mixture: smooth to high-contrast patches).
+DEFAULT_SCALES = (0.1, 1.0, 10.0)
+#: Bayer weights of the patch level ``s``: the mean of R, G, G, B over the patch's P x P pixels.
+_LEVEL_WEIGHTS = np.array([0.25, 0.5, 0.25])
+_DATA = Path(__file__).resolve().parent / "data"
+
+
+def shear_matrix(views: tuple[int, int], patch: int, margin: int, disparity: float) -> np.ndarray:
+    """``S_d``: ``(V U P P, E E)``, view pixel ``(v, u, y, x)`` from the extended centre patch (bilinear).
+
+    View ``(v, u)`` pixel ``(y, x)`` shows centre-view pixel ``(y - dv d, x - du d)`` (module notes),
+    i.e. extended-patch pixel ``(y + R - dv d, x + R - du d)``; a translation beyond the margin
+    raises :class:`~lfproc.errors.InputError`.
+    """
+    nv, nu = views
+    e = patch + 2 * margin
+    if abs(disparity) * max(nv // 2, nu // 2) > margin:
+        raise InputError(f"disparity {disparity:g}: translations of {abs(disparity) * max(nv // 2, nu // 2):g} pixels "
+                         f"exceed the model's margin of {margin} pixels")
+    out = np.zeros((nv, nu, patch, patch, e, e))
+    ii = np.arange(patch)
+    for v in range(nv):
+        for u in range(nu):
+            sy, sx = margin - (v - nv // 2) * disparity, margin - (u - nu // 2) * disparity
+            y0, x0 = math.floor(sy), math.floor(sx)
+            fy, fx = sy - y0, sx - x0
+            for oy, wy in ((0, 1.0 - fy), (1, fy)):
+                for ox, wx in ((0, 1.0 - fx), (1, fx)):
+                    if wy * wx < 1e-12:
+                        continue
+                    rows = (ii + y0 + oy)[:, None]
+                    cols = (ii + x0 + ox)[None, :]
+                    out[v, u, ii[:, None], ii[None, :], rows, cols] += wy * wx
+    return out.reshape(nv * nu * patch * patch, e * e)
+
+
+@dataclass(frozen=True, eq=False)
+class PatchModel:
+    """A Gaussian mixture over extended centre-view patches ``x / s`` (module notes).
+
+    Parameters
+    ----------
+    means : ndarray of shape (k, E * E * 3)
+    covariances : ndarray of shape (k, E * E * 3, E * E * 3)
+    weights : ndarray of shape (k,)
+        Mixture weights (sum 1).
+    patch : int
+        ``P``: the reconstructed patch (pixels square).
+    margin : int
+        ``R``: pixels around the patch the views can reach (``E = P + 2 R``).
+    attrs : dict
+        Provenance (lfproc version, training data, parameters).
+    """
+
+    means: np.ndarray
+    covariances: np.ndarray
+    weights: np.ndarray
+    patch: int
+    margin: int
+    attrs: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        e = self.patch + 2 * self.margin
+        n2 = e * e * 3
+        k = len(self.weights)
+        if self.means.shape != (k, n2) or self.covariances.shape != (k, n2, n2):
+            raise ShapeError(f"patch model: expected means ({k}, {n2}) and covariances ({k}, {n2}, {n2}) for "
+                             f"patches of {self.patch} pixels with a margin of {self.margin}, got "
+                             f"{self.means.shape} and {self.covariances.shape}")
+        for name in ("means", "covariances", "weights"):
+            if not np.isfinite(getattr(self, name)).all():
+                raise FileFormatError(f"patch model: {name} hold NaN or Inf")
+        if (self.weights <= 0).any():
+            raise FileFormatError("patch model: mixture weights must be positive")
+
+    def __repr__(self) -> str:
+        return (f"PatchModel(components={len(self.weights)}, patch={self.patch}, margin={self.margin}, "
+                f"source={self.attrs.get('source', '?')!r})")
+
+    @property
+    def components(self) -> int:
+        return len(self.weights)
+
+    def save(self, path: str | os.PathLike, *, force: bool = False) -> Path:
+        """Write the model as ``.npz`` (float32 arrays and a JSON record of its provenance)."""
+        import json
+
+        from ..io import atomic_file
+
+        path = Path(path)
+        with atomic_file(path, force=force) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(fh, means=self.means.astype(np.float32), covariances=self.covariances.astype(np.float32),
+                                    weights=self.weights.astype(np.float64),
+                                    header=np.array(json.dumps({"format": "lfproc-patch-model", "version": 1,
+                                                                "patch": self.patch, "margin": self.margin,
+                                                                "attrs": self.attrs})))
+        return path
+
+
+def load_patch_model(model: str | os.PathLike | PatchModel = "default") -> PatchModel:
+    """Read a patch model: ``"default"`` (the shipped one) or a file written by :meth:`PatchModel.save`."""
+    import json
+    import zipfile
+
+    if isinstance(model, PatchModel):
+        return model
+    path = _DATA / "gaussian_patch_model.npz" if str(model) == "default" else Path(model)
+    if not path.is_file():
+        raise MissingFileError(f"{path}: patch model file not found")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            header = json.loads(str(z["header"]))
+            arrays = {k: np.asarray(z[k], dtype=np.float64) for k in ("means", "covariances", "weights")}
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, EOFError) as exc:
+        raise FileFormatError(f"{path}: not an lfproc patch model ({type(exc).__name__}: {exc})") from None
+    if not isinstance(header, dict) or header.get("format") != "lfproc-patch-model":
+        raise FileFormatError(f"{path}: not an lfproc patch model (header format {header!r})")
+    try:
+        patch, margin = int(header["patch"]), int(header["margin"])
+    except (KeyError, TypeError, ValueError):
+        raise FileFormatError(f"{path}: patch model header lacks patch/margin") from None
+    if not (2 <= patch <= 64 and 0 <= margin <= 16):
+        raise FileFormatError(f"{path}: patch model patch {patch} / margin {margin} out of range")
+    try:
+        return PatchModel(arrays["means"], arrays["covariances"], arrays["weights"], patch, margin,
+                          attrs=dict(header.get("attrs") or {}, path=str(path)))
+    except ShapeError as exc:
+        raise FileFormatError(f"{path}: {exc}") from None
+
+
+def _level(patches: np.ndarray, patch: int, margin: int) -> np.ndarray:
+    """``s``: the Bayer-weighted mean of the central ``P x P`` pixels of extended patches ``(N, E E 3)``."""
+    e = patch + 2 * margin
+    w = np.zeros((e, e, 3))
+    w[margin:margin + patch, margin:margin + patch] = _LEVEL_WEIGHTS / (patch * patch)
+    return patches @ w.reshape(-1)
+
+
+def train_patch_model(images, *, patch: int = 8, margin: int = 2, components: int = 1, n_patches: int = 60000,
+                      max_iter: int = 5, clip: float = 50.0, random_state=0) -> PatchModel:
+    """Learn a :class:`PatchModel` from linear HDR images (e.g. real HDR photographs).
+
+    Patches of ``E = patch + 2 margin`` pixels are drawn uniformly (the same number from each
+    image), divided by their level ``s`` (module notes; patches of level below ``1e-6`` of the
+    image mean are skipped) and clipped at ``clip`` (a light in a dark patch would otherwise
+    dominate the covariances). One component: the sample mean and covariance. More: hard-EM
+    (assign each patch to its most likely component, refit), started from contrast quantiles.
+    Every covariance gets a ridge of ``1e-3`` of its mean variance.
+
+    Parameters
+    ----------
+    images : sequence of ndarray (H, W, 3)
+        Linear radiance, each larger than ``E`` pixels.
+    patch, margin, components, n_patches, max_iter, clip
+        See above.
+    random_state : None, int or Generator
+
+    Returns
+    -------
+    PatchModel
+    """
+    from .._util import check_random_state
+
+    rng = check_random_state(random_state)
+    e = patch + 2 * margin
+    per = n_patches // max(len(images), 1) + 1
+    rows = []
+    for img in images:
+        img = np.asarray(img, dtype=np.float64)
+        if img.ndim != 3 or img.shape[2] != 3 or min(img.shape[:2]) <= e:
+            raise ShapeError(f"training images: expected (H, W, 3) larger than {e} pixels, got {img.shape}")
+        ys = rng.integers(0, img.shape[0] - e, 2 * per)
+        xs = rng.integers(0, img.shape[1] - e, 2 * per)
+        ii = np.arange(e)
+        pats = img[ys[:, None, None] + ii[None, :, None], xs[:, None, None] + ii[None, None, :]].reshape(len(ys), -1)
+        s = _level(pats, patch, margin)
+        ok = s > 1e-6 * max(float(img.mean()), 1e-30)
+        rows.append(np.minimum(pats[ok][:per] / s[ok][:per, None], clip))
+    x = np.concatenate(rows)[:n_patches]
+    n2 = x.shape[1]
+
+    def fit(sel):
+        mu = sel.mean(axis=0)
+        cov = np.cov(sel, rowvar=False)
+        cov += 1e-3 * np.trace(cov) / n2 * np.eye(n2)
+        return mu, cov
+
+    if components == 1:
+        mu, cov = fit(x)
+        means, covs, weights = mu[None], cov[None], np.ones(1)
+    else:
+        contrast = np.log(x.std(axis=1) + 1e-6)
+        labels = np.searchsorted(np.quantile(contrast, np.linspace(0, 1, components + 1)[1:-1]), contrast)
+        for _ in range(max_iter):
+            parts = [fit(x[labels == j]) if (labels == j).sum() > n2 else fit(x) for j in range(components)]
+            weights = np.array([max((labels == j).mean(), 1e-3) for j in range(components)])
+            weights /= weights.sum()
+            ll = np.empty((len(x), components))
+            for j, (mu, cov) in enumerate(parts):
+                chol = np.linalg.cholesky(cov)
+                z = np.linalg.solve(chol, (x - mu).T)
+                ll[:, j] = -0.5 * (z * z).sum(axis=0) - np.log(np.diag(chol)).sum() + math.log(weights[j])
+            labels = ll.argmax(axis=1)
+        means = np.stack([p[0] for p in parts])
+        covs = np.stack([p[1] for p in parts])
+    return PatchModel(means, covs, weights, patch, margin,
+                      attrs={"lfproc_version": __version__, "patches": int(len(x)), "images": len(images),
+                             "components": components, "clip": clip, "max_iter": max_iter,
+                             "random_state": random_state if isinstance(random_state, (int, type(None))) else "generator"})
+
+
+def _gather(array: np.ndarray, tops: np.ndarray, lefts: np.ndarray, size: int) -> np.ndarray:
+    ii = np.arange(size)
+    out = array[:, tops[:, None, None] + ii[None, :, None], lefts[:, None, None] + ii[None, None, :]]
+    return np.ascontiguousarray(out.transpose(1, 0, 2, 3).reshape(len(tops), -1))
+
+
+def _patch_matrix(capture, top: int, left: int, size: int) -> np.ndarray:
+    """``Phi_p``: ``(S P P, V U P P 3)`` for the patch at ``(top, left)`` (rows: shot, row, column)."""
+    from ..camera.projection import cfa_index_map
+
+    nv, nu = capture.views
+    codes, per = capture.mask.codes, capture.mask.period
+    cfa = cfa_index_map(capture.cfa_pattern, (size, size), offset=(top, left))
+    out = np.zeros((capture.shots, size, size, nv, nu, size, size, 3))
+    ii = np.arange(size)
+    yy, xx = np.meshgrid(ii, ii, indexing="ij")
+    for s in range(capture.shots):
+        vals = codes[s][:, :, (top + yy) % per, (left + xx) % per, cfa]  # (V, U, P, P)
+        out[s, yy, xx, :, :, yy, xx, cfa] = vals.transpose(2, 3, 0, 1)
+    return out.reshape(capture.shots * size * size, -1)
+
+
+def _check_capture(capture, model: PatchModel, stride: int):
+    if capture.mask.kind != "random" or capture.mask.period is None:
+        raise InputError("reconstruct_gmm: needs a capture with a periodic random mask (simulate with mask_period, "
+                         f"e.g. 4); this capture's mask is {capture.mask.kind!r} with period {capture.mask.period}")
+    h, w = capture.size
+    if model.patch > min(h, w):
+        raise ShapeError(f"patch model: patches of {model.patch} pixels do not fit the capture's sensor of {h} x {w}")
+    if not 1 <= stride <= model.patch:
+        raise InputError(f"stride: expected 1..{model.patch} (the model's patch size), got {stride}")
+
+
+def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DEFAULT_DISPARITIES,
+                    scales=DEFAULT_SCALES, pool_radius: int = 1, saturation: str = "bound", chunk: int = 512,
+                    progress_bar: bool | None = None) -> LightField:
+    """Reconstruct the HDR light field of a capture with a disparity-sheared Gaussian patch model.
+
+    Parameters
+    ----------
+    capture : Capture or path of a capture file
+        With a periodic random mask (``mask_period``).
+    model : PatchModel, ``"default"`` or path
+        The patch prior (:func:`train_patch_model`); ``"default"`` is the shipped one.
+    stride : int
+        Patch spacing in pixels (1 .. the model's patch).
+    disparities : sequence of float
+        Disparities tried per patch (pixels per view step), within the model's margin.
+    scales : sequence of float
+        Multipliers of the chosen component's covariance tried per patch (module notes); ``(1,)``
+        turns the scale mixture off.
+    pool_radius : int
+        The disparity of a patch is chosen on the evidence summed over the ``(2 r + 1)^2``
+        neighbouring patches (0: each patch alone).
+    saturation : {"bound", "ignore"}
+        Use saturated measurements as lower bounds (module notes) or leave them out.
+    chunk : int
+        Patches solved at once (memory: about ``chunk * m^2 * 16`` bytes).
+    progress_bar : bool, optional
+        Show progress (None: when stderr is a terminal).
+
+    Returns
+    -------
+    LightField
+        ``(V, U, H, W, 3)``, in the light field's units (the capture's ``radiance_scale``
+        divided out) or e-/s; ``attrs["reconstruction"]`` records the settings and figures
+        (disparities chosen, seconds).
+
+    Raises
+    ------
+    InputError
+        A capture without a periodic random mask, a bad stride, disparities beyond the margin.
+    ShapeError
+        The model's patch does not fit the capture.
+    """
+    from ..camera.capture import Capture, load_capture, observations
+    from ..camera.projection import patch_grid
+
+    started = time.perf_counter()
+    if isinstance(capture, (str, os.PathLike)):
+        capture = load_capture(capture)
+    if not isinstance(capture, Capture):
+        raise InputError(f"reconstruct_gmm: expected a Capture or a capture file, got {type(capture).__name__}")
+    model = load_patch_model(model)
+    check_choice("saturation", saturation, SATURATION_MODES)
+    if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)):
+        raise InputError(f"stride: expected a positive integer, got {stride!r}")
+    stride = int(stride)
+    _check_capture(capture, model, stride)
+    try:
+        disparities = [float(d) for d in disparities]
+    except (TypeError, ValueError):
+        raise InputError(f"disparities: expected numbers, got {disparities!r}") from None
+    if not disparities or not all(math.isfinite(d) for d in disparities):
+        raise InputError(f"disparities: expected at least one finite number, got {disparities!r}")
+    try:
+        scales = sorted({float(v) for v in scales} | {1.0})
+    except (TypeError, ValueError):
+        raise InputError(f"scales: expected positive numbers, got {scales!r}") from None
+    if not all(math.isfinite(v) and v > 0 for v in scales):
+        raise InputError(f"scales: expected positive numbers, got {scales!r}")
+    if isinstance(pool_radius, bool) or not isinstance(pool_radius, (int, np.integer)) or pool_radius < 0:
+        raise InputError(f"pool_radius: expected an integer >= 0, got {pool_radius!r}")
+    radius = int(pool_radius)
+    nv, nu = capture.views
+    p, r = model.patch, model.margin
+    shears = [np.kron(shear_matrix((nv, nu), p, r, d), np.eye(3)) for d in disparities]  # (VUPP3, EE3)
+
+    obs = observations(capture, variance_from="local")
+    T = np.asarray(obs.radiance, np.float64)
+    W = np.asarray(obs.weight, np.float64)
+    if not (W > 0).any():
+        raise InputError("capture: every measurement has weight zero (all saturated or black-clipped); nothing to "
+                         "reconstruct from")
+    sat = np.asarray(obs.saturated) & (saturation == "bound")
+    W_sat = np.where(sat, 1.0 / np.sqrt(np.maximum(np.asarray(obs.variance, np.float64), 1e-30)), 0.0)
+    h, w = capture.size
+    tops, lefts = patch_grid((h, w), p, stride)
+    gt, gl = np.repeat(tops, len(lefts)), np.tile(lefts, len(tops))
+    per = capture.mask.period
+    phase = ((gt % per) * per + gl % per) * 4 + (gt % 2) * 2 + gl % 2
+    acc = np.zeros((nv, nu, h, w, 3))
+    wacc = np.zeros((h, w))
+    x1 = (np.arange(p) + 0.5) / p
+    win = np.outer(np.sin(np.pi * x1) ** 2 + 1e-3, np.sin(np.pi * x1) ** 2 + 1e-3)
+    bar = progress(total=len(gt), desc="reconstruct (gmm)", unit="patch",
+                   disable=None if progress_bar is None else not progress_bar)
+    log_pi = np.log(model.weights)
+    n_h = len(disparities) * model.components * len(scales)
+    scores = np.empty((len(gt), n_h))
+    phases = {}
+    try:
+        for ph in np.unique(phase):  # pass 1: the evidence of every hypothesis (disparity, component, scale)
+            members = np.flatnonzero(phase == ph)
+            phases[ph] = _phase_matrices(capture, int(gt[members[0]]), int(gl[members[0]]), p, shears, model)
+            for start in range(0, len(members), chunk):
+                sel = members[start:start + chunk]
+                scores[sel] = _evidence(T, W, gt[sel], gl[sel], p, phases[ph], log_pi, scales)
+                bar.update(len(sel) / 2)
+        # the disparity: the evidence pooled over the 3 x 3 neighbouring patches (surfaces are larger than a
+        # patch; one patch's evidence alone is noisy), then the component and scale of the patch at it
+        per_d = scores.reshape(len(gt), len(disparities), -1).max(axis=2)
+        pooled = _pool(per_d.reshape(len(tops), len(lefts), -1), radius)
+        chosen_d = pooled.reshape(len(gt), -1).argmax(axis=1)
+        at_d = scores.reshape(len(gt), len(disparities), -1)[np.arange(len(gt)), chosen_d]
+        chosen = chosen_d * at_d.shape[1] + at_d.argmax(axis=1)
+        for ph in np.unique(phase):  # pass 2: the estimates of the chosen hypotheses
+            members = np.flatnonzero(phase == ph)
+            for start in range(0, len(members), chunk):
+                sel = members[start:start + chunk]
+                est = _estimate(T, W, W_sat, gt[sel], gl[sel], p, phases[ph], chosen[sel], shears, model, (nv, nu),
+                                scales)
+                for b, i in enumerate(sel):
+                    t, l = gt[i], gl[i]
+                    wb = win * est["weight"][b]
+                    acc[:, :, t:t + p, l:l + p] += est["patches"][b] * wb[None, None, :, :, None]
+                    wacc[t:t + p, l:l + p] += wb
+                bar.update(len(sel) / 2)
+    finally:
+        bar.close()
+    data = acc / np.maximum(wacc, 1e-300)[None, None, :, :, None]
+    negative = float((data < 0).mean())
+    np.maximum(data, 0, out=data)
+    if capture.radiance_scale is not None:
+        data /= float(capture.radiance_scale)
+        units = capture.parameters.get("light_field_units") or "relative"
+    else:
+        units = "e-/s"
+    counts = np.bincount(chosen_d, minlength=len(disparities))
+    record = {"lfproc_version": __version__, "method": "gmm", "model": repr(model), "model_attrs": model.attrs,
+              "stride": stride, "disparities": disparities, "scales": scales, "pool_radius": radius,
+              "saturation": saturation,
+              "disparity_counts": counts.tolist(), "patches": int(len(gt)), "negative_fraction_clipped": negative,
+              "radiance_scale": capture.radiance_scale, "capture_ground_truth": capture.ground_truth,
+              "seconds": time.perf_counter() - started}
+    return LightField(data=data.astype(np.float32), units=units,
+                      colour_space="camera-rgb" if capture.radiance_scale is None else "linear-srgb",
+                      source="lfproc.reconstruct_gmm", attrs={"reconstruction": record})
+
+
+def _phase_matrices(capture, top: int, left: int, p: int, shears, model) -> dict:
+    """What every patch of one phase shares: ``A`` per disparity, ``A mu``, ``A Sigma`` and ``A Sigma A^T`` per component."""
+    phi = _patch_matrix(capture, top, left, p)
+    out = {"rowsum": phi.sum(axis=1), "hyp": []}
+    for di, sh in enumerate(shears):
+        a = phi @ sh  # (m, n2)
+        for k in range(model.components):
+            a_cov = a @ model.covariances[k]
+            out["hyp"].append((di, k, a, a_cov @ a.T, a @ model.means[k], a_cov))
+    return out
+
+
+def _normalised(T, W, tops, lefts, p, rowsum):
+    """The patches' measurements and weights in units of their level ``s`` (module notes), and ``s``."""
+    y = _gather(T, tops, lefts, p)
+    w = _gather(W, tops, lefts, p)
+    use = w > 0
+    level = np.where(use, np.maximum(y, 0), 0).sum(axis=1) / np.maximum((use * rowsum).sum(axis=1), 1e-12)
+    level = np.maximum(level, 1e-12 * max(float(level.max()), 1e-30))
+    return y / level[:, None], w * level[:, None], level
+
+
+def _evidence(T, W, tops, lefts, p, phase, log_pi, scales) -> np.ndarray:
+    """Log evidence of every (disparity, component, scale) for a chunk of patches, ``(B, D K S)``."""
+    yn, wn, _ = _normalised(T, W, tops, lefts, p, phase["rowsum"])
+    out = np.empty((len(yn), len(phase["hyp"]), len(scales)))
+    for j, (di, k, a, kmat, a_mu, a_cov) in enumerate(phase["hyp"]):
+        for si, sc in enumerate(scales):
+            out[:, j, si], _ = _wiener(sc * kmat, a_mu, yn, wn, log_pi[k] - math.log(len(scales)),
+                                       want_solution=False)
+    return out.reshape(len(yn), -1)
+
+
+def _pool(per_d: np.ndarray, radius: int) -> np.ndarray:
+    """Sum of each disparity's evidence over the ``(2 radius + 1)^2`` neighbouring patches of the grid."""
+    if radius == 0:
+        return per_d
+    from scipy.ndimage import uniform_filter
+
+    rel = per_d - per_d.max(axis=2, keepdims=True)  # relative evidence: a patch with a large one does not dominate
+    return uniform_filter(np.maximum(rel, -50.0), size=(2 * radius + 1, 2 * radius + 1, 1), mode="nearest")
+
+
+def _estimate(T, W, W_sat, tops, lefts, p, phase, chosen, shears, model, views, scales) -> dict:
+    """The estimate of each patch under its chosen hypothesis, and its overlap weight."""
+    yn, wn, level = _normalised(T, W, tops, lefts, p, phase["rowsum"])
+    ws = _gather(W_sat, tops, lefts, p) * level[:, None]
+    b_n = len(yn)
+    patches = np.zeros((b_n, len(shears[0])))
+    weight = np.zeros(b_n)
+    n_s = len(scales)
+    for h in np.unique(chosen):
+        g = np.flatnonzero(chosen == h)
+        di, k, a, kmat, a_mu, a_cov = phase["hyp"][h // n_s]
+        sc = scales[h % n_s]
+        wg = wn[g].copy()
+        _, alpha = _wiener(sc * kmat, a_mu, yn[g], wg, 0.0)
+        x = model.means[k][None] + sc * (wg * alpha) @ a_cov
+        for _ in range(2):  # saturated measurements below their level join the data as bounds (module notes)
+            low = (ws[g] > 0) & (x @ a.T < yn[g])
+            if not low.any():
+                break
+            wg = np.where(low, ws[g], wn[g])
+            _, alpha = _wiener(sc * kmat, a_mu, yn[g], wg, 0.0)
+            x = model.means[k][None] + sc * (wg * alpha) @ a_cov
+        res = (x @ a.T - yn[g]) * wg
+        chi2 = (res * res).sum(axis=1) / np.maximum((wg > 0).sum(axis=1), 1)
+        patches[g] = np.maximum(x @ shears[di].T, 0.0) * level[g, None]  # radiance is not negative
+        weight[g] = 1.0 / (level[g] ** 2 * np.maximum(chi2, 1.0))
+    return {"patches": patches.reshape(b_n, *views, p, p, 3), "weight": weight}
+
+
+def _wiener(kmat, a_mu, y, w, log_prior, want_solution=True):
+    """Evidence of ``y`` under ``N(A mu, K + W^-2)`` and ``alpha = (W K W + I)^-1 W (y - A mu)``, batched."""
+    import scipy.linalg as sl
+
+    m = len(kmat)
+    c = w[:, :, None] * kmat[None] * w[:, None, :]
+    c[:, np.arange(m), np.arange(m)] += 1.0
+    chol = np.linalg.cholesky(c)
+    r = w * (y - a_mu[None])
+    z = sl.solve_triangular(chol, r[..., None], lower=True)[..., 0]
+    score = -0.5 * (z * z).sum(axis=1) - np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1) + log_prior
+    if not want_solution:
+        return score, None
+    alpha = sl.solve_triangular(chol, z[..., None], lower=True, trans="T")[..., 0]
+    return score, alpha

@@ -1,0 +1,190 @@
+"""Reconstruction with disparity-sheared Gaussian patch models (lfproc.recon.reconstruct_gmm).
+
+References used: lfproc.synth.render_layers (an independent implementation of the views'
+translation) for the shear matrices; planted solutions (a patch drawn from a rank-limited model,
+a plane at a known disparity) and known levels for the solver.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lfproc import LightField
+from lfproc.camera.simulate import simulate_capture
+from lfproc.cli.main import main
+from lfproc.errors import FileFormatError, InputError, MissingFileError, ShapeError
+from lfproc.metrics import evaluate
+from lfproc.recon import PatchModel, load_patch_model, reconstruct_gmm, train_patch_model
+from lfproc.recon._gmm import _patch_matrix, _wiener, shear_matrix
+from lfproc.synth import Layer, render_layers
+
+
+@pytest.mark.parametrize("d", [1.0, -1.0, 0.5, -0.25, 0.0])
+def test_shear_matrix_matches_the_synthetic_renderer(d):
+    """S_d applied to a layer's centre patch equals lfproc.synth's rendering of that layer at disparity d."""
+    rng = np.random.default_rng(0)
+    p, r, m, t = 8, 2, 4, 4  # patch, model margin, raster margin, patch corner in a 16 x 16 view
+    raster = rng.random((16 + 2 * m, 16 + 2 * m, 3)).astype(np.float32)
+    views, _ = render_layers([Layer(raster, np.ones(raster.shape[:2], np.float32), d)], size=(16, 16), views=5)
+    ext = raster[m + t - r:m + t + p + r, m + t - r:m + t + p + r]  # the centre view's extended patch
+    got = (shear_matrix((5, 5), p, r, d) @ ext.reshape(-1, 3)).reshape(5, 5, p, p, 3)
+    np.testing.assert_allclose(got, views[:, :, t:t + p, t:t + p], atol=1e-5)
+
+
+def test_shear_matrix_refuses_translations_beyond_the_margin():
+    with pytest.raises(InputError, match="exceed the model's margin of 2"):
+        shear_matrix((5, 5), 8, 2, 1.5)
+
+
+def _rank_model(rank: int, seed: int = 0) -> PatchModel:
+    rng = np.random.default_rng(seed)
+    n2 = 12 * 12 * 3
+    basis = np.linalg.qr(rng.standard_normal((n2, rank)))[0]
+    cov = basis @ np.diag(np.linspace(1.0, 0.2, rank)) @ basis.T + 1e-10 * np.eye(n2)
+    return PatchModel(np.ones((1, n2)), cov[None], np.ones(1), 8, 2), basis
+
+
+def test_planted_patch_is_recovered_from_two_noise_free_shots():
+    """A patch drawn from a rank-40 model, seen by two shots (128 measurements), comes back at >= 50 dB."""
+    lf = LightField(np.full((5, 5, 16, 16, 3), 0.5, np.float32), units="relative")
+    capture = simulate_capture(lf, profile="paper-none", mask_period=4, shots=2, random_state=1, noise=False,
+                               radiance_scale=1000.0)  # only the mask codes are used
+    model, basis = _rank_model(40)
+    phi = _patch_matrix(capture, 0, 0, 8)
+    for d in (1.0, -0.5, 0.0):
+        a = phi @ np.kron(shear_matrix((5, 5), 8, 2, d), np.eye(3))
+        x_true = model.means[0] + basis @ np.random.default_rng(2).standard_normal(40) * 0.3
+        y = a @ x_true
+        w = np.ones((1, len(y))) * 1e4  # noise-free: measurements far more precise than the prior
+        kmat = a @ model.covariances[0] @ a.T
+        _, alpha = _wiener(kmat, a @ model.means[0], y[None], w, 0.0)
+        x = model.means[0] + (w * alpha) @ (a @ model.covariances[0])
+        est, true = (x[0] @ np.kron(shear_matrix((5, 5), 8, 2, d), np.eye(3)).T,
+                     np.kron(shear_matrix((5, 5), 8, 2, d), np.eye(3)) @ x_true)
+        psnr = 10 * np.log10(np.abs(true).max() ** 2 / np.mean((est - true) ** 2))
+        assert psnr >= 50, (d, psnr)
+
+
+def _plane(d: float, size=(48, 64), seed=0, level=1.0):
+    from scipy.ndimage import gaussian_filter
+
+    rng = np.random.default_rng(seed)
+    m = 8
+    tex = gaussian_filter(rng.random((size[0] + 2 * m, size[1] + 2 * m, 3)), (0.7, 0.7, 0)) * 2 * level
+    tex = tex.astype(np.float32) + np.float32(0.2 * level)
+    data, _ = render_layers([Layer(tex, np.ones(tex.shape[:2], np.float32), d)], size=size, views=5)
+    return LightField(data, units="relative")
+
+
+def test_disparity_of_a_plane_is_found():
+    lf = _plane(0.5)
+    capture = simulate_capture(lf, profile="paper-low", mask_period=4, shots=2, random_state=3)
+    out = reconstruct_gmm(capture, disparities=[-1, -0.5, 0, 0.5, 1])
+    counts = out.attrs["reconstruction"]["disparity_counts"]
+    assert counts[3] > 0.8 * sum(counts), counts
+    assert evaluate(out, lf)["pu21_psnr_db"] > 28
+
+
+def test_noise_free_capture_scores_at_least_as_well_as_noisy_ones():
+    """Means over two captures (seeds): a noise-free sensor (quantisation only) >= medium and high noise."""
+    lf = _plane(-0.5, seed=4)
+
+    def score(**options):
+        return np.mean([evaluate(reconstruct_gmm(simulate_capture(lf, mask_period=4, shots=2, random_state=seed,
+                                                                  **options), disparities=[-0.5, 0, 0.5]),
+                                 lf)["pu21_psnr_db"] for seed in (5, 6)])
+
+    free = score(profile="paper-none", noise=False)
+    assert free >= score(profile="paper-medium") and free >= score(profile="paper-high"), free
+
+
+def test_dark_floor_beside_a_light_12_stops_brighter():
+    """A flat floor with a square light 2^12 times brighter: the floor away from the light keeps its level."""
+    data = np.full((5, 5, 48, 48, 3), 1.0, np.float32)
+    data[:, :, 16:32, 16:32] = 4096.0
+    lf = LightField(data, units="relative")
+    capture = simulate_capture(lf, profile="paper-medium", mask_period=4, shots=2, random_state=6)
+    out = reconstruct_gmm(capture, disparities=[0.0]).data
+    floor = np.concatenate([out[:, :, :8].ravel(), out[:, :, 40:].ravel()])
+    assert abs(np.median(floor) - 1.0) < 0.05, np.median(floor)
+    assert (floor > 0).all()
+    light = out[:, :, 20:28, 20:28]
+    assert abs(np.median(light) / 4096.0 - 1.0) < 0.05, np.median(light)
+
+
+def test_input_is_not_mutated_and_the_result_records_its_settings():
+    lf = _plane(0.0, size=(24, 24))
+    capture = simulate_capture(lf, profile="paper-low", mask_period=4, shots=1, random_state=7)
+    dn = capture.dn.copy()
+    out = reconstruct_gmm(capture, disparities=[0.0], scales=[1.0])
+    assert np.array_equal(capture.dn, dn)
+    rec = out.attrs["reconstruction"]
+    assert rec["method"] == "gmm" and rec["disparities"] == [0.0] and rec["scales"] == [1.0]
+    assert rec["lfproc_version"] and out.shape == lf.shape
+
+
+@pytest.mark.filterwarnings("ignore::lfproc.errors.SaturationWarning")
+def test_bad_inputs():
+    lf = _plane(0.0, size=(24, 24))
+    aperiodic = simulate_capture(lf, profile="paper-low", shots=1, random_state=8)
+    with pytest.raises(InputError, match="periodic random mask"):
+        reconstruct_gmm(aperiodic)
+    capture = simulate_capture(lf, profile="paper-low", mask_period=4, shots=1, random_state=8)
+    with pytest.raises(InputError, match="stride: expected 1..8"):
+        reconstruct_gmm(capture, stride=9)
+    with pytest.raises(InputError, match="exceed the model's margin"):
+        reconstruct_gmm(capture, disparities=[3.0])
+    with pytest.raises(InputError, match="scales"):
+        reconstruct_gmm(capture, scales=[0.0])
+    with pytest.raises(InputError, match="saturation"):
+        reconstruct_gmm(capture, saturation="nope")
+    small = LightField(np.ones((5, 5, 6, 6, 3), np.float32), units="relative")
+    with pytest.raises(ShapeError, match="do not fit the capture's sensor of 6 x 6"):
+        reconstruct_gmm(simulate_capture(small, profile="paper-low", mask_period=2, shots=1, random_state=0))
+
+
+def test_model_files_round_trip_and_bad_files_are_refused(tmp_path):
+    rng = np.random.default_rng(0)
+    images = [np.exp(rng.standard_normal((40, 50, 3))).astype(np.float32) for _ in range(2)]
+    model = train_patch_model(images, n_patches=3000, components=2, max_iter=2, random_state=0)
+    path = model.save(tmp_path / "m.npz")
+    back = load_patch_model(path)
+    assert back.components == 2 and back.patch == 8 and back.margin == 2
+    np.testing.assert_allclose(back.covariances, model.covariances.astype(np.float32), rtol=1e-6)
+    with pytest.raises(Exception, match="output exists"):
+        model.save(path)
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip")
+    with pytest.raises(FileFormatError, match="not an lfproc patch model"):
+        load_patch_model(bad)
+    with pytest.raises(MissingFileError):
+        load_patch_model(tmp_path / "missing.npz")
+    shipped = load_patch_model("default")
+    assert shipped.patch == 8 and shipped.margin == 2 and "photographs" in shipped.attrs
+
+
+def test_cli_method_gmm(tmp_path, capsys):
+    from lfproc.io import write_lightfield
+
+    lf = _plane(0.25, size=(24, 32))
+    src = tmp_path / "lf.exr"
+    write_lightfield(lf, src)
+    cap = tmp_path / "c.capture.npz"
+    assert main(["simulate", str(src), "-o", str(cap), "--mask-period", "4", "--shots", "2", "--seed", "1"]) == 0
+    out = tmp_path / "r.exr"
+    assert main(["reconstruct", str(cap), "-o", str(out), "--method", "gmm", "--disparities", "0,0.25,0.5",
+                 "--json"]) == 0
+    assert out.is_file() and '"method": "gmm"' in capsys.readouterr().out
+    bad_cases = [
+        (["--method", "gmm", "--mu", "1"], "--mu: options of --method dictionary"),
+        (["--model", "x.npz"], "--model: options of --method gmm"),
+        (["--method", "gmm", "--disparities", "a,b"], "--disparities: expected comma-separated numbers"),
+        (["--method", "gmm", "--model", str(tmp_path / "none.npz")], "patch model file not found"),
+    ]
+    for extra, message in bad_cases:
+        target = tmp_path / "bad.exr"
+        assert main(["reconstruct", str(cap), "-o", str(target), *extra]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and message in err, (extra, err)
+        assert not target.exists()
