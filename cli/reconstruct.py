@@ -91,18 +91,18 @@ def _run_gmm(args) -> int:
     from lfproc.recon import load_patch_model, reconstruct_gmm
 
     ignored = [f"--{name.replace('_', '-')}" for name in ("mu", "tol", "max_iter", "sparsity", "scale", "overlap",
-                                                           "variance", "per_shot", "workers", "scheduler", "threads")
+                                                           "variance", "per_shot", "workers", "scheduler")
                if getattr(args, name) is not None]
     ignored += ["--paper"] if args.paper else []
     ignored += ["--dictionary"] if args.dictionary != "default" else []
     ignored += ["--solver"] if args.solver != "admm" else []
     if ignored:
         raise InputError(f"{', '.join(ignored)}: options of --method dictionary; --method gmm takes --model, "
-                         "--disparities, --scales and --stride")
+                         "--disparities, --scales, --stride and --threads")
     check_output(args.output, force=args.force)
     capture = load_capture(args.capture)
     model = load_patch_model(args.model or "default")
-    options = {"stride": args.stride}
+    options = {"stride": args.stride, "threads": args.threads}
     if args.disparities is not None:
         options["disparities"] = _numbers(args.disparities, "--disparities")
     if args.scales is not None:

@@ -431,6 +431,16 @@ def write_preview(obj: Any, path: str | os.PathLike, *, kind: str = "centre", fo
 
     Raises :class:`lfproc.errors.OutputExistsError` when ``path`` exists and ``force`` is false.
     """
+    text = {"lfproc_preview": kind,
+            "lfproc_options": repr(sorted((k, _describe_option(v)) for k, v in options.items()))}
+    if isinstance(obj, LightField) and obj.source:
+        text["Source"] = obj.source
+    return _write_picture(path, lambda: render_preview(obj, kind, **options), text, what="a preview", force=force)
+
+
+def _write_picture(path, render, text: dict[str, str], *, what: str, force: bool) -> Path:
+    """Check ``path``, render, and write atomically: PNG (with ``text`` and the lfproc version as text
+    chunks), JPEG or TIFF by the suffix."""
     from PIL import Image
     from PIL.PngImagePlugin import PngInfo
 
@@ -439,18 +449,16 @@ def write_preview(obj: Any, path: str | os.PathLike, *, kind: str = "centre", fo
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in PREVIEW_SUFFIXES:
-        raise InputError(f"{path}: expected a preview file ending in {', '.join(PREVIEW_SUFFIXES)}")
+        raise InputError(f"{path}: expected {what} file ending in {', '.join(PREVIEW_SUFFIXES)}")
     check_output(path, force=force)
-    image = render_preview(obj, kind, **options)
+    image = render()
     with atomic_file(path, force=force) as tmp:
         pil = Image.fromarray(image)
         if suffix == ".png":
             info = PngInfo()
             info.add_text("Software", f"lfproc {__version__}")
-            info.add_text("lfproc_preview", kind)
-            info.add_text("lfproc_options", repr(sorted((k, _describe_option(v)) for k, v in options.items())))
-            if isinstance(obj, LightField) and obj.source:
-                info.add_text("Source", obj.source)
+            for key, value in text.items():
+                info.add_text(key, value)
             pil.save(tmp, format="PNG", pnginfo=info)
         elif suffix in (".jpg", ".jpeg"):
             pil.save(tmp, format="JPEG", quality=92)
@@ -566,26 +574,5 @@ def write_error_map(result: Any, reference: Any, path: str | os.PathLike, *, for
                     **options) -> Path:
     """Write :func:`render_error_map` atomically to a PNG (or JPEG/TIFF); refuses an existing
     ``path`` unless ``force``. ``options`` go to :func:`render_error_map`."""
-    from PIL import Image
-    from PIL.PngImagePlugin import PngInfo
-
-    from .io import atomic_file, check_output
-
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in PREVIEW_SUFFIXES:
-        raise InputError(f"{path}: expected an error-map file ending in {', '.join(PREVIEW_SUFFIXES)}")
-    check_output(path, force=force)
-    image = render_error_map(result, reference, **options)
-    with atomic_file(path, force=force) as tmp:
-        pil = Image.fromarray(image)
-        if suffix == ".png":
-            info = PngInfo()
-            info.add_text("Software", f"lfproc {__version__}")
-            info.add_text("lfproc_preview", "error-map")
-            pil.save(tmp, format="PNG", pnginfo=info)
-        elif suffix in (".jpg", ".jpeg"):
-            pil.save(tmp, format="JPEG", quality=92)
-        else:
-            pil.save(tmp, format="TIFF")
-    return path
+    return _write_picture(path, lambda: render_error_map(result, reference, **options),
+                          {"lfproc_preview": "error-map"}, what="an error-map", force=force)

@@ -40,11 +40,13 @@ from __future__ import annotations
 import math
 import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from .._util import check_choice, progress
 from .._version import __version__
@@ -57,6 +59,7 @@ __all__ = ["PatchModel", "train_patch_model", "load_patch_model", "reconstruct_g
 #: Disparities tried by default (pixels per view step): a lenslet camera's range, in quarter pixels.
 DEFAULT_DISPARITIES = (-1.0, -0.75, -0.5, -0.25, 0.0, 0.25, 0.5, 0.75, 1.0)
 SATURATION_MODES = ("bound", "ignore")
+SEARCHES = ("joint", "staged")
 #: Multipliers of the model's covariances tried per patch (a Gaussian scale mixture: smooth to high-contrast patches).
 DEFAULT_SCALES = (0.1, 1.0, 10.0)
 #: Bayer weights of the patch level ``s``: the mean of R, G, G, B over the patch's P x P pixels.
@@ -303,8 +306,8 @@ def _check_capture(capture, model: PatchModel, stride: int):
 
 
 def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DEFAULT_DISPARITIES,
-                    scales=DEFAULT_SCALES, pool_radius: int = 1, saturation: str = "bound", chunk: int = 512,
-                    progress_bar: bool | None = None) -> LightField:
+                    scales=DEFAULT_SCALES, pool_radius: int = 1, search: str = "joint", saturation: str = "bound",
+                    chunk: int = 256, threads: int | None = None, progress_bar: bool | None = None) -> LightField:
     """Reconstruct the HDR light field of a capture with a disparity-sheared Gaussian patch model.
 
     Parameters
@@ -323,10 +326,17 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
     pool_radius : int
         The disparity of a patch is chosen on the evidence summed over the ``(2 r + 1)^2``
         neighbouring patches (0: each patch alone).
+    search : {"joint", "staged"}
+        Evaluate every (disparity, component, scale) per patch (``"joint"``), or the scales other
+        than 1 only at the disparity chosen at scale 1 (``"staged"``: about ``S`` times fewer
+        factorisations).
     saturation : {"bound", "ignore"}
         Use saturated measurements as lower bounds (module notes) or leave them out.
     chunk : int
-        Patches solved at once (memory: about ``chunk * m^2 * 16`` bytes).
+        Patches solved at once (memory: about ``chunk * m^2 * 16`` bytes per thread).
+    threads : int, optional
+        Chunks solved at once, each on one BLAS thread (default: the CPUs available). The
+        output does not depend on it.
     progress_bar : bool, optional
         Show progress (None: when stderr is a terminal).
 
@@ -354,6 +364,13 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
         raise InputError(f"reconstruct_gmm: expected a Capture or a capture file, got {type(capture).__name__}")
     model = load_patch_model(model)
     check_choice("saturation", saturation, SATURATION_MODES)
+    check_choice("search", search, SEARCHES)
+    if threads is None:
+        threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise InputError(f"threads: expected an integer >= 1, got {threads!r}")
+    if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
+        raise InputError(f"chunk: expected an integer >= 1, got {chunk!r}")
     if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)):
         raise InputError(f"stride: expected a positive integer, got {stride!r}")
     stride = int(stride)
@@ -398,35 +415,48 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
                    disable=None if progress_bar is None else not progress_bar)
     log_pi = np.log(model.weights)
     n_h = len(disparities) * model.components * len(scales)
-    scores = np.empty((len(gt), n_h))
-    phases = {}
+    scores = np.full((len(gt), n_h), -np.inf)
+    phases = {ph: _phase_matrices(capture, int(gt[phase == ph][0]), int(gl[phase == ph][0]), p, shears, model)
+              for ph in np.unique(phase)}
+    first = [scales.index(1.0)] if search == "staged" else list(range(len(scales)))
+    jobs = [(ph, members[start:start + chunk]) for ph in phases for members in [np.flatnonzero(phase == ph)]
+            for start in range(0, len(members), chunk)]
+
+    def evidence(job, which):
+        ph, sel = job
+        return _evidence(T, W, gt[sel], gl[sel], p, phases[ph], log_pi, scales, which)
+
     try:
-        for ph in np.unique(phase):  # pass 1: the evidence of every hypothesis (disparity, component, scale)
-            members = np.flatnonzero(phase == ph)
-            phases[ph] = _phase_matrices(capture, int(gt[members[0]]), int(gl[members[0]]), p, shears, model)
-            for start in range(0, len(members), chunk):
-                sel = members[start:start + chunk]
-                scores[sel] = _evidence(T, W, gt[sel], gl[sel], p, phases[ph], log_pi, scales)
-                bar.update(len(sel) / 2)
-        # the disparity: the evidence pooled over the 3 x 3 neighbouring patches (surfaces are larger than a
-        # patch; one patch's evidence alone is noisy), then the component and scale of the patch at it
-        per_d = scores.reshape(len(gt), len(disparities), -1).max(axis=2)
-        pooled = _pool(per_d.reshape(len(tops), len(lefts), -1), radius)
-        chosen_d = pooled.reshape(len(gt), -1).argmax(axis=1)
-        at_d = scores.reshape(len(gt), len(disparities), -1)[np.arange(len(gt)), chosen_d]
-        chosen = chosen_d * at_d.shape[1] + at_d.argmax(axis=1)
-        for ph in np.unique(phase):  # pass 2: the estimates of the chosen hypotheses
-            members = np.flatnonzero(phase == ph)
-            for start in range(0, len(members), chunk):
-                sel = members[start:start + chunk]
-                est = _estimate(T, W, W_sat, gt[sel], gl[sel], p, phases[ph], chosen[sel], shears, model, (nv, nu),
-                                scales)
+        with threadpool_limits(1), ThreadPoolExecutor(max_workers=threads) as pool:
+            # pass 1: the evidence of every hypothesis (disparity, component, scale; "staged": at scale 1 only)
+            for (ph, sel), out in zip(jobs, pool.map(lambda j: evidence(j, first), jobs)):
+                scores[sel] = out
+                bar.update(len(sel) / 3)
+            # the disparity: the evidence pooled over the neighbouring patches (surfaces are larger than a patch;
+            # one patch's evidence alone is noisy), then the component and scale of the patch at it
+            per_d = scores.reshape(len(gt), len(disparities), -1).max(axis=2)
+            pooled = _pool(per_d.reshape(len(tops), len(lefts), -1), radius)
+            chosen_d = pooled.reshape(len(gt), -1).argmax(axis=1)
+            if search == "staged":  # the other scales, at the chosen disparity only
+                rest = [i for i in range(len(scales)) if i not in first]
+                sub = [(ph, sel[chosen_d[sel] == d], d) for ph, sel in jobs for d in np.unique(chosen_d[sel])]
+                for (ph, sel, d), out in zip(sub, pool.map(
+                        lambda j: _evidence(T, W, gt[j[1]], gl[j[1]], p, phases[j[0]], log_pi, scales, rest,
+                                            disparity=j[2]), sub)):
+                    scores[sel[:, None], out[1][None, :]] = out[0]
+            bar.update(len(gt) / 3)
+            at_d = scores.reshape(len(gt), len(disparities), -1)[np.arange(len(gt)), chosen_d]
+            chosen = chosen_d * at_d.shape[1] + at_d.argmax(axis=1)
+            # pass 2: the estimates of the chosen hypotheses, added in a fixed order
+            estimates = pool.map(lambda j: _estimate(T, W, W_sat, gt[j[1]], gl[j[1]], p, phases[j[0]], chosen[j[1]],
+                                                     shears, model, (nv, nu), scales), jobs)
+            for (ph, sel), est in zip(jobs, estimates):
                 for b, i in enumerate(sel):
                     t, l = gt[i], gl[i]
                     wb = win * est["weight"][b]
                     acc[:, :, t:t + p, l:l + p] += est["patches"][b] * wb[None, None, :, :, None]
                     wacc[t:t + p, l:l + p] += wb
-                bar.update(len(sel) / 2)
+                bar.update(len(sel) / 3)
     finally:
         bar.close()
     data = acc / np.maximum(wacc, 1e-300)[None, None, :, :, None]
@@ -439,7 +469,7 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
         units = "e-/s"
     counts = np.bincount(chosen_d, minlength=len(disparities))
     record = {"lfproc_version": __version__, "method": "gmm", "model": repr(model), "model_attrs": model.attrs,
-              "stride": stride, "disparities": disparities, "scales": scales, "pool_radius": radius,
+              "stride": stride, "disparities": disparities, "scales": scales, "pool_radius": radius, "search": search,
               "saturation": saturation,
               "disparity_counts": counts.tolist(), "patches": int(len(gt)), "negative_fraction_clipped": negative,
               "radiance_scale": capture.radiance_scale, "capture_ground_truth": capture.ground_truth,
@@ -471,15 +501,27 @@ def _normalised(T, W, tops, lefts, p, rowsum):
     return y / level[:, None], w * level[:, None], level
 
 
-def _evidence(T, W, tops, lefts, p, phase, log_pi, scales) -> np.ndarray:
-    """Log evidence of every (disparity, component, scale) for a chunk of patches, ``(B, D K S)``."""
+def _evidence(T, W, tops, lefts, p, phase, log_pi, scales, which, disparity=None):
+    """Log evidence of the hypotheses (disparity, component, scale index in ``which``) of a chunk of patches.
+
+    All disparities: ``(B, D K S)`` with ``-inf`` for scales not in ``which``. One ``disparity``:
+    ``(values (B, H), columns (H,))`` of those hypotheses in the ``(D K S)`` layout.
+    """
     yn, wn, _ = _normalised(T, W, tops, lefts, p, phase["rowsum"])
-    out = np.empty((len(yn), len(phase["hyp"]), len(scales)))
+    n_s = len(scales)
+    cols, vals = [], []
     for j, (di, k, a, kmat, a_mu, a_cov) in enumerate(phase["hyp"]):
-        for si, sc in enumerate(scales):
-            out[:, j, si], _ = _wiener(sc * kmat, a_mu, yn, wn, log_pi[k] - math.log(len(scales)),
-                                       want_solution=False)
-    return out.reshape(len(yn), -1)
+        if disparity is not None and di != disparity:
+            continue
+        for si in which:
+            score, _ = _wiener(scales[si] * kmat, a_mu, yn, wn, log_pi[k] - math.log(n_s), want_solution=False)
+            cols.append(j * n_s + si)
+            vals.append(score)
+    if disparity is not None:
+        return np.stack(vals, axis=1), np.array(cols)
+    out = np.full((len(yn), len(phase["hyp"]) * n_s), -np.inf)
+    out[:, cols] = np.stack(vals, axis=1)
+    return out
 
 
 def _pool(per_d: np.ndarray, radius: int) -> np.ndarray:
