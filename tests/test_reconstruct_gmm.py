@@ -188,3 +188,14 @@ def test_cli_method_gmm(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and message in err, (extra, err)
         assert not target.exists()
+
+
+def test_output_does_not_depend_on_threads_or_chunks_and_staged_search_runs():
+    lf = _plane(0.25, size=(32, 40), seed=9)
+    capture = simulate_capture(lf, profile="paper-low", mask_period=4, shots=2, random_state=10)
+    one = reconstruct_gmm(capture, disparities=[0, 0.25, 0.5], threads=1, chunk=1000).data
+    two = reconstruct_gmm(capture, disparities=[0, 0.25, 0.5], threads=2, chunk=7).data
+    assert np.array_equal(one, two)
+    staged = reconstruct_gmm(capture, disparities=[0, 0.25, 0.5], search="staged")
+    assert staged.attrs["reconstruction"]["search"] == "staged"
+    assert evaluate(staged, lf)["pu21_psnr_db"] > 28
