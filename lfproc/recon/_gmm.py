@@ -496,7 +496,7 @@ def _normalised(T, W, tops, lefts, p, rowsum):
     y = _gather(T, tops, lefts, p)
     w = _gather(W, tops, lefts, p)
     use = w > 0
-    level = np.where(use, np.maximum(y, 0), 0).sum(axis=1) / np.maximum((use * rowsum).sum(axis=1), 1e-12)
+    level = np.where(use, y, 0).sum(axis=1) / np.maximum((use * rowsum).sum(axis=1), 1e-12)
     level = np.maximum(level, 1e-12 * max(float(level.max()), 1e-30))
     return y / level[:, None], w * level[:, None], level
 

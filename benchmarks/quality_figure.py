@@ -1,0 +1,77 @@
+"""Figure: centre view and EPI of truth, result and error at one exposure, before and after (README, docs).
+
+Usage::
+
+    python benchmarks/reconstruct_realistic.py --save BEFORE ...                 # lfproc's dictionary method
+    python benchmarks/reconstruct_realistic.py --save AFTER --method gmm ...      # the Gaussian patch models
+    python benchmarks/quality_figure.py --before BEFORE --after AFTER --scenes city-interior,night-studio \\
+        --capture "2 random" -o docs/figures/quality_before_after.png
+
+One row per scene: the truth, the result before and after (centre view over a horizontal EPI of
+the middle row, the 5 views of the centre angular row stretched), all tone-mapped with the truth's
+white point (``x / (1 + x)`` of the luminance over its 99th percentile, gamma 2.2), and the error
+of each result in stops (log2 of result over truth luminance, centre view, -2..2, blue: too dark).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+
+def _tone(img: np.ndarray, white: float) -> np.ndarray:
+    from lfproc.lightfield import luminance
+
+    y = luminance(img)
+    scale = (y / white) / (1 + y / white) / np.maximum(y, 1e-30)
+    return np.clip(img * scale[..., None], 0, 1) ** (1 / 2.2)
+
+
+def _epi(lf: np.ndarray, stretch: int = 8) -> np.ndarray:
+    return np.repeat(lf[lf.shape[0] // 2, :, lf.shape[2] // 2], stretch, axis=0)
+
+
+def main() -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from lfproc.lightfield import luminance
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--before", type=Path, required=True)
+    parser.add_argument("--after", type=Path, required=True)
+    parser.add_argument("--scenes", required=True)
+    parser.add_argument("--capture", default="2 random")
+    parser.add_argument("--labels", default="before: dictionary (lfproc reconstruct),after: --method gmm")
+    parser.add_argument("-o", "--output", type=Path, required=True)
+    args = parser.parse_args()
+    scenes = args.scenes.split(",")
+    labels = args.labels.split(",")
+    tag = args.capture.replace(" ", "_")
+    fig, axes = plt.subplots(len(scenes), 5, figsize=(20, 3.6 * len(scenes)), constrained_layout=True, squeeze=False)
+    for row, scene in zip(axes, scenes):
+        truth = np.load(args.before / f"{scene}__truth.npy")
+        results = [np.load(args.before / f"{scene}__{tag}.npy"), np.load(args.after / f"{scene}__{tag}.npy")]
+        white = float(np.percentile(luminance(truth[2, 2]), 99))
+        panels = [("truth", truth)] + list(zip(labels, results))
+        for ax, (name, lf) in zip(row[:3], panels):
+            ax.imshow(np.vstack([_tone(lf[2, 2], white), _tone(_epi(lf), white)]))
+            ax.set_title(f"{scene}: {name}", fontsize=9)
+            ax.axis("off")
+        for ax, (name, lf) in zip(row[3:], panels[1:]):
+            err = np.log2(np.maximum(luminance(lf[2, 2]), 1e-30) / np.maximum(luminance(truth[2, 2]), 1e-30))
+            im = ax.imshow(np.clip(err, -2, 2), cmap="RdBu_r", vmin=-2, vmax=2)
+            ax.set_title(f"error in stops, {name.split(':')[0]} (median |e| {np.median(np.abs(err)):.2f})", fontsize=9)
+            ax.axis("off")
+        fig.colorbar(im, ax=row[3:], fraction=0.04, label="log2(result / truth)")
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.output, dpi=60)
+    print(args.output)
+
+
+if __name__ == "__main__":
+    main()
