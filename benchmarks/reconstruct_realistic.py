@@ -20,9 +20,10 @@ Printed per scene and capture, beside PU21-PSNR / PU21-SSIM (:func:`lfproc.metri
 * ``detail``: Laplacian energy of the PU21 error over that of the truth (1.0 = no detail);
 * seconds of the reconstruction (an upper bound on a shared machine).
 
-The noise floor of a capture is the light-field luminance at which one measurement at the
-highest ISO has as much signal as read noise: ``read_noise_e / (t * radiance_scale * r)``
-with ``r`` the mean total mask transmittance of a pixel (the views' codes summed).
+The noise floor of a capture (:func:`lfproc.camera.capture.noise_floor`) is the light-field
+luminance at which one measurement at the highest ISO has as much signal as read noise:
+``read_noise_e / (t * radiance_scale * r)`` with ``r`` the mean total mask transmittance of a
+pixel (the views' codes summed).
 
 Capture names: ``"<shots> <iso pattern>"`` with pattern random, row or block, optionally
 followed by a profile suffix ``none``/``low``/``medium``/``high`` (the paper's noise levels),
@@ -53,17 +54,6 @@ def parse_capture(name: str) -> dict:
     return dict(shots=int(parts[0]), iso_pattern_kind=parts[1], profile=f"paper-{noise}")
 
 
-def noise_floor(capture) -> float:
-    """Light-field luminance at which one measurement at the highest ISO has signal = read noise."""
-    from lfproc.camera.sensor import iso_maps
-
-    iso = max(capture.isos)
-    read = float(iso_maps(capture.profile, iso, (1,))["read_noise_e"][0])
-    r = float(np.mean(capture.mask.codes)) * capture.views[0] * capture.views[1]
-    t = float(np.min(capture.exposures_s))
-    return read / (t * float(capture.radiance_scale) * r)
-
-
 def figures(result, truth, floor: float) -> dict:
     from lfproc.metrics import evaluate, hdr_figures
 
@@ -76,6 +66,7 @@ def figures(result, truth, floor: float) -> dict:
 
 
 def main() -> None:
+    from lfproc.camera.capture import noise_floor
     from lfproc.camera.simulate import simulate_capture
     from lfproc.recon import reconstruct, reconstruct_gmm
 
@@ -116,7 +107,7 @@ def main() -> None:
             t = time.perf_counter()
             out = method(cap, **options)
             seconds = time.perf_counter() - t
-            f = figures(out, lf, noise_floor(cap))
+            f = figures(out, lf, noise_floor(cap))  # lfproc.camera.capture.noise_floor
             f["seconds"] = seconds
             row[name] = f
             cells.append(f"{f['pu21_psnr_db']:.2f} / {f['pu21_ssim']:.3f} / {f['max_decade_stops']:.2f} / "

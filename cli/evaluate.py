@@ -68,6 +68,9 @@ def register(sub, common) -> None:
     p.add_argument("--noise-floor", type=float, default=None, metavar="VALUE",
                    help="reference luminance at or below which samples are left out of the error in stops and "
                         "the zeros (default: every sample with a positive reference)")
+    p.add_argument("--noise-floor-from", type=Path, default=None, metavar="CAPTURE",
+                   help="take --noise-floor from the capture the result was reconstructed from: the radiance at "
+                        "which one measurement at its highest ISO has as much signal as read noise")
     p.add_argument("--error-map", type=Path, default=None, metavar="MAP.png",
                    help="write the centre view's error in stops (log2 result/reference luminance) with a "
                         "diverging colour map and a colour bar")
@@ -174,6 +177,12 @@ def run(args) -> int:
     for option, value in (("--exclude-above", args.exclude_above), ("--noise-floor", args.noise_floor)):
         if value is not None and not (math.isfinite(value) and value >= 0):
             raise InputError(f"{option}: expected a finite luminance >= 0, got {value:g}")
+    if args.noise_floor_from is not None:
+        if args.noise_floor is not None:
+            raise InputError("--noise-floor and --noise-floor-from: give one of them")
+        from lfproc.camera.capture import load_capture, noise_floor
+
+        args.noise_floor = noise_floor(load_capture(args.noise_floor_from))
     mask = None if args.mask is None else read_mask(args.mask)
     result = read_lightfield(args.result, nonfinite=args.nonfinite, negative=args.negative)
     reference = read_lightfield(args.reference, nonfinite=args.nonfinite, negative=args.negative)

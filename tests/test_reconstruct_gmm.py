@@ -199,3 +199,24 @@ def test_output_does_not_depend_on_threads_or_chunks_and_staged_search_runs():
     staged = reconstruct_gmm(capture, disparities=[0, 0.25, 0.5], search="staged")
     assert staged.attrs["reconstruction"]["search"] == "staged"
     assert evaluate(staged, lf)["pu21_psnr_db"] > 28
+
+
+def test_noise_floor_of_a_capture_is_one_read_noise_per_measurement(tmp_path, capsys):
+    """Known answer: at the floor, one measurement of the highest ISO holds read_noise_e electrons."""
+    from lfproc.camera.capture import noise_floor
+    from lfproc.camera.sensor import iso_maps
+    from lfproc.io import write_lightfield
+
+    lf = _plane(0.0, size=(24, 24))
+    capture = simulate_capture(lf, profile="paper-medium", mask_period=4, shots=2, random_state=11)
+    floor = noise_floor(capture)
+    read = iso_maps(capture.profile, 1600, (1,))["read_noise_e"][0]
+    electrons = floor * capture.radiance_scale * 0.004 * capture.mask.codes.mean() * 25
+    assert electrons == pytest.approx(read, rel=1e-9)
+    cap_path = capture.save(tmp_path / "c.capture.npz")
+    write_lightfield(lf, tmp_path / "t.exr")
+    args = ["evaluate", str(tmp_path / "t.exr"), str(tmp_path / "t.exr"), "--json"]
+    assert main([*args, "--noise-floor-from", str(cap_path)]) == 0
+    assert f'"noise_floor": {floor!r}'[:30] in capsys.readouterr().out
+    assert main([*args, "--noise-floor-from", str(cap_path), "--noise-floor", "1"]) == 2
+    assert "give one of them" in capsys.readouterr().err

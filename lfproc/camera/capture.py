@@ -66,6 +66,7 @@ __all__ = [
     "load_capture",
     "is_capture_file",
     "local_signal",
+    "noise_floor",
     "capture_from_raw",
     "read_sensor_frame",
     "observations",
@@ -653,6 +654,25 @@ def local_signal(capture: Capture, obs: Observation, *, radius: int = 1) -> np.n
                 est = out[plane]
                 est[ok] = r[plane][ok] * np.maximum(st[ok], 0.0) / sr[ok]
     return out
+
+
+def noise_floor(capture: Capture) -> float:
+    """The light-field radiance at which one measurement has as much signal as read noise.
+
+    ``read_noise_e / (t r radiance_scale)`` at the capture's highest ISO and shortest exposure
+    ``t``, with ``r`` the mean total transmittance of a pixel (the mask codes summed over the
+    views): below it no single measurement sees the scene above its noise (units of the light
+    field the capture was simulated from; e-/s for a real capture, whose scale is 1). Used as
+    the noise floor of :func:`lfproc.metrics.hdr_figures`.
+    """
+    from .sensor import iso_maps
+
+    if not isinstance(capture, Capture):
+        raise InputError(f"noise_floor: expected a Capture, got {type(capture).__name__}")
+    read = float(iso_maps(capture.profile, max(capture.isos), (1,))["read_noise_e"][0])
+    r = float(np.mean(capture.mask.codes)) * capture.views[0] * capture.views[1]
+    scale = 1.0 if capture.radiance_scale is None else float(capture.radiance_scale)
+    return read / (float(np.min(capture.exposures_s)) * max(r, 1e-30) * scale)
 
 
 def _warn_saturation(capture: Capture, *, stacklevel: int) -> None:
