@@ -9,6 +9,20 @@ from lfproc.camera.iso import DEFAULT_BLOCK_PX
 from ._common import add_json, add_value_policies, add_output, emit, parse_floats
 
 
+def _period(text: str):
+    import argparse
+
+    if text.lower() in ("none", "default"):
+        return None if text.lower() == "none" else "default"
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a period in pixels or 'none', got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a period of at least 1 pixel, got {value}")
+    return value
+
+
 def register(sub, common) -> None:
     p = sub.add_parser(
         "simulate", parents=[common], help="simulate a multi-ISO coded-mask capture of an HDR light field",
@@ -31,7 +45,10 @@ def register(sub, common) -> None:
     p.add_argument("--exposure-s", type=float, default=0.004, help="exposure time of a shot in seconds")
     p.add_argument("--gamma", type=float, default=None, help="power-law sensor response (default: the profile's)")
     p.add_argument("--mask", choices=("random", "shifted"), default="random", help="mask model (default random)")
-    p.add_argument("--mask-period", type=int, default=None, help="tile the mask with this period in pixels")
+    p.add_argument("--mask-period", type=_period, default="default", metavar="N|none",
+                   help="tile the mask with this period in pixels (default 4 for a random mask, none for shifted: "
+                        "patches share one operator; 'none': one code per pixel, minutes to reconstruct at the Lytro "
+                        "size)")
     p.add_argument("--baseline", choices=("individual-iso", "bracketing"), default=None,
                    help="the paper's baselines: one global-ISO shot per ISO, or exposure bracketing at the lowest "
                         "ISO (relative exposures 0.5,8 / 0.5,2,8 / 0.5,2,4,8)")

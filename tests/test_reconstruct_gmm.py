@@ -127,7 +127,7 @@ def test_input_is_not_mutated_and_the_result_records_its_settings():
 @pytest.mark.filterwarnings("ignore::lfproc.errors.SaturationWarning")
 def test_bad_inputs():
     lf = _plane(0.0, size=(24, 24))
-    aperiodic = simulate_capture(lf, profile="paper-low", shots=1, random_state=8)
+    aperiodic = simulate_capture(lf, profile="paper-low", shots=1, random_state=8, mask_period=None)
     with pytest.raises(InputError, match="periodic random mask"):
         reconstruct_gmm(aperiodic)
     capture = simulate_capture(lf, profile="paper-low", mask_period=4, shots=1, random_state=8)

@@ -402,3 +402,27 @@ def test_cli_simulate_of_3x3_views_warns_in_one_line(tmp_path, capsys):
     assert main(["simulate", str(path), "-o", str(tmp_path / "c2.capture.npz"), "--seed", "1",
                  "--dictionary", str(mine)]) == 0
     assert capsys.readouterr().err == ""  # the dictionary it is meant for fits: no warning
+
+
+# -- the default mask tile (issue 23: a default that reconstructs fast) -----------------------------------------
+
+def test_random_masks_are_tiled_by_default_and_none_turns_it_off(tmp_path, capsys):
+    from lfproc.camera.simulate import DEFAULT_MASK_PERIOD
+
+    lf = _lf(16, 16)
+    assert simulate_capture(lf, profile="paper-low", random_state=0).mask.period == DEFAULT_MASK_PERIOD == 4
+    assert simulate_capture(lf, profile="paper-low", random_state=0, mask_period=None).mask.period is None
+    assert simulate_capture(lf, profile="paper-low", random_state=0, mask="shifted").mask.period is None
+    with pytest.raises(InputError, match="mask_period: expected a period in pixels, None or 'default'"):
+        simulate_capture(lf, profile="paper-low", random_state=0, mask_period="four")
+    path = tmp_path / "lf.exr"
+    write_lightfield(LightField(lf), path)
+    for option, period in ((None, 4), ("none", None), ("8", 8)):
+        out = tmp_path / f"c{option}.capture.npz"
+        extra = [] if option is None else ["--mask-period", option]
+        assert main(["simulate", str(path), "-o", str(out), "--seed", "1", *extra]) == 0
+        capsys.readouterr()
+        assert load_capture(out).mask.period == period
+    assert main(["simulate", str(path), "-o", str(tmp_path / "x.capture.npz"), "--mask-period", "four"]) == 2
+    err = capsys.readouterr().err
+    assert "--mask-period" in err and "'four'" in err
