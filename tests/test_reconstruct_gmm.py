@@ -16,7 +16,8 @@ from lfproc.cli.main import main
 from lfproc.errors import FileFormatError, InputError, MissingFileError, ShapeError
 from lfproc.metrics import evaluate
 from lfproc.recon import PatchModel, load_patch_model, reconstruct_gmm, train_patch_model
-from lfproc.recon._gmm import _patch_matrix, _wiener, shear_matrix
+from lfproc.camera.projection import patch_operators
+from lfproc.recon._gmm import _wiener, shear_matrix
 from lfproc.synth import Layer, render_layers
 
 
@@ -51,7 +52,8 @@ def test_planted_patch_is_recovered_from_two_noise_free_shots():
     capture = simulate_capture(lf, profile="paper-none", mask_period=4, shots=2, random_state=1, noise=False,
                                radiance_scale=1000.0)  # only the mask codes are used
     model, basis = _rank_model(40)
-    phi = _patch_matrix(capture, 0, 0, 8)
+    phi = patch_operators(capture.mask, views=(5, 5), cfa_pattern=capture.cfa_pattern, tops=[0], lefts=[0],
+                          size=8).dense(0).astype(np.float64)
     for d in (1.0, -0.5, 0.0):
         a = phi @ np.kron(shear_matrix((5, 5), 8, 2, d), np.eye(3))
         x_true = model.means[0] + basis @ np.random.default_rng(2).standard_normal(40) * 0.3

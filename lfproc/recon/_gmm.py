@@ -278,22 +278,6 @@ def _gather(array: np.ndarray, tops: np.ndarray, lefts: np.ndarray, size: int) -
     return np.ascontiguousarray(out.transpose(1, 0, 2, 3).reshape(len(tops), -1))
 
 
-def _patch_matrix(capture, top: int, left: int, size: int) -> np.ndarray:
-    """``Phi_p``: ``(S P P, V U P P 3)`` for the patch at ``(top, left)`` (rows: shot, row, column)."""
-    from ..camera.projection import cfa_index_map
-
-    nv, nu = capture.views
-    codes, per = capture.mask.codes, capture.mask.period
-    cfa = cfa_index_map(capture.cfa_pattern, (size, size), offset=(top, left))
-    out = np.zeros((capture.shots, size, size, nv, nu, size, size, 3))
-    ii = np.arange(size)
-    yy, xx = np.meshgrid(ii, ii, indexing="ij")
-    for s in range(capture.shots):
-        vals = codes[s][:, :, (top + yy) % per, (left + xx) % per, cfa]  # (V, U, P, P)
-        out[s, yy, xx, :, :, yy, xx, cfa] = vals.transpose(2, 3, 0, 1)
-    return out.reshape(capture.shots * size * size, -1)
-
-
 def _check_capture(capture, model: PatchModel, stride: int):
     if capture.mask.kind != "random" or capture.mask.period is None:
         raise InputError("reconstruct_gmm: needs a capture with a periodic random mask (simulate with mask_period, "
@@ -355,7 +339,7 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
         The model's patch does not fit the capture.
     """
     from ..camera.capture import Capture, load_capture, observations
-    from ..camera.projection import patch_grid
+    from ..camera.projection import patch_grid, patch_operators
 
     started = time.perf_counter()
     if isinstance(capture, (str, os.PathLike)):
@@ -405,8 +389,9 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
     h, w = capture.size
     tops, lefts = patch_grid((h, w), p, stride)
     gt, gl = np.repeat(tops, len(lefts)), np.tile(lefts, len(tops))
-    per = capture.mask.period
-    phase = ((gt % per) * per + gl % per) * 4 + (gt % 2) * 2 + gl % 2
+    ops = patch_operators(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern, tops=gt, lefts=gl,
+                          size=p, sensor_size=(h, w))
+    phase = ops.index  # patches of one phase share their matrix Phi_p
     acc = np.zeros((nv, nu, h, w, 3))
     wacc = np.zeros((h, w))
     x1 = (np.arange(p) + 0.5) / p
@@ -416,7 +401,7 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
     log_pi = np.log(model.weights)
     n_h = len(disparities) * model.components * len(scales)
     scores = np.full((len(gt), n_h), -np.inf)
-    phases = {ph: _phase_matrices(capture, int(gt[phase == ph][0]), int(gl[phase == ph][0]), p, shears, model)
+    phases = {ph: _phase_matrices(ops.dense(ph).astype(np.float64), shears, model)
               for ph in np.unique(phase)}
     first = [scales.index(1.0)] if search == "staged" else list(range(len(scales)))
     jobs = [(ph, members[start:start + chunk]) for ph in phases for members in [np.flatnonzero(phase == ph)]
@@ -479,9 +464,8 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
                       source="lfproc.reconstruct_gmm", attrs={"reconstruction": record})
 
 
-def _phase_matrices(capture, top: int, left: int, p: int, shears, model) -> dict:
+def _phase_matrices(phi: np.ndarray, shears, model) -> dict:
     """What every patch of one phase shares: ``A`` per disparity, ``A mu``, ``A Sigma`` and ``A Sigma A^T`` per component."""
-    phi = _patch_matrix(capture, top, left, p)
     out = {"rowsum": phi.sum(axis=1), "hyp": []}
     for di, sh in enumerate(shears):
         a = phi @ sh  # (m, n2)
