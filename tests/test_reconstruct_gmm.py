@@ -158,7 +158,7 @@ def test_model_files_round_trip_and_bad_files_are_refused(tmp_path):
         model.save(path)
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a zip")
-    with pytest.raises(FileFormatError, match="not an lfproc patch model"):
+    with pytest.raises(FileFormatError, match="not a readable .npz"):
         load_patch_model(bad)
     with pytest.raises(MissingFileError):
         load_patch_model(tmp_path / "missing.npz")
@@ -222,3 +222,66 @@ def test_noise_floor_of_a_capture_is_one_read_noise_per_measurement(tmp_path, ca
     assert f'"noise_floor": {floor!r}'[:30] in capsys.readouterr().out
     assert main([*args, "--noise-floor-from", str(cap_path), "--noise-floor", "1"]) == 2
     assert "give one of them" in capsys.readouterr().err
+
+
+def _model_file(path, *, header=None, **arrays):
+    """A patch-model file with the shipped model's arrays, any of them or the header replaced."""
+    import json
+
+    shipped = load_patch_model("default")
+    content = {"means": shipped.means.astype(np.float32), "covariances": shipped.covariances.astype(np.float32),
+               "weights": shipped.weights}
+    content.update(arrays)
+    if header is None:
+        header = {"format": "lfproc-patch-model", "version": 1, "patch": 8, "margin": 2, "attrs": {}}
+    np.savez(path, header=np.array(header if isinstance(header, str) else json.dumps(header)), **content)
+    return path
+
+
+@pytest.mark.parametrize("case, message", [
+    (dict(header={"format": "lfproc-patch-model", "patch": "eight", "margin": 2}), "field 'patch'"),
+    (dict(header={"format": "lfproc-patch-model", "patch": 8, "margin": 2, "attrs": [1, 2]}), "field 'attrs'"),
+    (dict(header={"format": "lfproc-patch-model", "patch": 1000, "margin": 2}), "field 'patch'"),
+    (dict(header={"format": "something else", "patch": 8, "margin": 2}), "not an lfproc patch model"),
+    (dict(header="{not json"), "not valid JSON"),
+    (dict(header=[1, 2, 3]), "not an lfproc patch model"),
+    (dict(means=np.full((1, 432), np.nan)), "NaN"),
+    (dict(covariances=-np.eye(432)[None]), "not positive definite"),
+    (dict(covariances=np.zeros((1, 432, 431))), "array 'covariances'"),
+    (dict(means=np.zeros((1, 432), complex)), "expected floating point"),
+    (dict(weights=np.ones(2)), "patch model"),
+    (dict(header={"format": "lfproc-patch-model", "patch": 8, "margin": 3}), "array 'means'"),
+])
+def test_damaged_model_files_are_refused_in_one_line(tmp_path, capsys, case, message):
+    bad = _model_file(tmp_path / "bad.npz", **case)
+    with pytest.raises(FileFormatError, match=message):
+        load_patch_model(bad)
+    cap = simulate_capture(_plane(0.0, size=(24, 24)), profile="paper-low", shots=1, random_state=0)
+    cap_path = cap.save(tmp_path / "c.capture.npz")
+    assert main(["reconstruct", str(cap_path), "-o", str(tmp_path / "o.exr"), "--method", "gmm",
+                 "--model", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(bad) in err, err
+    assert not (tmp_path / "o.exr").exists()
+
+
+def test_a_model_file_announcing_a_huge_array_is_refused_before_reading_it(tmp_path):
+    """A header that announces a 100000 x 100000 covariance in a small file: refused from the header."""
+    import zipfile
+
+    path = _model_file(tmp_path / "m.npz")
+    huge = tmp_path / "huge.npz"
+    with zipfile.ZipFile(path) as src, zipfile.ZipFile(huge, "w", zipfile.ZIP_DEFLATED) as dst:
+        for info in src.infolist():
+            data = src.read(info)
+            if info.filename == "covariances.npy":
+                head = np.lib.format.header_data_from_array_1_0(np.zeros((1, 2, 2), np.float32))
+                head["shape"] = (1, 100000, 100000)
+                buf = __import__("io").BytesIO()
+                np.lib.format.write_array_header_1_0(buf, head)
+                data = buf.getvalue() + b"\0" * 64
+            dst.writestr(info.filename, data)
+    with pytest.raises(FileFormatError, match="covariances"):
+        load_patch_model(huge)
+    with pytest.raises(InputError, match="expected 'default', a path or a PatchModel"):
+        load_patch_model(3)

@@ -134,6 +134,13 @@ class PatchModel:
                 raise FileFormatError(f"patch model: {name} hold NaN or Inf")
         if (self.weights <= 0).any():
             raise FileFormatError("patch model: mixture weights must be positive")
+        for j, cov in enumerate(self.covariances):
+            if not np.allclose(cov, cov.T, rtol=1e-5, atol=1e-8 * max(float(np.abs(cov).max()), 1e-30)):
+                raise FileFormatError(f"patch model: covariance {j} is not symmetric")
+            try:
+                np.linalg.cholesky(cov)
+            except np.linalg.LinAlgError:
+                raise FileFormatError(f"patch model: covariance {j} is not positive definite") from None
 
     def __repr__(self) -> str:
         return (f"PatchModel(components={len(self.weights)}, patch={self.patch}, margin={self.margin}, "
@@ -161,33 +168,52 @@ class PatchModel:
 
 
 def load_patch_model(model: str | os.PathLike | PatchModel = "default") -> PatchModel:
-    """Read a patch model: ``"default"`` (the shipped one) or a file written by :meth:`PatchModel.save`."""
-    import json
-    import zipfile
+    """Read a patch model: ``"default"`` (the shipped one) or a file written by :meth:`PatchModel.save`.
+
+    The file is untrusted: its header is checked (types, ranges) and every array's shape and
+    dtype are checked against it before any data is read (:mod:`lfproc._untrusted`).
+
+    Raises
+    ------
+    MissingFileError
+        No such file.
+    FileFormatError
+        Not a patch model, a header of the wrong types or out of range, arrays of other shapes
+        or dtypes, NaN/Inf, covariances that are not symmetric positive definite.
+    """
+    from .. import _untrusted as ut
 
     if isinstance(model, PatchModel):
         return model
+    if not isinstance(model, (str, os.PathLike)):
+        raise InputError(f"patch model: expected 'default', a path or a PatchModel, got {type(model).__name__}")
     path = _DATA / "gaussian_patch_model.npz" if str(model) == "default" else Path(model)
     if not path.is_file():
         raise MissingFileError(f"{path}: patch model file not found")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            header = json.loads(str(z["header"]))
-            arrays = {k: np.asarray(z[k], dtype=np.float64) for k in ("means", "covariances", "weights")}
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, EOFError) as exc:
-        raise FileFormatError(f"{path}: not an lfproc patch model ({type(exc).__name__}: {exc})") from None
-    if not isinstance(header, dict) or header.get("format") != "lfproc-patch-model":
-        raise FileFormatError(f"{path}: not an lfproc patch model (header format {header!r})")
-    try:
-        patch, margin = int(header["patch"]), int(header["margin"])
-    except (KeyError, TypeError, ValueError):
-        raise FileFormatError(f"{path}: patch model header lacks patch/margin") from None
-    if not (2 <= patch <= 64 and 0 <= margin <= 16):
-        raise FileFormatError(f"{path}: patch model patch {patch} / margin {margin} out of range")
+    text = ut.read_npz(path, names=["header"], source=path, max_bytes=1 << 20)["header"]
+    if text.dtype.kind != "U" or text.ndim != 0:
+        raise FileFormatError(f"{path}: not an lfproc patch model (header of dtype {text.dtype}, shape {text.shape})")
+    header = ut.Node(ut.parse_json(str(text), source=path, what="header"), source=path)
+    if not header.is_dict() or header.get("format") is None or header["format"].value != "lfproc-patch-model":
+        raise FileFormatError(f"{path}: not an lfproc patch model (no header format 'lfproc-patch-model')")
+    patch = header["patch"].as_int(low=2, high=64)
+    margin = header["margin"].as_int(low=0, high=16)
+    attrs = header["attrs"].as_dict() if header.has("attrs") else {}
+    n2 = (patch + 2 * margin) ** 2 * 3
+    def check(name, shape, dtype):
+        if dtype.kind != "f":
+            raise FileFormatError(f"{path}: array {name!r}: expected floating point, found {dtype}")
+        want = {"weights": 1, "means": 2, "covariances": 3}[name]
+        if len(shape) != want or not 1 <= shape[0] <= 64 or any(d != n2 for d in shape[1:]):
+            raise FileFormatError(f"{path}: array {name!r}: expected {want} dimensions, 1..64 components of "
+                                  f"{n2} samples (patch {patch}, margin {margin}), found shape {shape}")
+
+    arrays = ut.read_npz(path, names=["means", "covariances", "weights"], source=path, check=check)
+    arrays = {name: np.asarray(value, dtype=np.float64) for name, value in arrays.items()}
     try:
         return PatchModel(arrays["means"], arrays["covariances"], arrays["weights"], patch, margin,
-                          attrs=dict(header.get("attrs") or {}, path=str(path)))
-    except ShapeError as exc:
+                          attrs=dict(attrs, path=str(path)))
+    except (ShapeError, FileFormatError) as exc:
         raise FileFormatError(f"{path}: {exc}") from None
 
 
