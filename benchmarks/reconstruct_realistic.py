@@ -18,7 +18,9 @@ Printed per scene and capture, beside PU21-PSNR / PU21-SSIM (:func:`lfproc.metri
 * ``zeros``: the share of samples above the noise floor returned as 0;
 * ``hi``: the energy kept in the brightest 1 % of the truth's samples (1 = all);
 * ``detail``: Laplacian energy of the PU21 error over that of the truth (1.0 = no detail);
-* seconds of the reconstruction (an upper bound on a shared machine).
+* seconds of the reconstruction (an upper bound on a shared machine), with a float32 GEMM rate
+  measured at the start and the end of the run as the reference for the machine's speed, and
+  the run's peak memory.
 
 The noise floor of a capture (:func:`lfproc.camera.capture.noise_floor`) is the light-field
 luminance at which one measurement at the highest ISO has as much signal as read noise:
@@ -35,6 +37,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import sys
 import time
 import warnings
@@ -44,6 +47,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import quality_scenes  # noqa: E402
+from reconstruct import gemm_rate  # noqa: E402
 
 
 def parse_capture(name: str) -> dict:
@@ -55,14 +59,12 @@ def parse_capture(name: str) -> dict:
 
 
 def figures(result, truth, floor: float) -> dict:
-    from lfproc.metrics import evaluate, hdr_figures
+    """PU21 and the HDR figures (:func:`lfproc.metrics.evaluate` computes both in one pass)."""
+    from lfproc.metrics import evaluate
 
-    sc = evaluate(result, truth, scale_tolerance_stops=None)
-    hf = hdr_figures(result, truth, noise_floor=floor)
-    return {"pu21_psnr_db": sc["pu21_psnr_db"], "pu21_ssim": sc["pu21_ssim"],
-            "max_decade_stops": hf["max_decade_stops"], "zeros_above_floor": hf["zeros_above_floor"],
-            "highlight_energy": hf["highlight_energy"], "detail_ratio": hf["detail_ratio"],
-            "stops_by_decade": hf["stops_by_decade"], "emitters_dominate": hf["emitters_dominate"]}
+    sc = evaluate(result, truth, scale_tolerance_stops=None, noise_floor=floor)
+    return {k: sc[k] for k in ("pu21_psnr_db", "pu21_ssim", "max_decade_stops", "zeros_above_floor",
+                               "highlight_energy", "detail_ratio", "stops_by_decade", "emitters_dominate")}
 
 
 def main() -> None:
@@ -94,6 +96,8 @@ def main() -> None:
           "(stops) / zeros / highlight energy / detail ratio / seconds")
     print("| scene | stops | " + " | ".join(names) + " |")
     print("|---|---|" + "---|" * len(names))
+    rate = gemm_rate()
+    print(f"float32 GEMM rate (2048^3, best of 3) at the start: {rate / 1e9:.1f} GFLOP/s", flush=True)
     rows = []
     for scene in scenes:
         lf = quality_scenes.make_scene(scene, tuple(args.size), data=args.data)
@@ -128,6 +132,8 @@ def main() -> None:
               f"{100 * np.max([v['zeros_above_floor'] for v in vals]):.2f}% (max), highlight energy "
               f"{np.min([v['highlight_energy'] for v in vals]):.2f} (min), detail "
               f"{np.mean([v['detail_ratio'] for v in vals]):.2f}, {np.mean([v['seconds'] for v in vals]):.0f} s")
+    print(f"float32 GEMM rate at the end: {gemm_rate() / 1e9:.1f} GFLOP/s (times are comparable between runs only "
+          f"at similar rates); peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20:.2f} GiB")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1, default=float))
 
