@@ -178,15 +178,21 @@ def test_cli_method_gmm(tmp_path, capsys):
     assert main(["reconstruct", str(cap), "-o", str(out), "--method", "gmm", "--disparities", "0,0.25,0.5",
                  "--json"]) == 0
     assert out.is_file() and '"method": "gmm"' in capsys.readouterr().out
-    bad_cases = [
-        (["--method", "gmm", "--mu", "1"], "--mu: options of --method dictionary"),
-        (["--model", "x.npz"], "--model: options of --method gmm"),
-        (["--method", "gmm", "--disparities", "a,b"], "--disparities: expected comma-separated numbers"),
-        (["--method", "gmm", "--model", str(tmp_path / "none.npz")], "patch model file not found"),
+    flat = tmp_path / "flat.capture.npz"  # one mask code per pixel: gmm cannot share its matrices
+    assert main(["simulate", str(src), "-o", str(flat), "--mask-period", "none", "--seed", "1"]) == 0
+    capsys.readouterr()
+    bad_cases = [  # (capture, options, what the one line says)
+        (cap, ["--method", "gmm", "--mu", "1"], "--mu: options of --method dictionary"),
+        (cap, ["--model", "x.npz"], "--model: options of --method gmm"),
+        (cap, ["--method", "gmm", "--disparities", "a,b"], "--disparities: expected comma-separated numbers"),
+        (cap, ["--method", "gmm", "--model", str(tmp_path / "none.npz")], "patch model file not found"),
+        (cap, ["--method", "gmm", "--scales", "0"], "scales: expected positive numbers"),
+        (cap, ["--method", "gmm", "--stride", "0"], "stride: expected an integer >= 1"),
+        (flat, ["--method", "gmm"], "--mask-period 4"),
     ]
-    for extra, message in bad_cases:
+    for capture, extra, message in bad_cases:
         target = tmp_path / "bad.exr"
-        assert main(["reconstruct", str(cap), "-o", str(target), *extra]) == 2
+        assert main(["reconstruct", str(capture), "-o", str(target), *extra]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and message in err, (extra, err)
         assert not target.exists()

@@ -49,8 +49,9 @@ from threadpoolctl import threadpool_limits
 
 from .._util import check_choice, progress
 from .._version import __version__
-from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
+from ..errors import FileFormatError, InputError, MissingFileError, ShapeError, option_name
 from ..lightfield import LightField
+from ._reconstruct import _default_threads, _gather, _int_option
 
 __all__ = ["PatchModel", "train_patch_model", "load_patch_model", "reconstruct_gmm", "shear_matrix",
            "DEFAULT_DISPARITIES", "SATURATION_MODES"]
@@ -297,16 +298,10 @@ def train_patch_model(images, *, patch: int = 8, margin: int = 2, components: in
                              "random_state": random_state if isinstance(random_state, (int, type(None))) else "generator"})
 
 
-def _gather(array: np.ndarray, tops: np.ndarray, lefts: np.ndarray, size: int) -> np.ndarray:
-    ii = np.arange(size)
-    out = array[:, tops[:, None, None] + ii[None, :, None], lefts[:, None, None] + ii[None, None, :]]
-    return np.ascontiguousarray(out.transpose(1, 0, 2, 3).reshape(len(tops), -1))
-
-
 def _check_capture(capture, model: PatchModel, stride: int):
     if capture.mask.kind != "random" or capture.mask.period is None:
-        raise InputError("reconstruct_gmm: needs a capture with a periodic random mask (simulate with mask_period, "
-                         f"e.g. 4); this capture's mask is {capture.mask.kind!r} with period {capture.mask.period}")
+        raise InputError("reconstruct_gmm: needs a capture with a periodic random mask (simulate with "
+                         f"{option_name('mask_period', '--mask-period')} 4, the default); this capture's mask is {capture.mask.kind!r} with period {capture.mask.period}")
     h, w = capture.size
     if model.patch > min(h, w):
         raise ShapeError(f"patch model: patches of {model.patch} pixels do not fit the capture's sensor of {h} x {w}")
@@ -374,15 +369,9 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
     model = load_patch_model(model)
     check_choice("saturation", saturation, SATURATION_MODES)
     check_choice("search", search, SEARCHES)
-    if threads is None:
-        threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
-        raise InputError(f"threads: expected an integer >= 1, got {threads!r}")
-    if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
-        raise InputError(f"chunk: expected an integer >= 1, got {chunk!r}")
-    if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)):
-        raise InputError(f"stride: expected a positive integer, got {stride!r}")
-    stride = int(stride)
+    threads = _int_option("threads", _default_threads() if threads is None else threads)
+    chunk = _int_option("chunk", chunk)
+    stride = _int_option("stride", stride)
     _check_capture(capture, model, stride)
     try:
         disparities = [float(d) for d in disparities]
@@ -396,9 +385,7 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
         raise InputError(f"scales: expected positive numbers, got {scales!r}") from None
     if not all(math.isfinite(v) and v > 0 for v in scales):
         raise InputError(f"scales: expected positive numbers, got {scales!r}")
-    if isinstance(pool_radius, bool) or not isinstance(pool_radius, (int, np.integer)) or pool_radius < 0:
-        raise InputError(f"pool_radius: expected an integer >= 0, got {pool_radius!r}")
-    radius = int(pool_radius)
+    radius = _int_option("pool_radius", pool_radius, low=0)
     nv, nu = capture.views
     p, r = model.patch, model.margin
     shears = [np.kron(shear_matrix((nv, nu), p, r, d), np.eye(3)) for d in disparities]  # (VUPP3, EE3)

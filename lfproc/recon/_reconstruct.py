@@ -124,6 +124,11 @@ def patch_count(size: tuple[int, int], patch: int, stride: int) -> int:
     return len(tops) * len(lefts)
 
 
+def _default_threads() -> int:
+    """The CPUs this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
 def _int_option(name: str, value, *, low: int = 1) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or int(value) < low:
         raise InputError(f"{name}: expected an integer >= {low}, got {value!r}")
@@ -503,7 +508,7 @@ def reconstruct(
     if workers is not None:
         workers = _int_option("workers", workers)
     if threads is None:
-        threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        threads = _default_threads()
     threads = _int_option("threads", threads)
     capture, dictionary = _load_inputs(capture, dictionary)
     v_n, u_n, size, _, c_n = dictionary.patch
