@@ -177,12 +177,13 @@ def run(args) -> int:
     for option, value in (("--exclude-above", args.exclude_above), ("--noise-floor", args.noise_floor)):
         if value is not None and not (math.isfinite(value) and value >= 0):
             raise InputError(f"{option}: expected a finite luminance >= 0, got {value:g}")
+    floor = args.noise_floor
     if args.noise_floor_from is not None:
         if args.noise_floor is not None:
             raise InputError("--noise-floor and --noise-floor-from: give one of them")
         from lfproc.camera.capture import load_capture, noise_floor
 
-        args.noise_floor = noise_floor(load_capture(args.noise_floor_from))
+        floor = noise_floor(load_capture(args.noise_floor_from))
     mask = None if args.mask is None else read_mask(args.mask)
     result = read_lightfield(args.result, nonfinite=args.nonfinite, negative=args.negative)
     reference = read_lightfield(args.reference, nonfinite=args.nonfinite, negative=args.negative)
@@ -197,7 +198,7 @@ def run(args) -> int:
                              f"{float(metric_luminance(reference.data).min()):.4g})")
     figures = evaluate(result, reference, peak_luminance=args.peak_luminance,
                        scale_tolerance_stops=args.scale_tolerance_stops, align=args.align, mask=mask,
-                       exclude_above=args.exclude_above, noise_floor=args.noise_floor)
+                       exclude_above=args.exclude_above, noise_floor=floor)
     figures = {"result": str(args.result), "reference": str(args.reference),
                "mask": None if args.mask is None else str(args.mask)} | figures
     if args.error_map is not None:

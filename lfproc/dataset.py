@@ -172,15 +172,15 @@ def read_exposure_file(path: str | os.PathLike, inputs, *, bare_order: str = "so
     in_order: list[float] = []
     if not path.is_file():
         raise MissingFileError(f"{path}: no such exposure file")
+    from . import _untrusted as ut
+
+    data = ut.read_bytes(path, max_bytes=ut.MAX_TEXT_BYTES, source=path, error=InputError, what="exposure file")
     try:
-        text = path.read_text(encoding="utf-8")
+        text = data.decode("utf-8")
     except UnicodeDecodeError:
         raise InputError(f"{path}: expected a text (UTF-8) exposure file, found binary data") from None
-    if path.suffix.lower() == ".json":
-        try:
-            doc = json.loads(text)
-        except ValueError as exc:
-            raise InputError(f"{path}: not a JSON exposure file ({exc})") from None
+    if path.suffix.lower() == ".json":  # size and nesting checked before parsing (a deep file is an error, no crash)
+        doc = ut.parse_json(text, source=path, error=InputError, what="not a JSON exposure file")
         if isinstance(doc, dict):
             by_name = {str(k): _seconds(str(v), f"{path}: {k}") for k, v in doc.items()}
         elif isinstance(doc, list):

@@ -304,3 +304,18 @@ def test_bracket_without_exif_points_to_the_exposure_file(tmp_path):
     (row,) = read_manifest(out)
     assert row["exposures_s"] == pytest.approx([0.01, 0.02])
     assert row["exposure_file"].endswith("exposures.txt")
+
+
+def test_hostile_exposure_files_get_one_line(tmp_path):
+    """A JSON exposure list nested 100,000 levels deep raised RecursionError; NaN and binary files are refused."""
+    from lfproc.dataset import read_exposure_file
+    from lfproc.errors import InputError
+
+    inputs = [tmp_path / "a.png", tmp_path / "b.png"]
+    for name, data, message in [("deep.json", b"[" * 100000 + b"]" * 100000, "nested 100000 levels deep"),
+                                ("nan.txt", b"a.png nan\nb.png 1\n", "expected a positive exposure time"),
+                                ("bin.txt", bytes(range(256)), "found binary data")]:
+        path = tmp_path / name
+        path.write_bytes(data)
+        with pytest.raises(InputError, match=message):
+            read_exposure_file(path, inputs)
