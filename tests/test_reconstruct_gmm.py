@@ -204,6 +204,10 @@ def test_output_does_not_depend_on_threads_or_chunks_and_staged_search_runs():
     one = reconstruct_gmm(capture, disparities=[0, 0.25, 0.5], threads=1, chunk=1000).data
     two = reconstruct_gmm(capture, disparities=[0, 0.25, 0.5], threads=2, chunk=7).data
     assert np.array_equal(one, two)
+    own = reconstruct_gmm(capture, disparities=[0.25], scales=[2.0, 0.5], search="staged")
+    assert own.attrs["reconstruction"]["scales"] == [0.5, 2.0]  # exactly the scales asked for
+    with pytest.raises(InputError, match="scales: expected positive numbers"):
+        reconstruct_gmm(capture, scales=[])
     staged = reconstruct_gmm(capture, disparities=[0, 0.25, 0.5], search="staged")
     assert staged.attrs["reconstruction"]["search"] == "staged"
     assert evaluate(staged, lf)["pu21_psnr_db"] > 28

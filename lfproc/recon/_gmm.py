@@ -331,9 +331,9 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
         The disparity of a patch is chosen on the evidence summed over the ``(2 r + 1)^2``
         neighbouring patches (0: each patch alone).
     search : {"joint", "staged"}
-        Evaluate every (disparity, component, scale) per patch (``"joint"``), or the scales other
-        than 1 only at the disparity chosen at scale 1 (``"staged"``: about ``S`` times fewer
-        factorisations).
+        Evaluate every (disparity, component, scale) per patch (``"joint"``), or choose the
+        disparity at the scale nearest 1 and try the other scales only there (``"staged"``:
+        about ``S`` times fewer factorisations).
     saturation : {"bound", "ignore"}
         Use saturated measurements as lower bounds (module notes) or leave them out.
     chunk : int
@@ -380,10 +380,10 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
     if not disparities or not all(math.isfinite(d) for d in disparities):
         raise InputError(f"disparities: expected at least one finite number, got {disparities!r}")
     try:
-        scales = sorted({float(v) for v in scales} | {1.0})
+        scales = sorted({float(v) for v in scales})
     except (TypeError, ValueError):
         raise InputError(f"scales: expected positive numbers, got {scales!r}") from None
-    if not all(math.isfinite(v) and v > 0 for v in scales):
+    if not scales or not all(math.isfinite(v) and v > 0 for v in scales):
         raise InputError(f"scales: expected positive numbers, got {scales!r}")
     radius = _int_option("pool_radius", pool_radius, low=0)
     nv, nu = capture.views
@@ -415,7 +415,8 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
     scores = np.full((len(gt), n_h), -np.inf)
     phases = {ph: _phase_matrices(ops.dense(ph).astype(np.float64), shears, model)
               for ph in np.unique(phase)}
-    first = [scales.index(1.0)] if search == "staged" else list(range(len(scales)))
+    # "staged": the disparity at the scale nearest the model's own (1), the others only at that disparity
+    first = [int(np.argmin(np.abs(np.log(scales))))] if search == "staged" else list(range(len(scales)))
     jobs = [(ph, members[start:start + chunk]) for ph in phases for members in [np.flatnonzero(phase == ph)]
             for start in range(0, len(members), chunk)]
 
