@@ -59,7 +59,9 @@ from typing import Any
 
 import numpy as np
 
-from lfproc._util import check_positive, progress, short_repr
+from lfproc._shared.validation import check_positive
+from lfproc._shared.progress import progress
+from lfproc._shared.reprs import short_repr
 from lfproc._version import __version__
 from lfproc.errors import CalibrationError, InputError, MissingFileError
 

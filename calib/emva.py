@@ -51,7 +51,8 @@ from typing import Any
 import numpy as np
 
 from lfproc import _untrusted as ut
-from lfproc._util import progress, short_repr
+from lfproc._shared.progress import progress
+from lfproc._shared.reprs import short_repr
 from lfproc.errors import CalibrationError, FileFormatError, MissingFileError
 from lfproc.io._atomic import atomic_file
 

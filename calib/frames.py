@@ -32,7 +32,7 @@ import numpy as np
 
 from lfproc import _untrusted as ut
 from lfproc.errors import CalibrationError, FileFormatError, InputError, MissingFileError
-from lfproc._util import short_repr
+from lfproc._shared.reprs import short_repr
 
 __all__ = [
     "FrameRecord",

@@ -33,7 +33,8 @@ from typing import Any
 import numpy as np
 
 from lfproc import _untrusted as ut
-from lfproc._util import FrozenDict, frozen_array, short_repr
+from lfproc._shared.frozen import FrozenDict, frozen_array
+from lfproc._shared.reprs import short_repr
 from lfproc._version import __version__
 from lfproc.errors import FileFormatError, MissingFileError, ProfileError, UnsafeFileError
 from lfproc.io._atomic import atomic_outputs

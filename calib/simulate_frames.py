@@ -24,7 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from lfproc._util import check_choice, check_random_state, progress
+from lfproc._shared.validation import check_choice
+from lfproc._shared.random import check_random_state
+from lfproc._shared.progress import progress
 from lfproc._version import __version__
 from lfproc.errors import InputError
 from lfproc.io._atomic import atomic_dir

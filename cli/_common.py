@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from lfproc._util import to_jsonable
+from lfproc._shared.jsonable import to_jsonable
 from lfproc.errors import InputError
 
 __all__ = ["to_jsonable", "emit", "add_output", "add_json", "add_value_policies", "parse_floats", "parse_ints",

@@ -35,7 +35,8 @@ def run(args) -> int:
     if args.workers is not None:
         import os
 
-        from lfproc._util import check_count, max_workers
+        from lfproc._shared.validation import check_count
+        from lfproc._shared.parallel import max_workers
 
         check_count("--workers", args.workers, high=max_workers(),
                     why=f"at most 4 per CPU core; this machine has {os.cpu_count() or 1}")

@@ -71,7 +71,7 @@ def run(args) -> int:
     from lfproc.camera.simulate import NOISE_PROFILES, simulate_file
 
     profile = args.profile or NOISE_PROFILES[args.noise or "low"]
-    from lfproc._util import check_count
+    from lfproc._shared.validation import check_count
     from lfproc.camera.capture import MAX_SHOTS
 
     shots = args.shots if args.shots is not None else (2 if args.baseline == "bracketing" else 1)

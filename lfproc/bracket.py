@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from ._util import freeze
+from ._shared.frozen import freeze
 from .errors import DependencyError, FileFormatError, InputError, MissingFileError, option_name
 from .lightfield import LightField
 
@@ -294,7 +294,7 @@ def merge_files(
     information (see :func:`lfproc.merge.merge_lightfields`), plus ``method``.
     """
     from .merge import MERGE_METHODS, merge_lightfields
-    from ._util import check_choice
+    from ._shared.validation import check_choice
 
     if method is not None:
         check_choice("method", method, MERGE_METHODS)
@@ -351,7 +351,7 @@ def camera_response(x, kind: str = "camera") -> np.ndarray:
     measured consumer-camera responses (e.g. the DoRF database of Grossberg & Nayar) share
     that shape: sRGB-like in the shadows, compressed in the highlights.
     """
-    from ._util import check_choice
+    from ._shared.validation import check_choice
 
     check_choice("response", kind, CAMERA_RESPONSES)
     x = np.clip(np.asarray(x, dtype=np.float64), 0, None)
@@ -403,7 +403,7 @@ def simulate_ldr_bracket(
     """
     import cv2
 
-    from ._util import check_random_state
+    from ._shared.random import check_random_state
     from .lightfield import LightField
 
     if isinstance(radiance, LightField):
@@ -524,7 +524,7 @@ def format_response(response, *, suffix: str, metadata: dict[str, Any] | None = 
     import io as _io
     import json
 
-    from ._util import to_jsonable
+    from ._shared.jsonable import to_jsonable
 
     if suffix.lower() not in RESPONSE_SUFFIXES:
         raise InputError(f"{where}: expected a response file ending in {' or '.join(RESPONSE_SUFFIXES)}, "

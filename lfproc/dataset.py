@@ -48,7 +48,7 @@ from pathlib import Path
 from typing import Any
 
 from ._version import __version__
-from ._util import file_sha256
+from ._shared.hashing import file_sha256
 from .errors import InputError, LfprocWarning, MissingFileError
 
 __all__ = [
@@ -440,7 +440,9 @@ def build_dataset(
         ``processed``, ``skipped`` and ``failed`` (scene -> error message) scene names,
         ``manifest`` (path) and ``rows`` (the manifest rows).
     """
-    from ._util import check_count, max_workers, progress
+    from ._shared.validation import check_count
+    from ._shared.parallel import max_workers
+    from ._shared.progress import progress
 
     if workers is not None:  # before any folder is made or process started
         check_count("--workers", workers, high=max_workers(),

@@ -454,7 +454,7 @@ def run_demo(out_dir: str | os.PathLike = "lfproc-demo", *, config: DemoConfig |
     ``out_dir`` appears complete or not at all (built in a temporary sibling and renamed);
     an existing ``out_dir`` is only replaced with ``force``.
     """
-    from ._util import progress
+    from ._shared.progress import progress
 
     config = config or DemoConfig()
     out_dir = check_output(out_dir, force=force)

@@ -25,7 +25,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ._util import ReadOnlyState, frozen_array
+from ._shared.frozen import ReadOnlyState, frozen_array
 from .errors import InputError, ShapeError
 
 __all__ = ["LightField", "UNITS", "luminance", "clean_nonfinite", "REC709_LUMA"]

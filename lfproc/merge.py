@@ -54,7 +54,10 @@ from typing import Any
 
 import numpy as np
 
-from ._util import check_choice, check_random_state, freeze, warn_convergence, warn_saturation
+from ._shared.validation import check_choice
+from ._shared.random import check_random_state
+from ._shared.frozen import freeze
+from ._shared.warn import warn_convergence, warn_saturation
 from ._version import __version__
 from .errors import InputError, ShapeError, option_name
 from .lightfield import LightField

@@ -101,7 +101,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ._util import check_choice, check_positive
+from ._shared.validation import check_choice, check_positive
 from .errors import InputError, ShapeError, option_name
 from .lightfield import LightField
 

@@ -44,7 +44,8 @@ from typing import Any
 
 import numpy as np
 
-from ._util import check_random_state, freeze
+from ._shared.random import check_random_state
+from ._shared.frozen import freeze
 from ._version import __version__
 from .errors import InputError, MissingFileError, ShapeError
 from .lightfield import REC709_LUMA, LightField, luminance

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from ._util import check_choice
+from ._shared.validation import check_choice
 from .errors import InputError
 from .lightfield import LightField
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from lfproc import LightField
-from lfproc._util import FrozenDict, freeze, frozen_array, is_frozen
+from lfproc._shared.frozen import FrozenDict, freeze, frozen_array, is_frozen
 from lfproc.calib import load_profile
 from lfproc.camera.capture import Capture, load_capture, observations
 from lfproc.camera.projection import MaskCode, ProjectionOperator, build_operator, make_mask

@@ -247,7 +247,7 @@ def dask_scheduler():
 def test_arrays_a_worker_receives_at_any_offset_are_realigned():
     """Dask hands a worker arrays at any byte offset (measured: 7); numpy's matmul skips BLAS for them and
     sums in another order, so they are copied to an aligned buffer first; aligned ones are not copied."""
-    from lfproc._util import realign
+    from lfproc._shared.parallel import realign
 
     raw = bytearray(4 * 12 + 1)
     odd = np.frombuffer(raw, dtype=np.float32, count=12, offset=1).reshape(3, 4)

@@ -273,7 +273,7 @@ def test_same_seed_gives_byte_identical_capture_files(tmp_path, capsys, lf_file,
     import time
     import zipfile
 
-    from lfproc._util import file_sha256
+    from lfproc._shared.hashing import file_sha256
 
     args = ["simulate", str(lf_file), "--seed", "7", "--shots", "2", "--iso-pattern", "random"]
     assert main([*args, "-o", str(tmp_path / "a.capture.npz")]) == 0

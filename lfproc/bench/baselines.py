@@ -58,7 +58,7 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_choice
+from .._shared.validation import check_choice
 from .._version import __version__
 from ..errors import InputError, SaturationWarning
 from ..lightfield import LightField

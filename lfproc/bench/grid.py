@@ -39,7 +39,7 @@ import json
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from .._util import check_choice
+from .._shared.validation import check_choice
 from ..errors import InputError
 
 __all__ = ["METHODS", "NOISE_LEVELS", "ISO_SETS", "PATTERNS", "PRESETS", "Preset", "Cell", "Job", "get_preset",

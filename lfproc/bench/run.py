@@ -31,7 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from .._util import file_sha256, progress, to_jsonable
+from .._shared.hashing import file_sha256
+from .._shared.progress import progress
+from .._shared.jsonable import to_jsonable
 from .._version import __version__
 from ..errors import InputError, OutputExistsError, SaturationWarning, ShapeError
 from ..camera.iso import DEFAULT_BLOCK_PX

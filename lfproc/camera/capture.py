@@ -49,7 +49,9 @@ from typing import Any
 import numpy as np
 
 from .. import _untrusted as ut
-from .._util import ReadOnlyState, file_sha256, freeze, frozen_array, to_jsonable
+from .._shared.frozen import ReadOnlyState, freeze, frozen_array
+from .._shared.hashing import file_sha256
+from .._shared.jsonable import to_jsonable
 from .._version import __version__
 from ..calib import load_profile
 from ..errors import FileFormatError, InputError, LfprocError, MissingFileError, ShapeError
@@ -253,7 +255,7 @@ class Capture(ReadOnlyState):
         saturated one there has lost its radiance for good (this is what
         :class:`lfproc.errors.SaturationWarning` tests).
         """
-        from .._util import check_choice
+        from .._shared.validation import check_choice
 
         check_choice("pixels", pixels, ("all", "least-sensitive"))
         codes = np.zeros(self.iso.shape, np.float64)
@@ -337,7 +339,7 @@ def _member(name: str) -> zipfile.ZipInfo:
 
 def is_capture_file(path: str | os.PathLike) -> bool:
     """True when ``path`` is a ZIP archive whose first member is the capture header."""
-    from .._util import zip_first_member
+    from .._shared.zipfiles import zip_first_member
 
     return zip_first_member(path) == HEADER_NAME
 
@@ -677,7 +679,7 @@ def noise_floor(capture: Capture) -> float:
 
 def _warn_saturation(capture: Capture, *, stacklevel: int) -> None:
     """SaturationWarning when too many of the least sensitive pixels (lowest ISO x exposure) saturate."""
-    from .._util import warn_saturation
+    from .._shared.warn import warn_saturation
 
     sens = capture.iso * np.asarray(capture.exposures_s, np.float32)[:, None, None]
     at = np.unravel_index(int(np.argmin(sens)), sens.shape)
@@ -971,7 +973,7 @@ def render_capture_preview(capture: Capture, kind: str = "capture", *, shot: int
     from matplotlib.figure import Figure
     from matplotlib.patches import Patch
 
-    from .._util import check_choice
+    from .._shared.validation import check_choice
 
     check_choice("preview kind", kind, PREVIEW_KINDS)
     if not 0 <= shot < capture.shots:
@@ -1045,7 +1047,7 @@ def write_capture_preview(capture, output: str | os.PathLike, *, kind: str = "ca
     Goes through :func:`lfproc.preview.write_preview` (the capture kinds are registered
     there). Returns a summary (``output``, ``kind``, ``size`` of the picture, ``shots``, ``isos``).
     """
-    from .._util import check_choice
+    from .._shared.validation import check_choice
     from ..io import check_output
     from ..preview import write_preview
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._util import check_random_state
+from .._shared.random import check_random_state
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 
 __all__ = ["ISO_PATTERNS", "DEFAULT_ISOS", "DEFAULT_BLOCK_PX", "iso_pattern", "describe_iso_pattern"]

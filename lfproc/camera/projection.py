@@ -41,7 +41,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._util import ReadOnlyState, check_choice, check_random_state, freeze, frozen_array, short_repr
+from .._shared.frozen import ReadOnlyState, freeze, frozen_array
+from .._shared.validation import check_choice
+from .._shared.random import check_random_state
+from .._shared.reprs import short_repr
 from ..errors import InputError, ShapeError
 
 __all__ = [

@@ -40,7 +40,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 import numpy as np
 
-from .._util import ReadOnlyState, check_positive, check_random_state, freeze, frozen_array, short_repr
+from .._shared.frozen import ReadOnlyState, freeze, frozen_array
+from .._shared.validation import check_positive
+from .._shared.random import check_random_state
+from .._shared.reprs import short_repr
 from ..calib import load_profile
 from ..errors import InputError, ShapeError
 

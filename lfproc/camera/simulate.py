@@ -50,7 +50,9 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_choice, check_count, check_positive, check_random_state, freeze
+from .._shared.validation import check_choice, check_count, check_positive
+from .._shared.random import check_random_state
+from .._shared.frozen import freeze
 from .._version import __version__
 from .iso import DEFAULT_BLOCK_PX, DEFAULT_ISOS, ISO_PATTERNS, _num, describe_iso_pattern, iso_pattern
 from .capture import MAX_SHOTS, Capture, _warn_saturation, file_sha256, observations

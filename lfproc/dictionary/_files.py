@@ -36,7 +36,9 @@ from typing import Any
 import numpy as np
 
 from .. import _untrusted as ut
-from .._util import ReadOnlyState, frozen_array, to_jsonable, zip_first_member
+from .._shared.frozen import ReadOnlyState, frozen_array
+from .._shared.jsonable import to_jsonable
+from .._shared.zipfiles import zip_first_member
 from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 from ..io import atomic_file

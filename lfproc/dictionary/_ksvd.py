@@ -52,7 +52,10 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_random_state, progress, realign, short_repr
+from .._shared.random import check_random_state
+from .._shared.progress import progress
+from .._shared.parallel import realign
+from .._shared.reprs import short_repr
 from ..errors import FileFormatError, InputError, ShapeError
 from ..io import atomic_file
 from ._omp import gram_matrix, omp_codes

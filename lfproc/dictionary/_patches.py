@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_random_state
+from .._shared.random import check_random_state
 from ..errors import InputError, MissingFileError, ShapeError
 from ..lightfield import LightField
 

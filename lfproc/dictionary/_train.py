@@ -28,7 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_choice, progress
+from .._shared.validation import check_choice
+from .._shared.progress import progress
 from .._version import __version__
 from ..errors import InputError, option_name
 from ..lightfield import LightField

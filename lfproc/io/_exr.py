@@ -15,7 +15,7 @@ import os
 from pathlib import Path
 
 from .. import _untrusted as ut
-from .._util import quiet
+from .._shared.stdio import quiet
 from ..errors import FileFormatError
 
 __all__ = ["open_exr", "MAX_EXR_RATIO", "MAX_EXR_PARTS"]

@@ -267,7 +267,7 @@ def imread(path: str | os.PathLike, flags: int | None = None, *, what: str = "im
     :class:`FileFormatError` quoting the first of them when nothing could be decoded."""
     import cv2
 
-    from .._util import quiet
+    from .._shared.stdio import quiet
 
     path = Path(path)
     check_image_size(path)

@@ -31,7 +31,7 @@ from typing import Any, Literal
 import numpy as np
 
 from .. import _untrusted as ut
-from .._util import freeze
+from .._shared.frozen import freeze
 from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError, option_name
 from ..lightfield import LightField, clean_nonfinite

@@ -42,7 +42,7 @@ from ..io import atomic_file
 from .capture import _get, _packing, _size, frame_fields, split_txt_metadata
 from .container import _parse_json, is_lfp, read_lfp, sha1_ref
 from .raw import pack_raw10, pack_raw12, raw_byte_count, unpack_raw
-from .._util import short_repr
+from .._shared.reprs import short_repr
 
 __all__ = [
     "WhiteFrame",

@@ -32,7 +32,7 @@ from .. import _untrusted as ut
 from ..errors import LfpFormatError, MissingFileError
 from .container import LFP_MAGIC, LfpContainer, _norm_sha1, _parse_json, _storage_entries, is_lfp, read_lfp
 from .raw import raw_byte_count, unpack_raw
-from .._util import short_repr
+from .._shared.reprs import short_repr
 
 __all__ = [
     "LytroCapture",

@@ -34,7 +34,7 @@ from .._version import __version__
 from ..errors import InputError, LfpFormatError, MissingFileError, ShapeError
 from ..io import atomic_file
 from .raw import pack_raw10
-from .._util import short_repr
+from .._shared.reprs import short_repr
 
 __all__ = [
     "LFP_MAGIC",

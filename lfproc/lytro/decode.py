@@ -43,7 +43,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .._util import check_choice, freeze
+from .._shared.validation import check_choice
+from .._shared.frozen import freeze
 from .._version import __version__
 from ..errors import InputError, ShapeError, option_name
 from ..lightfield import LightField

@@ -33,7 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from .._util import warn_convergence, short_repr
+from .._shared.warn import warn_convergence
+from .._shared.reprs import short_repr
 from ..errors import CalibrationError, InputError, ShapeError
 
 __all__ = ["LensletGrid", "estimate_grid", "ILLUM_SPACING_PX", "F01_SPACING_PX"]

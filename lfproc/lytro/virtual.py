@@ -35,7 +35,9 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_positive, check_random_state, progress
+from .._shared.validation import check_positive
+from .._shared.random import check_random_state
+from .._shared.progress import progress
 from ..errors import InputError, ShapeError
 from .grid import ILLUM_SPACING_PX, LensletGrid
 

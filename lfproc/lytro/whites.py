@@ -28,7 +28,8 @@ from typing import Any
 import numpy as np
 
 from .. import _untrusted as ut
-from .._util import progress, short_repr
+from .._shared.progress import progress
+from .._shared.reprs import short_repr
 from .._version import __version__
 from ..errors import (CalibrationError, FileFormatError, InputError, MissingFileError, NoWhiteImageError,
                       UnsafeFileError)

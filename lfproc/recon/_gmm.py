@@ -47,7 +47,8 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .._util import check_choice, progress
+from .._shared.validation import check_choice
+from .._shared.progress import progress
 from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError, option_name
 from ..lightfield import LightField
@@ -248,7 +249,7 @@ def train_patch_model(images, *, patch: int = 8, margin: int = 2, components: in
     -------
     PatchModel
     """
-    from .._util import check_random_state
+    from .._shared.random import check_random_state
 
     rng = check_random_state(random_state)
     e = patch + 2 * margin

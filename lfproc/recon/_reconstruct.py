@@ -72,7 +72,9 @@ from typing import Any
 
 import numpy as np
 
-from .._util import check_choice, progress, realign
+from .._shared.validation import check_choice
+from .._shared.progress import progress
+from .._shared.parallel import realign
 from .._version import __version__
 from ..errors import InputError, ShapeError
 from ..lightfield import LightField
