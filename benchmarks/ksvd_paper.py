@@ -24,7 +24,8 @@ import numpy as np
 
 
 def make_patches(path: Path, n_patches: int, seed: int) -> None:
-    from lfproc.dictionary import PRESETS, synthetic_lightfields, training_patches
+    from lfproc.dictionary import PRESETS, training_patches
+    from lfproc.dictionary._train import synthetic_lightfields
 
     p = PRESETS["paper"]
     lfs = list(synthetic_lightfields(p.synthetic_scenes, views=p.patch[:2], size=p.synthetic_size, seed=seed))

@@ -67,7 +67,8 @@ def omp_vs_sklearn(n_signals: int, sparsity: int) -> None:
 
 
 def omp_paper(n_signals: int, sparsity: int, rate: float) -> None:
-    from lfproc.dictionary import batch_omp, gram_matrix
+    from lfproc.dictionary import batch_omp
+    from lfproc.dictionary._omp import gram_matrix
 
     n, k = 6075, 16402
     rng = np.random.default_rng(0)

@@ -67,7 +67,8 @@ from lfproc.errors import CalibrationError, InputError, MissingFileError
 
 from .emva import SIGMA2_Q, EmvaDescriptor, evaluate, is_descriptor, read_descriptor, reduce_descriptor
 from .frames import FrameChecker, FrameRecord, _channel_names, read_frame, read_manifest
-from .profile import MONO, CameraProfile, IsoFigures
+from lfproc.sensor._profile import MONO
+from lfproc.sensor import CameraProfile, IsoFigures
 
 __all__ = ["calibrate", "find_calibration_input", "CalibrationResult", "DEFAULT_ISO_KEY", "MANIFEST_NAMES"]
 

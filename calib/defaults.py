@@ -1,14 +1,13 @@
 """The profiles lfproc ships, built from their stated assumptions.
 
-``python -m lfproc.calib.defaults`` rewrites ``profiles/*.json``; a test checks that the
+``python -m lfproc.calib.defaults`` rewrites ``lfproc/sensor/profiles/*.json``; a test checks that the
 shipped files equal what this module builds, so the numbers below are the only source.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from .profile import CameraProfile, IsoFigures, paper_gain_dn_per_e, save_profile
+from lfproc.sensor._profile import _PROFILE_DIR
+from lfproc.sensor import CameraProfile, IsoFigures, paper_gain_dn_per_e, save_profile
 
 __all__ = ["paper_profile", "illum_profile", "build_all"]
 
@@ -96,7 +95,7 @@ def build_all() -> dict[str, CameraProfile]:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    folder = Path(__file__).resolve().parent / "profiles"
+    folder = _PROFILE_DIR  # lfproc/sensor/profiles: the shipped profiles live beside their type
     for name, profile in build_all().items():
         save_profile(profile, folder / f"{name}.json", force=True)
         print(f"wrote {folder / (name + '.json')}")

@@ -32,7 +32,9 @@ import numpy as np
 
 from lfproc import _untrusted as ut
 from lfproc.errors import CalibrationError, FileFormatError, InputError, MissingFileError
+from lfproc.lytro.capture import read_capture
 from lfproc._shared.reprs import short_repr
+from lfproc.io.images import imread
 
 __all__ = [
     "FrameRecord",
@@ -328,10 +330,6 @@ def _read_rawpy(path: Path) -> Frame:
 
 
 def _read_lytro(path: Path) -> Frame:
-    try:
-        from lfproc.lytro.capture import read_capture
-    except ImportError:  # another module of lfproc; absent in partial installs
-        raise FileFormatError(f"{path}: reading Lytro raws needs lfproc.lytro.capture, which is not available") from None
     cap = read_capture(path)
     cfa = getattr(cap, "cfa_pattern", None)
     levels = getattr(cap, "black_level", None)
@@ -352,8 +350,6 @@ def _read_lytro(path: Path) -> Frame:
 
 def _read_image(path: Path) -> Frame:
     import cv2
-
-    from lfproc.io.images import imread
 
     try:
         data = imread(path, cv2.IMREAD_UNCHANGED)

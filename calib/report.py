@@ -30,6 +30,7 @@ from lfproc._version import __version__
 from lfproc.io._atomic import atomic_dir
 
 from .calibrate import CalibrationResult
+from lfproc.calib.emva import SIGMA2_Q
 
 __all__ = ["write_report", "summary_markdown", "SUMMARY_COLUMNS", "PROFILE_COLUMNS", "EMVA_COLUMNS", "format_value"]
 
@@ -199,8 +200,6 @@ def _read_noise(result, Figure, folder, written) -> None:
 def _snr(result, Figure, folder, written) -> None:
     """EMVA 1288 SNR curve: measured SNR against the signal in electrons, with the linear model
     ``mu_e / sqrt(sigma_d^2 + sigma_q^2 / K^2 + mu_e)`` and the ideal ``sqrt(mu_e)``."""
-    from .emva import SIGMA2_Q
-
     fig = _figure(Figure)
     ax = fig.add_subplot()
     top = 0.0

@@ -33,7 +33,7 @@ from lfproc.io._atomic import atomic_dir
 
 from .emva import EmvaDescriptor, EmvaStep, format_descriptor
 from .frames import FrameRecord, write_manifest
-from .profile import CameraProfile, load_profile
+from lfproc.sensor import CameraProfile, expose, load_profile
 
 __all__ = ["simulate_frames", "expected_figures", "BIAS_EXPOSURE_S", "FLAT_LEVELS"]
 
@@ -148,8 +148,6 @@ def simulate_frames(
 
 
 def _write_manifest_set(profile, tmp: Path, iso_list, shape, rng, params) -> str:
-    from lfproc.camera.sensor import expose
-
     frames_dir = tmp / "frames"
     frames_dir.mkdir()
     records: list[FrameRecord] = []
@@ -183,8 +181,6 @@ def _write_manifest_set(profile, tmp: Path, iso_list, shape, rng, params) -> str
 
 
 def _write_emva_set(profile, tmp: Path, iso: float, shape, rng, params) -> str:
-    from lfproc.camera.sensor import expose
-
     fig = expected_figures(profile, iso)
     img = tmp / "images"
     img.mkdir()

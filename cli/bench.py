@@ -6,6 +6,9 @@ import sys
 from pathlib import Path
 
 from ._common import add_json, emit
+from lfproc.bench import run_bench
+from lfproc.bench.grid import get_preset
+from lfproc.errors import InputError
 
 
 def register(sub, common) -> None:
@@ -36,10 +39,6 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from lfproc.bench import run_bench
-    from lfproc.bench.grid import get_preset
-    from lfproc.errors import InputError
-
     get_preset(args.preset)  # an unknown preset fails before anything is read
     if not args.scenes:
         raise InputError("LF: expected at least one light field, got none")

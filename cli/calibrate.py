@@ -17,6 +17,12 @@ from pathlib import Path
 from lfproc.errors import InputError
 
 from ._common import add_json, emit, parse_size
+from lfproc.calib.calibrate import calibrate
+from lfproc.calib.report import EMVA_COLUMNS, PROFILE_COLUMNS, write_report
+from lfproc.calib.simulate_frames import simulate_frames
+from lfproc.io._atomic import atomic_outputs, check_output
+from lfproc.sensor import save_profile
+from lfproc.sensor._profile import profile_outputs
 
 SIMULATE = "simulate-frames"
 
@@ -53,8 +59,6 @@ def register(sub, common) -> None:
 
 
 def _simulate(args) -> int:
-    from lfproc.calib.simulate_frames import simulate_frames
-
     if args.report or args.name or args.adc_bits or args.cfa or args.frames_root:
         raise InputError(f"{SIMULATE}: --report, --name, --adc-bits, --cfa and --frames-root apply to calibration, "
                          "not simulation")
@@ -75,9 +79,6 @@ def run(args) -> int:
                             ("--size", args.size), ("--iso", args.iso)) if v is not None]
     if given:
         raise InputError(f"{', '.join(given)}: only for 'lfproc calibrate {SIMULATE}'")
-    from lfproc.calib.calibrate import calibrate
-    from lfproc.calib.profile import profile_outputs, save_profile
-    from lfproc.io import atomic_outputs, check_output
 
     check_output(args.output, force=args.force)
     if args.report is not None:
@@ -92,8 +93,6 @@ def run(args) -> int:
     with atomic_outputs(outputs, force=args.force) as staged:
         save_profile(result.profile, staged[0])
         if args.report is not None:
-            from lfproc.calib.report import write_report
-
             write_report(result, staged[-1])
     out = {"profile": str(args.output), "name": result.profile.name}
     if args.report is not None:
@@ -112,8 +111,6 @@ def run(args) -> int:
 
 def _table(result) -> None:
     """The profile's figures, then the EMVA 1288 figures (the same tables as the report's summary)."""
-    from lfproc.calib.report import EMVA_COLUMNS, PROFILE_COLUMNS
-
     isos = list(result.figures)
     profile = result.profile
     print(f"sensor  {'monochrome' if profile.is_mono else 'Bayer ' + profile.cfa_pattern}, {profile.adc_bits} bit")

@@ -18,10 +18,14 @@ import sys
 import warnings
 from pathlib import Path
 
-from lfproc.camera.iso import DEFAULT_BLOCK_PX
+from lfproc.camera.iso import DEFAULT_BLOCK_PX, ISO_PATTERNS
 from lfproc.errors import InputError, LfprocWarning
 
 from ._common import add_json, add_output, emit, parse_floats
+from lfproc.camera.capture import capture_from_raw, is_capture_file
+from lfproc.camera.simulate import capture_summary
+from lfproc.io._atomic import check_output
+from lfproc.sensor import fixed_pattern_correction
 
 
 def register(sub, common) -> None:
@@ -65,12 +69,6 @@ def register(sub, common) -> None:
 
 
 def run_import(args) -> int:
-    from lfproc.camera.capture import capture_from_raw, is_capture_file
-    from lfproc.camera.iso import ISO_PATTERNS
-    from lfproc.camera.sensor import fixed_pattern_correction
-    from lfproc.camera.simulate import capture_summary
-    from lfproc.io import check_output
-
     check_output(args.output, force=args.force)
     exposures = parse_floats(args.exposures_s, option="--exposures-s")
     if len(exposures) not in (1, len(args.raw)):

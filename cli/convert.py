@@ -7,6 +7,9 @@ from pathlib import Path
 from lfproc.io import read_lightfield, write_lightfield
 
 from ._common import add_value_policies
+from lfproc.errors import SaturationWarning
+from lfproc.io._atomic import check_output
+from lfproc.preview import display_transform
 
 
 def register(sub, common) -> None:
@@ -38,10 +41,6 @@ def register(sub, common) -> None:
 def run(args) -> int:
     import sys
     import warnings
-
-    from lfproc.errors import SaturationWarning
-    from lfproc.io import check_output
-    from lfproc.tonemap import display_transform
 
     check_output(args.output, force=args.force)
     lf = read_lightfield(args.input, nonfinite=args.nonfinite, negative=args.negative, transfer=args.transfer)

@@ -6,6 +6,9 @@ import sys
 from pathlib import Path
 
 from ._common import add_json, emit
+from lfproc._shared.parallel import max_workers
+from lfproc._shared.validation import check_count
+from lfproc.dataset import build_dataset
 
 
 def register(sub, common) -> None:
@@ -30,13 +33,8 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from lfproc.dataset import build_dataset
-
     if args.workers is not None:
         import os
-
-        from lfproc._shared.validation import check_count
-        from lfproc._shared.parallel import max_workers
 
         check_count("--workers", args.workers, high=max_workers(),
                     why=f"at most 4 per CPU core; this machine has {os.cpu_count() or 1}")

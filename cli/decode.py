@@ -5,6 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from ._common import add_json, add_output, emit
+from lfproc.io import write_lightfield
+from lfproc.io._atomic import check_output
+from lfproc.lytro.decode import decode_capture
 
 
 def register(sub, common) -> None:
@@ -28,9 +31,6 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from lfproc.io import check_output, write_lightfield
-    from lfproc.lytro.decode import decode_capture
-
     check_output(args.output, force=args.force)
     lf = decode_capture(args.capture, white_db=args.white_db, white=args.white, n_views=args.views,
                         colour=args.colour, demosaic_method=args.demosaic, verify=not args.no_verify)

@@ -8,6 +8,7 @@ from pathlib import Path
 from lfproc.demo import run_demo
 
 from ._common import add_json, emit
+from lfproc.errors import OutputExistsError
 
 
 def register(sub, common) -> None:
@@ -21,8 +22,6 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from lfproc.errors import OutputExistsError
-
     if args.output.exists() and not args.force:
         raise OutputExistsError(
             f"{args.output}: the output folder exists (an earlier demo?); run 'lfproc demo -o {args.output} --force' "

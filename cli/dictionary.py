@@ -6,11 +6,17 @@ import shutil
 from pathlib import Path
 
 from ._common import add_json, add_value_policies, add_output, emit, parse_ints
+from lfproc.dictionary import (
+    evaluate_dictionary, get_preset, load_dictionary, PRESETS, save_dictionary, SHIPPED, train_dictionary,
+)
+from lfproc.dictionary._files import shipped_path
+from lfproc.dictionary._patches import collect_lightfields
+from lfproc.errors import InputError
+from lfproc.io import read_lightfield
+from lfproc.io._atomic import check_output
 
 
 def register(sub, common) -> None:
-    from lfproc.dictionary import PRESETS
-
     presets = "; ".join(f"{k}: patch {'x'.join(map(str, p.patch))}, {p.atoms} atoms, sparsity {p.sparsity}, "
                         f"{p.iterations} iterations, {p.patches} patches" for k, p in PRESETS.items())
     p = sub.add_parser("dictionary", parents=[common], help="train, describe and evaluate HDR light-field dictionaries",
@@ -82,10 +88,6 @@ def _command(args) -> str:
 def run_train(args) -> int:
     import time
 
-    from lfproc.dictionary import collect_lightfields, get_preset, save_dictionary, train_dictionary
-    from lfproc.errors import InputError
-    from lfproc.io import check_output, read_lightfield
-
     get_preset(args.preset)
     patch = None
     if args.patch is not None:
@@ -120,12 +122,9 @@ def run_train(args) -> int:
 
 
 def run_info(args) -> int:
-    from lfproc.dictionary import load_dictionary
-
     d = load_dictionary(args.dictionary)
     info = d.describe()
     path = Path(d.name) if d.name not in ("default",) else None
-    from lfproc.dictionary import SHIPPED, shipped_path
 
     if d.name in SHIPPED:
         path = shipped_path(d.name)
@@ -137,10 +136,6 @@ def run_info(args) -> int:
 
 
 def run_eval(args) -> int:
-    from lfproc.dictionary import collect_lightfields, evaluate_dictionary, load_dictionary
-    from lfproc.errors import InputError
-    from lfproc.io import read_lightfield
-
     d = load_dictionary(args.dictionary)
     if args.sparsity is not None and not 1 <= args.sparsity <= min(d.n, d.n_atoms):
         raise InputError(f"--sparsity: expected 1..{min(d.n, d.n_atoms)}, got {args.sparsity}")

@@ -19,9 +19,14 @@ import numpy as np
 
 from lfproc.errors import FileFormatError, InputError, ShapeError
 from lfproc.io import read_lightfield
-from lfproc.metrics import evaluate
+from lfproc.metrics._metrics import evaluate, evaluation_mask, metric_luminance
 
 from ._common import add_json, add_value_policies, emit
+from lfproc._untrusted import read_npy
+from lfproc.camera.capture import load_capture, noise_floor
+from lfproc.io._atomic import check_output
+from lfproc.io.images import imread
+from lfproc.preview import PREVIEW_SUFFIXES, write_error_map
 
 MASK_SUFFIXES = (".png", ".npy")
 
@@ -136,8 +141,6 @@ def read_mask(path: Path) -> np.ndarray:
     if not path.is_file():
         raise InputError(f"--mask {path}: no such file")
     if suffix == ".npy":
-        from lfproc._untrusted import read_npy
-
         with open(path, "rb") as fh:
             arr = read_npy(fh, path.stat().st_size, source=f"--mask {path}", what="mask")
         if arr.dtype != bool:
@@ -149,8 +152,6 @@ def read_mask(path: Path) -> np.ndarray:
             raise ShapeError(f"--mask {path}: expected shape H x W or V x U x H x W, found {arr.shape}")
         return arr
     import cv2
-
-    from lfproc.io.images import imread
 
     raw = imread(path, cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH, what="mask image")
     top = np.iinfo(raw.dtype).max if np.issubdtype(raw.dtype, np.integer) else 1.0
@@ -166,10 +167,7 @@ def _check_mask_shape(mask: np.ndarray, path: Path, reference) -> None:
 
 
 def run(args) -> int:
-    from lfproc.io import check_output
-
     if args.error_map is not None:  # before reading anything large
-        from lfproc.preview import PREVIEW_SUFFIXES
 
         if args.error_map.suffix.lower() not in PREVIEW_SUFFIXES:
             raise InputError(f"--error-map {args.error_map}: expected a file ending in {', '.join(PREVIEW_SUFFIXES)}")
@@ -181,7 +179,6 @@ def run(args) -> int:
     if args.noise_floor_from is not None:
         if args.noise_floor is not None:
             raise InputError("--noise-floor and --noise-floor-from: give one of them")
-        from lfproc.camera.capture import load_capture, noise_floor
 
         floor = noise_floor(load_capture(args.noise_floor_from))
     mask = None if args.mask is None else read_mask(args.mask)
@@ -190,8 +187,6 @@ def run(args) -> int:
     if mask is not None:
         _check_mask_shape(mask, args.mask, reference)
     if args.exclude_above is not None:
-        from lfproc.metrics import metric_luminance
-
         if not (metric_luminance(reference.data) <= args.exclude_above).any():
             raise InputError(f"--exclude-above {args.exclude_above:g}: every reference sample is brighter; expected "
                              "a value that keeps some (the reference's luminance starts at "
@@ -202,9 +197,6 @@ def run(args) -> int:
     figures = {"result": str(args.result), "reference": str(args.reference),
                "mask": None if args.mask is None else str(args.mask)} | figures
     if args.error_map is not None:
-        from lfproc.metrics import evaluation_mask
-        from lfproc.preview import write_error_map
-
         aligned = result if figures["gain"] == 1.0 else result.replace(data=result.data * np.float32(figures["gain"]))
         keep = evaluation_mask(reference, mask=mask, exclude_above=args.exclude_above)
         write_error_map(aligned, reference, args.error_map, force=args.force, mask=keep)

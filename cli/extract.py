@@ -5,6 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from ._common import add_json, add_output, emit
+from lfproc.io._atomic import check_output
+from lfproc.lytro.extract import extract_lfp
 
 
 def register(sub, common) -> None:
@@ -25,9 +27,6 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from lfproc.io import check_output
-    from lfproc.lytro.extract import extract_lfp
-
     check_output(args.output, force=args.force)
     doc = extract_lfp(args.lfp, args.output, force=args.force, verify=not args.no_verify)
     kinds: dict[str, int] = {}

@@ -7,6 +7,7 @@ from pathlib import Path
 from lfproc.info import describe
 
 from ._common import add_json, add_value_policies, emit
+from lfproc.cli.profile import print_profile
 
 
 def register(sub, common) -> None:
@@ -23,8 +24,6 @@ def register(sub, common) -> None:
 def run(args) -> int:
     doc = describe(args.path, nonfinite=args.nonfinite, negative=args.negative)
     if doc.get("kind") == "camera_profile" and not args.json:
-        from .profile import print_profile
-
         print(f"kind  camera_profile\npath  {doc['path']}")
         print_profile(doc)
         return 0

@@ -5,6 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from ._common import add_json, add_value_policies, add_output, emit, parse_floats
+from lfproc.errors import InputError
+from lfproc.dataset import read_exposure_file
+from lfproc.hdr import merge_files
+from lfproc.hdr._bracket import format_response, plot_response, RESPONSE_SUFFIXES
+from lfproc.io import write_lightfield
+from lfproc.io._atomic import atomic_outputs, check_output
+from lfproc.lightfield import LightField
 
 
 def register(sub, common) -> None:
@@ -54,11 +61,6 @@ _OPTION_NAMES = {"profile": "--profile", "exposures_s": "--exposures-s", "isos":
 def run(args) -> int:
     import numpy as np
 
-    from lfproc.bracket import merge_files
-    from lfproc.errors import InputError
-    from lfproc.io import atomic_outputs, check_output, write_lightfield
-    from lfproc.lightfield import LightField
-
     if args.output.suffix.lower() != ".exr":
         raise InputError(f"{args.output}: expected an output path ending in .exr")
     check_output(args.output, force=args.force)
@@ -66,8 +68,6 @@ def run(args) -> int:
         check_output(args.mask, force=args.force)
     response_plot = None
     if args.response_out is not None:
-        from lfproc.bracket import RESPONSE_SUFFIXES
-
         if args.response_out.suffix.lower() not in RESPONSE_SUFFIXES:
             raise InputError(f"--response-out {args.response_out}: expected a file ending in "
                              f"{' or '.join(RESPONSE_SUFFIXES)}, got {args.response_out.suffix or 'no suffix'}")
@@ -82,8 +82,6 @@ def run(args) -> int:
         raise InputError(f"--iterations: expected a non-negative integer, got {args.iterations}")
     exposures = parse_floats(args.exposures_s, option="--exposures-s") if args.exposures_s else None
     if args.exposures_file is not None:
-        from lfproc.dataset import read_exposure_file
-
         exposures = read_exposure_file(args.exposures_file, args.inputs, bare_order="inputs")
     isos = parse_floats(args.isos, option="--isos") if args.isos else None
     merged, info = merge_files(args.inputs, method=args.method, profile=args.profile, exposures_s=exposures,
@@ -92,8 +90,6 @@ def run(args) -> int:
                                option_names=_OPTION_NAMES, nonfinite=args.nonfinite, negative=args.negative)
     response_text = None
     if args.response_out is not None:
-        from lfproc.bracket import format_response
-
         if info.get("response") is None:
             raise InputError(f"--response-out: no camera response was recovered: the inputs are linear data "
                              f"({merged.attrs['input_mapping']}), not 8-bit images; drop it")
@@ -119,8 +115,6 @@ def run(args) -> int:
                 mask = mask.max(axis=-1, keepdims=True)
             write_lightfield(LightField(data=mask, source=f"saturated-everywhere mask of {args.output}"), staged[1])
         if response_text is not None:
-            from lfproc.bracket import plot_response
-
             staged[-2].write_text(response_text, encoding="utf-8")
             plot_response(staged[-1], info["response"], title=f"camera response recovered by lfproc merge "
                                                                 f"({info['method']})")

@@ -9,15 +9,17 @@ from __future__ import annotations
 from pathlib import Path
 
 from ._common import add_json, add_value_policies, add_output, emit
+from lfproc.camera.capture import is_capture_file
+from lfproc.dictionary import is_dictionary_file, load_dictionary
+from lfproc.errors import InputError
+from lfproc.io import read_lightfield
+from lfproc.io._atomic import check_output
+from lfproc.lightfield import LightField
+from lfproc.preview import preview_kinds, PREVIEWS, write_capture_preview, write_preview
+import lfproc.camera.capture
 
 
 def register(sub, common) -> None:
-    from lfproc.lightfield import LightField
-    from lfproc.preview import PREVIEWS, preview_kinds
-
-    import lfproc.camera.capture  # noqa: F401  (registers the capture kinds)
-    import lfproc.dictionary  # noqa: F401  (registers the atoms kind)
-
     kinds = preview_kinds(LightField)
     listing = "; ".join(f"{k}: {PREVIEWS[k].description}" for k in PREVIEWS)
     p = sub.add_parser(
@@ -40,15 +42,9 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from lfproc.camera.capture import is_capture_file, write_capture_preview
-    from lfproc.errors import InputError
-    from lfproc.io import check_output, read_lightfield
-    from lfproc.preview import PREVIEWS, write_preview
-
     if args.kind is not None and args.kind not in PREVIEWS:  # before reading a large input
         raise InputError(f"--kind: expected one of {', '.join(PREVIEWS)}; got {args.kind!r}")
     check_output(args.output, force=args.force)
-    from lfproc.dictionary import is_dictionary_file, load_dictionary
 
     def _no_exposure_from(what: str) -> None:
         if args.exposure_from is not None:

@@ -7,7 +7,7 @@ PROFILE is a shipped profile name (``illum``, ``paper-none``, ``paper-low``,
 from __future__ import annotations
 
 from lfproc.calib.calibrate import EMVA_SOURCE_KEYS
-from lfproc.calib.profile import describe_profile
+from lfproc.sensor import describe_profile, load_profile
 
 from ._common import add_json, emit
 
@@ -30,8 +30,6 @@ def register(sub, common) -> None:
 
 
 def run_show(args) -> int:
-    from lfproc.calib.profile import load_profile
-
     doc = describe_profile(load_profile(args.profile))
     if args.json:
         emit(doc, as_json=True)

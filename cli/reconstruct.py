@@ -5,6 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from ._common import add_json, add_output, emit
+from lfproc.bench import reconstruct_per_shot
+from lfproc.camera.capture import load_capture
+from lfproc.dictionary import load_dictionary
+from lfproc.errors import InputError
+from lfproc.io import write_lightfield
+from lfproc.io._atomic import check_output
+from lfproc.recon import DEFAULTS, load_patch_model, PAPER, reconstruct, reconstruct_gmm
 
 
 def register(sub, common) -> None:
@@ -76,8 +83,6 @@ def register(sub, common) -> None:
 
 
 def _numbers(text: str, option: str) -> list[float]:
-    from lfproc.errors import InputError
-
     try:
         return [float(v) for v in text.split(",")]
     except ValueError:
@@ -85,11 +90,6 @@ def _numbers(text: str, option: str) -> list[float]:
 
 
 def _run_gmm(args) -> int:
-    from lfproc.camera.capture import load_capture
-    from lfproc.errors import InputError
-    from lfproc.io import check_output, write_lightfield
-    from lfproc.recon import load_patch_model, reconstruct_gmm
-
     ignored = [f"--{name.replace('_', '-')}" for name in ("mu", "tol", "max_iter", "sparsity", "scale", "overlap",
                                                            "variance", "per_shot", "workers", "scheduler")
                if getattr(args, name) is not None]
@@ -118,23 +118,16 @@ def _run_gmm(args) -> int:
 
 
 def run(args) -> int:
-    from lfproc.errors import InputError
-
     if args.method == "gmm":
         return _run_gmm(args)
     given = [o for o, v in (("--model", args.model), ("--disparities", args.disparities), ("--scales", args.scales))
              if v is not None]
     if given:
         raise InputError(f"{', '.join(given)}: options of --method gmm, not of --method dictionary")
-    from lfproc.camera.capture import load_capture
-    from lfproc.dictionary import load_dictionary
-    from lfproc.io import check_output, write_lightfield
-    from lfproc.recon import reconstruct
 
     check_output(args.output, force=args.force)
     capture = load_capture(args.capture)
     dictionary = load_dictionary(args.dictionary)
-    from lfproc.recon import DEFAULTS, PAPER
 
     base = PAPER if args.paper else DEFAULTS  # options given explicitly win
     # tol and max_iter: the paper's numbers, or None for the library's per-solver defaults
@@ -145,8 +138,6 @@ def run(args) -> int:
     options.update(solver=args.solver, stride=args.stride, sparsity=args.sparsity,
                    workers=args.workers, scheduler=args.scheduler, threads=args.threads)
     if args.per_shot is not None:
-        from lfproc.bench import reconstruct_per_shot
-
         lf = reconstruct_per_shot(capture, dictionary, merges=[args.per_shot], **options)[args.per_shot]
     else:
         lf = reconstruct(capture, dictionary, **options)

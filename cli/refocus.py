@@ -5,6 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from ._common import add_json, add_output, emit, parse_floats
+from lfproc.errors import InputError
+from lfproc.io import read_lightfield, write_image
+from lfproc.io._atomic import atomic_dir, check_output
+from lfproc.refocus._refocus import check_slopes, focal_stack
 
 #: Suffixes of a single linear HDR output.
 HDR_SUFFIXES = (".exr", ".hdr")
@@ -33,10 +37,6 @@ def _name(slope: float) -> str:
 
 def run(args) -> int:
     import json
-
-    from lfproc.errors import InputError
-    from lfproc.io import atomic_dir, check_output, read_lightfield, write_image
-    from lfproc.refocus import check_slopes, focal_stack
 
     text = ",".join(args.slope)
     slopes = parse_floats(text, option="--slope")

@@ -7,6 +7,9 @@ from pathlib import Path
 from lfproc.camera.iso import DEFAULT_BLOCK_PX
 
 from ._common import add_json, add_value_policies, add_output, emit, parse_floats
+from lfproc._shared.validation import check_count
+from lfproc.camera.capture import MAX_SHOTS
+from lfproc.camera.simulate import NOISE_PROFILES, simulate_file
 
 
 def _period(text: str):
@@ -68,11 +71,7 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from lfproc.camera.simulate import NOISE_PROFILES, simulate_file
-
     profile = args.profile or NOISE_PROFILES[args.noise or "low"]
-    from lfproc._shared.validation import check_count
-    from lfproc.camera.capture import MAX_SHOTS
 
     shots = args.shots if args.shots is not None else (2 if args.baseline == "bracketing" else 1)
     check_count("--shots", shots, high=MAX_SHOTS)

@@ -5,12 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from ._common import add_json, add_output, emit, parse_size
+from lfproc.io import write_lightfield
+from lfproc.io._atomic import check_output
+from lfproc.synth._synth import check_scene, SCENES, synthesize
 
 
 def register(sub, common) -> None:
     import argparse
-
-    from lfproc.synth import SCENES
 
     listing = "\n".join(f"  {name:<9} {desc}" for name, (_, desc) in SCENES.items())
     p = sub.add_parser(
@@ -35,9 +36,6 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from lfproc.io import check_output, write_lightfield
-    from lfproc.synth import check_scene, synthesize
-
     check_scene(args.scene)
     size = parse_size(args.size, option="--size")
     check_output(args.output, force=args.force)

@@ -6,6 +6,9 @@ import re
 from pathlib import Path
 
 from ._common import add_json, add_value_policies, add_output, emit, parse_floats
+from lfproc.io import read_lightfield
+from lfproc.io._atomic import check_output
+from lfproc.lytro.virtual import make_virtual_illum
 
 
 def register(sub, common) -> None:
@@ -31,9 +34,6 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from lfproc.io import check_output, read_lightfield
-    from lfproc.lytro.virtual import make_virtual_illum
-
     evs = parse_floats(args.exposures_ev, option="--exposures-ev")
     check_output(args.output, force=args.force)
     lf = read_lightfield(args.lightfield, nonfinite=args.nonfinite, negative=args.negative)

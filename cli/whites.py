@@ -5,6 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from ._common import add_json, add_output, emit
+from lfproc.io._atomic import check_output
+from lfproc.lytro.whites import build_white_db
 
 
 def register(sub, common) -> None:
@@ -20,9 +22,6 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from lfproc.io import check_output
-    from lfproc.lytro.whites import build_white_db
-
     check_output(args.output, force=args.force)
     db = build_white_db(args.caldata, args.output, force=args.force)
     emit({"output": str(args.output), "white_images": len(db.entries), "skipped": list(db.skipped),

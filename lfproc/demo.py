@@ -21,8 +21,27 @@ from typing import Any
 import numpy as np
 
 from ._version import __version__
-from .io import atomic_dir, check_output, write_lightfield
+from .io._atomic import atomic_dir, check_output
+from .io import read_lightfield, write_lightfield
 from .lightfield import LightField
+from ._shared.progress import progress
+from .calib.calibrate import calibrate
+from .calib.frames import read_frame, read_manifest
+from .calib.report import write_report
+from .calib.simulate_frames import expected_figures, simulate_frames
+from .camera.capture import observations
+from .camera.simulate import capture_summary, simulate_capture
+from .hdr import merge_lightfields
+from .lytro.decode import decode_capture
+from .lytro.grid import LensletGrid
+from .lytro.score import clip_level, score_decode
+from .lytro.virtual import make_virtual_illum
+from .lytro.whites import build_white_db
+from .metrics._metrics import evaluate
+from .preview import write_capture_preview, write_preview
+from .recon import reconstruct
+from .sensor import load_profile, save_profile
+from .synth._synth import synthesize
 
 __all__ = ["run_demo", "DemoConfig", "STAGES"]
 
@@ -65,9 +84,6 @@ def _rel(ctx: _Context, p: Path) -> str:
 
 def stage_synthesize(ctx: _Context) -> dict[str, Any]:
     """Synthesise the HDR scene (exact ground truth) and preview it."""
-    from .preview import write_preview
-    from .synth import synthesize
-
     c = ctx.config
     lf = synthesize(c.scene, size=c.size, views=c.views, baseline_px=c.baseline_px, random_state=c.seed)
     ctx.state["scene"] = lf
@@ -89,8 +105,6 @@ def stage_synthesize(ctx: _Context) -> dict[str, Any]:
 
 def stage_evaluate_noisy(ctx: _Context) -> dict[str, Any]:
     """Sanity of the metrics: the scene against copies with more and more noise."""
-    from .metrics import evaluate
-
     lf: LightField = ctx.state["scene"]
     rng = np.random.default_rng(ctx.config.seed)
     rows = {}
@@ -106,8 +120,6 @@ def stage_virtual_illum(ctx: _Context) -> dict[str, Any]:
     """Render the scene through the virtual Lytro Illum (hexagonal microlens array, vignetting, Bayer
     GRBG, 10-bit raw with photon and read noise; small sensor crop) as a bracket of 5 exposures 1 EV
     apart, with the camera's calibration data (white images) and the views a perfect decoder returns."""
-    from .lytro.virtual import make_virtual_illum
-
     c = ctx.config
     info = make_virtual_illum(ctx.state["scene"], ctx.path("illum/camera"), sensor="small",
                               exposures_ev=c.exposures_ev, seed=c.seed)
@@ -124,9 +136,6 @@ def stage_virtual_illum(ctx: _Context) -> dict[str, Any]:
 def stage_whites(ctx: _Context) -> dict[str, Any]:
     """Build the white-image database from the calibration data: drop dark frames, estimate each white
     image's hexagonal lenslet grid; compare the estimates with the grids the camera was made with."""
-    from .lytro.grid import LensletGrid
-    from .lytro.whites import build_white_db
-
     info = ctx.state["illum"]
     db = build_white_db(ctx.path("illum/camera") / info["caldata"], ctx.path("illum/whites"))
     ctx.state["white_db"] = ctx.path("illum/whites")
@@ -149,8 +158,6 @@ def stage_whites(ctx: _Context) -> dict[str, Any]:
 def _decode_scores(decoded: LightField, truth: LightField, info: dict[str, Any]) -> dict[str, float]:
     """Linear PSNR of a decode against the truth (:mod:`lfproc.lytro.score`: the capture's clipped
     truth left out, peak = 99.9th percentile of the rest, 4-pixel border excluded)."""
-    from .lytro.score import clip_level, score_decode
-
     s = score_decode(decoded.data, truth.data, clip=clip_level(info))
     return {"psnr_centre_db": round(s["psnr_centre_db"], 2), "psnr_all_views_db": round(s["psnr_all_views_db"], 2)}
 
@@ -160,9 +167,6 @@ def stage_decode(ctx: _Context) -> dict[str, Any]:
     image, hot pixels, demosaicing, hexagonal-to-square resampling) and score the 0 EV decode against the
     views the camera saw (linear PSNR with the 99.9th percentile of the truth as peak, the samples the
     capture clipped left out, 4-pixel border excluded)."""
-    from .io import read_lightfield
-    from .lytro.decode import decode_capture
-
     info = ctx.state["illum"]
     camera = ctx.path("illum/camera")
     decoded = []
@@ -186,10 +190,6 @@ def stage_merge(ctx: _Context) -> dict[str, Any]:
     """Merge the decoded bracket into one HDR light field (noise-aware ML estimator, per view and pixel,
     with variance) and evaluate it against the truth with the HDR metrics (the merge is in units per
     second: it is compared after multiplying by the 0 EV exposure time)."""
-    from .merge import merge_lightfields
-    from .metrics import evaluate
-    from .preview import write_preview
-
     c = ctx.config
     hdr, info = merge_lightfields(ctx.state["decoded"], method="ml", profile="illum")
     write_lightfield(hdr, ctx.path("illum/merged_hdr.exr"))
@@ -238,8 +238,6 @@ def _frames_contact_sheet(manifest: Path, out: Path) -> Path:
     frame therefore looks dark and a saturated flat white (each tile used to be stretched to its
     own 1st-99th percentile, which made every frame look alike and a saturated flat black)."""
     import cv2
-
-    from .calib.frames import read_frame, read_manifest
 
     records, _ = read_manifest(manifest)
     first: dict[tuple, Any] = {}
@@ -290,11 +288,6 @@ def stage_calibrate(ctx: _Context) -> dict[str, Any]:
     `calibration/simulated/frames/`."""
     from dataclasses import replace
 
-    from .calib import load_profile, save_profile
-    from .calib.calibrate import calibrate
-    from .calib.report import write_report
-    from .calib.simulate_frames import expected_figures, simulate_frames
-
     c = ctx.config
     base = load_profile(f"paper-{c.noise}")
     noisy = base.with_noise(read_noise_e=2.0, dark_current_e_per_s=50.0, name="demo-sensor-truth")
@@ -328,9 +321,6 @@ def stage_simulate(ctx: _Context) -> dict[str, Any]:
     """Simulate the paper's multi-ISO coded-mask camera (random ISO pattern, random colour mask of
     period 4, Bayer RGGB) from the scene with the calibrated profile (or the paper's sensor), and
     check the calibrated observations T against the noiseless projection of the ground truth."""
-    from .camera.capture import observations, write_capture_preview
-    from .camera.simulate import capture_summary, simulate_capture
-
     c = ctx.config
     lf: LightField = ctx.state["scene"]
     profile = ctx.state.get("profile", f"paper-{c.noise}")
@@ -365,10 +355,6 @@ def stage_reconstruct(ctx: _Context) -> dict[str, Any]:
     """Reconstruct the HDR light field from the coded multi-ISO capture with the shipped default
     dictionary (lfproc's defaults: ADMM, stride 4), evaluate it against the ground truth with the
     HDR metrics, and preview its centre view and an epipolar image."""
-    from .metrics import evaluate
-    from .preview import write_preview
-    from .recon import reconstruct
-
     c = ctx.config
     lf: LightField = ctx.state["scene"]
     out = reconstruct(ctx.state["capture"], "default", threads=1)
@@ -454,8 +440,6 @@ def run_demo(out_dir: str | os.PathLike = "lfproc-demo", *, config: DemoConfig |
     ``out_dir`` appears complete or not at all (built in a temporary sibling and renamed);
     an existing ``out_dir`` is only replaced with ``force``.
     """
-    from ._shared.progress import progress
-
     config = config or DemoConfig()
     out_dir = check_output(out_dir, force=force)
     log = log or (lambda message: None)

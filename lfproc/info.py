@@ -17,6 +17,10 @@ from .errors import FileFormatError, MissingFileError
 from .io.images import exr_parts
 from .io.lightfield_files import read_lightfield
 from .lightfield import LightField
+from .camera.capture import describe_capture, is_capture_file
+from .lytro.capture import describe_lytro
+from .lytro.container import is_lfp
+from .sensor import describe_profile, is_profile_file, load_profile
 
 __all__ = ["describe", "describe_lightfield"]
 
@@ -47,16 +51,12 @@ def describe_lightfield(lf: LightField) -> dict[str, Any]:
 
 
 def _is_lfp(path: Path) -> bool:
-    from .lytro.container import is_lfp
-
     return is_lfp(path)
 
 
 def _describe_json(path: Path) -> dict[str, Any]:
     """A camera profile (``schema: lfproc.camera_profile``); any other JSON is named as such."""
     import json
-
-    from .calib.profile import describe_profile, is_profile_file, load_profile
 
     if is_profile_file(path):
         out = describe_profile(load_profile(path))
@@ -78,10 +78,7 @@ def describe(path: str | os.PathLike, **read_options) -> dict[str, Any]:
     if not path.exists():
         raise MissingFileError(f"{path}: no such file or folder")
     if path.is_file() and (path.suffix.lower() in (".lfr", ".lfp", ".raw") or _is_lfp(path)):
-        from .lytro.capture import describe_lytro
-
         return describe_lytro(path)
-    from .camera.capture import describe_capture, is_capture_file  # coded multi-ISO captures
 
     if is_capture_file(path):
         return describe_capture(path)

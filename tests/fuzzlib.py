@@ -631,7 +631,7 @@ def _lytro_real_seeds() -> list[Seed]:
 
 
 def _small_lfr(folder: Path, name: str = "IMG_0001.LFR", h: int = 24, w: int = 32, **meta) -> bytes:
-    from lfproc.lytro import illum_metadata, write_lfr
+    from lfproc.lytro.container import illum_metadata, write_lfr
 
     rng = np.random.default_rng(3)
     raw = rng.integers(64, 1000, (h, w)).astype(np.uint16)
@@ -661,7 +661,7 @@ def make_lytro_capture_reader(work: Path) -> Reader:
     # an unpacked F01-style RAW + metadata pair
     f01 = SHARED_DATA / "lytro" / "f01_IMG_0001__frame.json"
     if f01.is_file():
-        from lfproc.lytro import pack_raw12
+        from lfproc.lytro.raw import pack_raw12
 
         doc = json.loads(f01.read_text())
         doc["image"]["width"], doc["image"]["height"] = 16, 12
@@ -693,7 +693,7 @@ def make_lytro_capture_reader(work: Path) -> Reader:
 def make_exr_reader(work: Path) -> Reader:
     from lfproc.info import describe_lightfield
     from lfproc.io import read_lightfield, write_lightfield
-    from lfproc.synth import synthesize
+    from lfproc.synth._synth import synthesize
 
     lf = synthesize("layers", size=(16, 16), views=3, random_state=1)
     variance = np.full(lf.shape, 0.01, np.float32)
@@ -751,10 +751,10 @@ def make_exr_reader(work: Path) -> Reader:
 
 
 def make_profile_reader(work: Path) -> Reader:
-    from lfproc.calib import load_profile, save_profile
+    from lfproc.sensor._profile import load_profile, save_profile
     from lfproc.camera.simulate import simulate_capture
     from lfproc.cli.profile import describe_profile
-    from lfproc.synth import synthesize
+    from lfproc.synth._synth import synthesize
 
     base = load_profile("paper-low")
     bias = {iso: np.full((8, 8), base.black_level_dn, np.float32) + np.float32(0.25) for iso in base.iso_values}
@@ -881,7 +881,7 @@ def make_manifest_reader(work: Path) -> Reader:
 def make_capture_reader(work: Path) -> Reader:
     from lfproc.camera.capture import describe_capture
     from lfproc.camera.simulate import simulate_capture
-    from lfproc.synth import synthesize
+    from lfproc.synth._synth import synthesize
 
     lf = synthesize("layers", size=(16, 16), views=3, random_state=0)
     seeds = []
@@ -924,7 +924,7 @@ def make_capture_reader(work: Path) -> Reader:
 
 
 def make_caldata_reader(work: Path) -> Reader:
-    from lfproc.lytro import WhiteFrame, white_metadata, write_caldata_tar
+    from lfproc.lytro.caldata import WhiteFrame, white_metadata, write_caldata_tar
     from lfproc.lytro.caldata import read_caldata
 
     rng = np.random.default_rng(7)

@@ -13,11 +13,14 @@ import numpy as np
 import pytest
 
 from lfproc.cli.main import main
-from lfproc.dictionary import (Dictionary, batch_omp, dct_dictionary, evaluate_dictionary, extract_patches, ksvd,
-                               load_dictionary, save_dictionary, train_dictionary, training_patches)
+from lfproc.dictionary import (
+    Dictionary, batch_omp, dct_dictionary, evaluate_dictionary, ksvd, load_dictionary, save_dictionary,
+    train_dictionary, training_patches,
+)
+from lfproc.dictionary._patches import extract_patches
 from lfproc.dictionary._files import HEADER_NAME
 from lfproc.errors import FileFormatError, InputError, LfprocError, ShapeError
-from lfproc.synth import synthesize
+from lfproc.synth._synth import synthesize
 
 
 def _random_dictionary(n, k, seed=0):
@@ -523,7 +526,7 @@ def test_cli_train_killed_then_resumed_gives_the_uninterrupted_dictionary(tmp_pa
 
 
 def test_training_sources_files_view_folders_and_datasets(tmp_path):
-    from lfproc.dictionary import collect_lightfields
+    from lfproc.dictionary._patches import collect_lightfields
     from lfproc.io import write_lightfield
 
     lf = synthesize("layers", size=(16, 16), views=5, random_state=1)
@@ -544,7 +547,8 @@ def test_training_sources_files_view_folders_and_datasets(tmp_path):
 # -- the shipped default ---------------------------------------------------------------------------
 
 def test_shipped_default_dictionary_is_described(capsys):
-    from lfproc.dictionary import PRESETS, shipped_path
+    from lfproc.dictionary import PRESETS
+    from lfproc.dictionary._files import shipped_path
 
     path = shipped_path("default")
     assert path.stat().st_size <= 25_000_000

@@ -8,7 +8,8 @@ import pytest
 
 from lfproc import LightField, read_lightfield, write_lightfield
 from lfproc.errors import FileFormatError, InputError, MissingFileError, OutputExistsError, ShapeError
-from lfproc.io import atomic_file, exr_parts, read_image, write_image
+from lfproc.io._atomic import atomic_file
+from lfproc.io import exr_parts, read_image, write_image
 
 
 def random_lf(seed=0, shape=(3, 3, 12, 16, 3), **kw):

@@ -11,9 +11,12 @@ import numpy as np
 import pytest
 
 from lfproc.errors import InputError, LfpFormatError, MissingFileError, OutputExistsError
-from lfproc.lytro import (WhiteFrame, build_lfp, geometry_correction_bytes, illum_metadata, iter_caldata,
-                          pack_raw10, pack_raw12, raw_byte_count, read_caldata, read_capture, sha1_ref,
-                          white_metadata, white_txt_document, write_caldata_tar, write_lfr)
+from lfproc.lytro.caldata import (
+    WhiteFrame, geometry_correction_bytes, iter_caldata, white_metadata, white_txt_document, write_caldata_tar,
+)
+from lfproc.lytro.container import build_lfp, illum_metadata, sha1_ref, write_lfr
+from lfproc.lytro.raw import pack_raw10, pack_raw12, raw_byte_count
+from lfproc.lytro import read_caldata, read_capture
 
 SERIAL = "B5152102610"
 

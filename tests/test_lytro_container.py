@@ -12,8 +12,9 @@ import pytest
 
 from lfproc.cli.main import main
 from lfproc.errors import ChecksumError, InputError, LfpFormatError, MissingFileError, OutputExistsError, ShapeError
-from lfproc.lytro import (LFP_MAGIC, build_lfp, describe_lytro, illum_metadata, pack_raw10, pack_raw12, read_capture,
-                          read_lfp, sha1_ref, write_lfr)
+from lfproc.lytro.container import LFP_MAGIC, build_lfp, illum_metadata, sha1_ref, write_lfr
+from lfproc.lytro import describe_lytro, read_capture, read_lfp
+from lfproc.lytro.raw import pack_raw10, pack_raw12
 
 REAL = {
     # name: (sections, content sections, toc position, embedded images)

@@ -13,16 +13,10 @@ from PIL import Image
 from lfproc.errors import InputError, OutputExistsError, ShapeError
 from lfproc.io import srgb_encode, write_lightfield
 from lfproc.lightfield import LightField
-from lfproc.preview import (
-    PREVIEWS,
-    epi_stretch,
-    register_preview,
-    reinhard_parameters,
-    render_preview,
-    tonemap,
-    write_preview,
+from lfproc.preview._preview import (
+    PREVIEWS, epi_stretch, register_preview, reinhard_parameters, render_preview, tonemap, write_preview,
 )
-from lfproc.synth import synthesize
+from lfproc.synth._synth import synthesize
 
 
 @pytest.fixture(scope="module")
@@ -135,7 +129,7 @@ def _grey_levels(levels, counts, zeros=0):
 
 
 def test_histogram_figures_known_answer():
-    from lfproc.preview import _histogram_data
+    from lfproc.preview._preview import _histogram_data
 
     data = _histogram_data(_grey_levels([1.0, 16.0], [30, 10], zeros=10))  # 0 and 4 stops
     np.testing.assert_allclose(data["edges"], np.linspace(0, 4, 33))  # whole stops, 8 bins a stop
@@ -319,7 +313,7 @@ def test_histogram_figures_never_cover_the_peak():
 
 
 def test_histogram_exposure_from_shares_the_stops_axis():
-    from lfproc.preview import _histogram_data, _stops_range
+    from lfproc.preview._preview import _histogram_data, _stops_range
 
     narrow = _grey_levels([1.0, 4.0], [10, 10])  # 0 and 2 stops
     wide = _grey_levels([1 / 64, 1.0, 256.0], [10, 10, 10])  # -6, 0 and 8 stops
@@ -353,7 +347,7 @@ def test_sheet_is_labelled_with_view_indices():
 
 
 def test_sheet_is_downscaled_to_its_pixel_budget():
-    from lfproc.preview import SHEET_MAX_PIXELS, sheet_tile_size
+    from lfproc.preview._preview import SHEET_MAX_PIXELS, sheet_tile_size
 
     big = LightField(data=np.zeros((5, 5, 434, 625, 1), np.float32))  # Lytro size, as the 9.7 MB sheet
     th, tw = sheet_tile_size(big)
@@ -381,7 +375,7 @@ def test_sheet_of_a_real_light_field_is_at_most_2_mb(shared_data, tmp_path):
 
 
 def test_capture_preview_has_colour_bars(lf):
-    from lfproc.camera.capture import render_capture_preview
+    from lfproc.preview._capture import render_capture_preview
     from lfproc.camera.simulate import simulate_capture
 
     cap = simulate_capture(lf.data[:, :, :32, :32], profile="paper-medium", shots=1, mask_period=4, random_state=1)

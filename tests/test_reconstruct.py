@@ -356,7 +356,7 @@ def test_bad_input_gets_one_line_and_exit_2(files, capsys, case, tmp_path):
             zf.writestr("lfproc-dictionary.json", "{not json")
         args[5] = str(bad)
     elif case == "missing-default":
-        from lfproc.dictionary import shipped_path
+        from lfproc.dictionary._files import shipped_path
 
         if shipped_path("default").is_file():
             pytest.skip("the default dictionary is shipped in this installation")
@@ -396,9 +396,10 @@ def test_two_shots_beat_one_on_a_textured_hdr_scene(shared_data):
     """
     import warnings
 
-    from lfproc.dictionary import load_dictionary, shipped_path
-    from lfproc.metrics import evaluate
-    from lfproc.synth import synthesize
+    from lfproc.dictionary import load_dictionary
+    from lfproc.dictionary._files import shipped_path
+    from lfproc.metrics._metrics import evaluate
+    from lfproc.synth._synth import synthesize
 
     texture = shared_data / "hdr" / "ScanLines_Desk.exr"
     if not texture.is_file() or not shipped_path("default").is_file():

@@ -37,6 +37,9 @@ from typing import Any
 import numpy as np
 
 from .grid import ISO_SETS, NOISE_LEVELS, REFERENCE
+from ..io._atomic import atomic_outputs
+from ..metrics._metrics import metric_luminance, pu21_encode
+from .cells import BenchScene, load_scene, read_centre
 
 __all__ = ["write_report", "claims", "PAPER", "PLOTS", "REPORT_FILES", "mean_metric"]
 
@@ -379,9 +382,6 @@ def _tonemap(rgb: np.ndarray, white: float) -> np.ndarray:
 def _plot_best_worst(rows, bench_dir: Path, meta: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
-    from ..metrics import metric_luminance, pu21_encode
-    from .run import BenchScene, load_scene, read_centre
-
     ok = [r for r in rows if math.isfinite(_num(r, "pu21_psnr_db"))]
     if not ok:
         fig, ax = plt.subplots(figsize=(4, 1))
@@ -462,8 +462,6 @@ def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict,
     ``bench_dir`` is where the cells (for the best/worst picture) are read.
     """
     if paths is None:
-        from ..io import atomic_outputs
-
         out = Path(bench_dir)
         with atomic_outputs([out / f for f in REPORT_FILES], force=True) as staged:
             _render(out, rows, meta, dict(zip(REPORT_FILES, staged)))

@@ -25,7 +25,6 @@ import os
 import shutil
 import time
 import warnings
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -37,8 +36,18 @@ from .._shared.jsonable import to_jsonable
 from .._version import __version__
 from ..errors import InputError, OutputExistsError, SaturationWarning, ShapeError
 from ..camera.iso import DEFAULT_BLOCK_PX
-from ..recon import DEFAULTS as RECON_DEFAULTS
+from ..recon import DEFAULTS as RECON_DEFAULTS, reconstruct
 from .grid import Cell, Job, Preset, cell_id, cell_seed, get_preset, grid_cells, group_jobs
+from .cells import BenchScene, _cell_path, load_scene, read_cells, read_centre  # noqa: F401  (read_centre: its old path)
+from ..camera.capture import observations
+from ..camera.simulate import NOISE_PROFILES, simulate_capture
+from ..dictionary import Dictionary, load_dictionary
+from ..dictionary._files import shipped_path
+from ..io import read_lightfield
+from ..io._atomic import atomic_file, atomic_outputs, clean_stale
+from ..metrics._metrics import evaluate
+from .baselines import reconstruct_per_shot
+from .report import REPORT_FILES, write_report
 
 __all__ = ["run_bench", "load_scene", "run_job", "read_cells", "COLUMNS", "BenchScene"]
 
@@ -50,38 +59,9 @@ COLUMNS = (
     "simulate_seconds", "iterations_mean", "empty_patches", "size", "views", "profile", "mask_period", "dictionary",
     "solver", "mu", "max_iter", "scale", "overlap", "lfproc_version", "cell_id",
 )
-_SCENE_CACHE: dict[tuple, Any] = {}
-
-
-@dataclass(frozen=True)
-class BenchScene:
-    """A scene of the bench: its name (file stem), path, SHA-256 and the crop used."""
-
-    name: str
-    path: str
-    sha256: str
-    crop: tuple[int, int, int, int] | None  # top, left, height, width
-    views: tuple[int, int]
-    size: tuple[int, int]
-
-
-def load_scene(scene: BenchScene):
-    """The scene's light field, cropped (cached per process: workers read each scene once)."""
-    from ..io import read_lightfield
-
-    key = (scene.path, scene.sha256, scene.crop)
-    if key not in _SCENE_CACHE:
-        lf = read_lightfield(scene.path, nonfinite="raise", negative="raise")
-        if scene.crop is not None:
-            lf = lf.crop(*scene.crop)
-        _SCENE_CACHE.clear()  # one scene per worker at a time bounds the memory
-        _SCENE_CACHE[key] = lf
-    return _SCENE_CACHE[key]
 
 
 def _scenes(paths, preset: Preset, dictionary) -> list[BenchScene]:
-    from ..io import read_lightfield
-
     paths = [Path(p) for p in paths]
     if not paths:
         raise InputError("scenes: expected at least one light field (LF...), got none")
@@ -128,8 +108,6 @@ def _dictionary_id(dictionary, source) -> str:
     import hashlib
 
     if isinstance(source, (str, os.PathLike)):
-        from ..dictionary import shipped_path
-
         path = Path(source)
         if not path.exists() and str(source) in ("default",):
             path = shipped_path(str(source))
@@ -139,13 +117,7 @@ def _dictionary_id(dictionary, source) -> str:
     return f"{dictionary.name or dictionary.preset}:{digest[:16]}"
 
 
-def _cell_path(cells_dir: Path, cid: str) -> Path:
-    return cells_dir / f"{cid}.npz"
-
-
 def _simulate(lf, cell: Cell, preset: Preset, seed: int):
-    from ..camera.simulate import NOISE_PROFILES, simulate_capture
-
     common = dict(profile=NOISE_PROFILES[cell.noise], isos=cell.isos, exposure_s=preset.exposure_s,
                   mask="random", mask_period=preset.mask_period, random_state=seed)
     if cell.method in ("joint", "dual-iso"):
@@ -158,12 +130,6 @@ def _simulate(lf, cell: Cell, preset: Preset, seed: int):
 
 def run_job(spec: dict[str, Any], dictionary) -> list[dict[str, Any]]:
     """Simulate, reconstruct, score and write the cells of one job; returns their rows."""
-    from ..camera.capture import observations
-    from ..metrics import evaluate
-    from ..recon import reconstruct
-    from .baselines import reconstruct_per_shot
-    from ..io import atomic_file
-
     scene: BenchScene = spec["scene"]
     preset: Preset = spec["preset"]
     cells: list[Cell] = spec["cells"]
@@ -219,24 +185,6 @@ def run_job(spec: dict[str, Any], dictionary) -> list[dict[str, Any]]:
     return rows
 
 
-def read_cells(paths: list[Path]) -> list[dict[str, Any]]:
-    """The rows of cell files (skipping any that cannot be read: they are recomputed)."""
-    rows = []
-    for path in paths:
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                rows.append(json.loads(str(z["row"])))
-        except (OSError, ValueError, KeyError):
-            continue
-    return rows
-
-
-def read_centre(bench_dir: str | os.PathLike, cid: str) -> np.ndarray:
-    """The reconstructed centre view stored with a cell."""
-    with np.load(_cell_path(Path(bench_dir) / "cells", cid), allow_pickle=False) as z:
-        return np.array(z["centre"])
-
-
 def _is_done(path: Path) -> bool:
     if not path.is_file():
         return False
@@ -290,10 +238,6 @@ def run_bench(
         ``cells``, ``computed``, ``cached``, ``failed`` (cell label -> error), ``seconds``,
         ``results`` (path), ``report`` (path or None), ``rows``.
     """
-    from ..dictionary import Dictionary, load_dictionary
-    from ..io import atomic_file, atomic_outputs, clean_stale
-    from .report import REPORT_FILES, write_report
-
     started = time.perf_counter()
     preset = get_preset(preset)
     if workers is not None and (isinstance(workers, bool) or int(workers) != workers or workers < 1):

@@ -1,10 +1,30 @@
-"""The paper's coded multi-ISO camera (stage 4 of the pipeline, and the model stage 5 inverts).
+"""The paper's coded multi-ISO camera: simulated and imported captures (the simulate stage,
+and the model the reconstruction inverts).
 
-* :mod:`~lfproc.camera.sensor`: the sensor's noise model (exposure, calibrated observations);
-* :mod:`~lfproc.camera.projection`: mask codes, the Bayer CFA and the projection operator ``Phi``;
-* :mod:`~lfproc.camera.iso`: per-pixel ISO layouts;
-* :mod:`~lfproc.camera.capture`: capture files (simulated or imported from raw files);
-* :mod:`~lfproc.camera.simulate`: simulated captures of HDR light fields.
+* :func:`simulate_capture`, :func:`simulate_file`: coded multi-ISO captures of an HDR light field
+  (:mod:`~lfproc.camera.simulate`);
+* :class:`Capture`, :func:`load_capture`, :func:`is_capture_file`, :func:`describe_capture`,
+  :func:`observations`: capture files and their calibrated observations
+  (:mod:`~lfproc.camera.capture`); :func:`capture_from_raw`: captures from a real camera's raw files;
+* :func:`make_mask`, :class:`MaskCode`, :func:`build_operator`, :class:`ProjectionOperator`:
+  mask codes, the Bayer CFA and the projection operator ``Phi`` (:mod:`~lfproc.camera.projection`);
+* :func:`iso_pattern`: per-pixel ISO layouts (:mod:`~lfproc.camera.iso`).
 
-Imports go one way: ``sensor``, ``projection``, ``iso`` <- ``capture`` <- ``simulate``.
+The sensor's noise model and camera profiles are :mod:`lfproc.sensor` (a lower layer; the old
+path ``lfproc.camera.sensor`` still works). Previews of captures are
+:func:`lfproc.preview.render_capture_preview` (presentation).
+
+Imports go one way: ``projection``, ``iso`` <- ``capture`` <- ``simulate``.
 """
+
+from .capture import Capture, capture_from_raw, describe_capture, is_capture_file, load_capture, observations
+from .iso import DEFAULT_ISOS, ISO_PATTERNS, iso_pattern
+from .projection import MASK_KINDS, MaskCode, ProjectionOperator, build_operator, make_mask
+from .simulate import BASELINES, NOISE_PROFILES, simulate_capture, simulate_file
+
+__all__ = [
+    "simulate_capture", "simulate_file", "BASELINES", "NOISE_PROFILES",
+    "Capture", "load_capture", "is_capture_file", "describe_capture", "observations", "capture_from_raw",
+    "MASK_KINDS", "MaskCode", "make_mask", "ProjectionOperator", "build_operator",
+    "ISO_PATTERNS", "DEFAULT_ISOS", "iso_pattern",
+]

@@ -53,12 +53,20 @@ from .._shared.frozen import ReadOnlyState, freeze, frozen_array
 from .._shared.hashing import file_sha256
 from .._shared.jsonable import to_jsonable
 from .._version import __version__
-from ..calib import load_profile
-from ..errors import FileFormatError, InputError, LfprocError, MissingFileError, ShapeError
-from ..io import atomic_file
-from .iso import DEFAULT_BLOCK_PX, _num
-from .projection import CFA_PATTERNS, MASK_KINDS, MaskCode, ProjectionOperator, build_operator, decode_levels, encode_levels, sampling_rate
-from .sensor import Observation, calibrated_observation
+from ..sensor import load_profile
+from ..errors import (DependencyError, FileFormatError, InputError, LfprocError, LfprocWarning, MissingFileError,
+                      ShapeError)
+from ..io._atomic import atomic_file
+from .iso import _num, DEFAULT_BLOCK_PX, describe_iso_pattern, iso_pattern, ISO_PATTERNS
+from .projection import (
+    build_operator, CFA_PATTERNS, decode_levels, encode_levels, MASK_KINDS, MaskCode, ProjectionOperator,
+    sampling_rate, transmittance_map,
+)
+from ..sensor import calibrated_observation, CameraProfile, iso_maps, Observation
+from .._shared.validation import check_choice
+from .._shared.warn import warn_saturation
+from .._shared.zipfiles import zip_first_member
+from ..io.images import imread
 
 __all__ = [
     "SCHEMA",
@@ -73,16 +81,12 @@ __all__ = [
     "read_sensor_frame",
     "observations",
     "describe_capture",
-    "render_capture_preview",
-    "write_capture_preview",
-    "PREVIEW_KINDS",
     "file_sha256",
 ]
 
 SCHEMA = "lfproc.capture"
 SCHEMA_VERSION = 1
 HEADER_NAME = "lfproc-capture.json"
-PREVIEW_KINDS = ("capture", "sensor", "iso", "mask")
 _ARRAYS = ("dn", "iso", "mask", "bias")
 #: Most measured profile maps (profile_flat_field, profile_bias_<ISO>) one capture file may embed.
 MAX_PROFILE_MAPS = 64
@@ -255,8 +259,6 @@ class Capture(ReadOnlyState):
         saturated one there has lost its radiance for good (this is what
         :class:`lfproc.errors.SaturationWarning` tests).
         """
-        from .._shared.validation import check_choice
-
         check_choice("pixels", pixels, ("all", "least-sensitive"))
         codes = np.zeros(self.iso.shape, np.float64)
         for value in self.isos:
@@ -339,8 +341,6 @@ def _member(name: str) -> zipfile.ZipInfo:
 
 def is_capture_file(path: str | os.PathLike) -> bool:
     """True when ``path`` is a ZIP archive whose first member is the capture header."""
-    from .._shared.zipfiles import zip_first_member
-
     return zip_first_member(path) == HEADER_NAME
 
 
@@ -512,8 +512,6 @@ def load_capture(path: str | os.PathLike) -> Capture:
         Not a capture file, another schema version, a field or array that is missing, of the
         wrong type or shape, or larger than the file can hold.
     """
-    from ..calib import CameraProfile
-
     path = Path(path)
     if not path.exists():
         raise MissingFileError(f"{path}: no such capture file")
@@ -637,8 +635,6 @@ def local_signal(capture: Capture, obs: Observation, *, radius: int = 1) -> np.n
     """
     from scipy.ndimage import uniform_filter
 
-    from .projection import transmittance_map
-
     T = np.maximum(obs.radiance.astype(np.float64), 0.0)
     use = obs.weight > 0
     r = transmittance_map(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern, size=T.shape[1:])
@@ -667,8 +663,6 @@ def noise_floor(capture: Capture) -> float:
     field the capture was simulated from; e-/s for a real capture, whose scale is 1). Used as
     the noise floor of :func:`lfproc.metrics.hdr_figures`.
     """
-    from .sensor import iso_maps
-
     if not isinstance(capture, Capture):
         raise InputError(f"noise_floor: expected a Capture, got {type(capture).__name__}")
     read = float(iso_maps(capture.profile, max(capture.isos), (1,))["read_noise_e"][0])
@@ -679,8 +673,6 @@ def noise_floor(capture: Capture) -> float:
 
 def _warn_saturation(capture: Capture, *, stacklevel: int) -> None:
     """SaturationWarning when too many of the least sensitive pixels (lowest ISO x exposure) saturate."""
-    from .._shared.warn import warn_saturation
-
     sens = capture.iso * np.asarray(capture.exposures_s, np.float32)[:, None, None]
     at = np.unravel_index(int(np.argmin(sens)), sens.shape)
     where = f"ISO {_num(capture.iso[at])} at {capture.exposures_s[at[0]]:g} s"
@@ -745,8 +737,6 @@ def read_sensor_frame(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, An
     if path.suffix.lower() in _CV_SUFFIXES:
         import cv2
 
-        from ..io.images import imread
-
         image = imread(path, cv2.IMREAD_UNCHANGED, what="sensor image")
         if image.ndim != 2 or image.dtype != np.uint16:
             raise FileFormatError(
@@ -757,8 +747,6 @@ def read_sensor_frame(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, An
     try:
         import rawpy
     except ImportError:  # pragma: no cover - rawpy is a dependency
-        from ..errors import DependencyError
-
         raise DependencyError("reading raw files needs rawpy (pip install rawpy)") from None
     try:
         with rawpy.imread(str(path)) as raw:
@@ -796,7 +784,6 @@ def _mask_from(mask, *, views) -> tuple[MaskCode, tuple[int, int], str | None]:
             source = str(codes_path)
             if not codes_path.is_file():
                 raise MissingFileError(f"{codes_path}: no such mask code file")
-            from .. import _untrusted as ut
 
             with open(codes_path, "rb") as fh:  # header checked against the file's size before reading
                 codes = ut.read_npy(fh, codes_path.stat().st_size, source=codes_path, what="mask codes")
@@ -869,8 +856,6 @@ def capture_from_raw(
     """
     import warnings
 
-    from ..errors import LfprocWarning
-
     paths = [Path(p) for p in ([raw_paths] if isinstance(raw_paths, (str, os.PathLike)) else raw_paths)]
     if not paths:
         raise InputError("capture_from_raw: expected at least one sensor image")
@@ -899,8 +884,6 @@ def capture_from_raw(
     mask, views, mask_source = _mask_from(mask, views=views)
     iso_info: dict[str, Any] = {"kind": "given"}
     if isinstance(iso_layout, (str, os.PathLike)):
-        from .iso import ISO_PATTERNS, describe_iso_pattern, iso_pattern
-
         name = str(iso_layout)
         if name in ISO_PATTERNS and isos is None:
             raise InputError(f"iso_layout {name!r}: pass isos= (the ISO values of the pattern)")
@@ -934,149 +917,3 @@ def capture_from_raw(
         if mask_source and "mask" in str(exc):
             raise ShapeError(f"{mask_source}: {exc}") from None
         raise
-
-
-# -- previews --------------------------------------------------------------------------------
-
-def _iso_colours(n: int) -> np.ndarray:
-    import matplotlib
-
-    cmap = matplotlib.colormaps["viridis"]
-    return np.array([cmap(x)[:3] for x in (np.linspace(0.05, 0.95, n) if n > 1 else [0.5])])
-
-
-def render_capture_preview(capture: Capture, kind: str = "capture", *, shot: int = 0, zoom: int = 32,
-                           dpi: int = 100) -> np.ndarray:
-    """A picture of a capture: the sensor image, the ISO map and the mask.
-
-    Parameters
-    ----------
-    capture : Capture
-    kind : {"capture", "sensor", "iso", "mask"}
-        ``capture`` shows all three side by side (each with a zoomed top-left crop of
-        ``zoom`` pixels so pixel-level patterns are visible); the others one of them.
-        The sensor image has a colour bar in DN above the black level (gamma 2.2 scale),
-        the mask one of its transmission (0 to 1; the hue is the pixel's CFA colour), the
-        ISO map a legend of its ISOs.
-    shot : int
-        Which shot to show.
-    zoom : int
-        Side of the zoomed crop in pixels.
-
-    Returns
-    -------
-    ndarray of shape (H, W, 3), uint8
-    """
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Patch
-
-    from .._shared.validation import check_choice
-
-    check_choice("preview kind", kind, PREVIEW_KINDS)
-    if not 0 <= shot < capture.shots:
-        raise InputError(f"shot: expected 0..{capture.shots - 1}, got {shot}")
-    h, w = capture.size
-    z = max(2, min(int(zoom), h, w))
-    profile = capture.profile
-    black = float(profile.black_level_dn)
-    sensor_dn = np.maximum(capture.dn[shot].astype(np.float64) - black, 0)
-    top = max(float(np.percentile(sensor_dn, 99.5)), 1.0)
-    sensor = np.clip(sensor_dn / top, 0, 1) ** (1 / 2.2)
-    isos = capture.isos
-    colours = _iso_colours(len(isos))
-    iso_index = np.searchsorted(np.asarray(isos), capture.iso[shot])
-    iso_rgb = colours[iso_index]
-    op = capture.operator()
-    centre = (capture.views[0] // 2, capture.views[1] // 2)
-    # the mask seen by the centre view at each pixel's CFA colour, tinted by that colour
-    tint = np.eye(3)[op.cfa_index]
-    mask_rgb = op.weights[shot, centre[0], centre[1]][..., None] * tint
-    from matplotlib.cm import ScalarMappable
-    from matplotlib.colors import Normalize, PowerNorm
-
-    # colour bars: (mappable, label) of the values shown, drawn beside the full panel
-    sensor_bar = (ScalarMappable(norm=PowerNorm(gamma=1 / 2.2, vmin=0, vmax=top), cmap="gray"),
-                  "DN above black (clipped at the 99.5th percentile)")
-    mask_bar = (ScalarMappable(norm=Normalize(vmin=0, vmax=1), cmap="gray"), "mask transmission (hue: CFA colour)")
-    panels = []
-    if kind in ("capture", "sensor"):
-        panels.append((f"sensor, shot {shot + 1}/{capture.shots} (DN - black, gamma 2.2)", sensor, "gray", None,
-                       sensor_bar))
-    if kind in ("capture", "iso"):
-        legend = [Patch(color=colours[i], label=f"ISO {_num(v)}") for i, v in enumerate(isos)]
-        title = f"ISO map ({capture.iso_pattern.get('kind', 'given')})"
-        panels.append((title, iso_rgb, None, legend, None))
-    if kind in ("capture", "mask"):
-        panels.append((f"mask, view {centre}, CFA {capture.cfa_pattern} ({capture.mask.kind})", mask_rgb, None, None,
-                       mask_bar))
-    fig = Figure(figsize=(4.2 * len(panels), 8.4), dpi=dpi)
-    for i, (title, image, cmap, legend, bar) in enumerate(panels):
-        ax = fig.add_subplot(2, len(panels), i + 1)
-        ax.imshow(image, cmap=cmap, vmin=0, vmax=1, interpolation="nearest")
-        ax.set_title(title, fontsize=9)
-        ax.add_patch(matplotlib.patches.Rectangle((-0.5, -0.5), z, z, fill=False, color="red", lw=1))
-        ax.set_xticks([])
-        ax.set_yticks([])
-        if bar is not None:
-            cb = fig.colorbar(bar[0], ax=ax, fraction=0.046, pad=0.03)
-            cb.set_label(bar[1], fontsize=8)
-            cb.ax.tick_params(labelsize=7)
-        ax2 = fig.add_subplot(2, len(panels), len(panels) + i + 1)
-        ax2.imshow(image[:z, :z], cmap=cmap, vmin=0, vmax=1, interpolation="nearest")
-        ax2.set_title(f"top-left {z} x {z} pixels", fontsize=9)
-        ax2.set_xticks([])
-        ax2.set_yticks([])
-        if legend:
-            ax2.legend(handles=legend, loc="upper center", bbox_to_anchor=(0.5, -0.02), ncol=min(4, len(legend)),
-                       fontsize=8, frameon=False)
-    fig.tight_layout()
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    canvas = FigureCanvasAgg(fig)
-    canvas.draw()
-    return np.asarray(canvas.buffer_rgba())[..., :3].copy()
-
-
-def write_capture_preview(capture, output: str | os.PathLike, *, kind: str = "capture", force: bool = False,
-                          shot: int = 0) -> dict[str, Any]:
-    """Write :func:`render_capture_preview` of a capture (object or file) to a PNG/JPEG/TIFF.
-
-    Goes through :func:`lfproc.preview.write_preview` (the capture kinds are registered
-    there). Returns a summary (``output``, ``kind``, ``size`` of the picture, ``shots``, ``isos``).
-    """
-    from .._shared.validation import check_choice
-    from ..io import check_output
-    from ..preview import write_preview
-
-    check_choice("--kind (capture previews)", kind, PREVIEW_KINDS)
-    check_output(output, force=force)
-    if not isinstance(capture, Capture):
-        capture = load_capture(capture)
-    path = write_preview(capture, output, kind=kind, force=force, shot=shot)
-    from PIL import Image
-
-    with Image.open(path) as im:
-        width, height = im.size
-    return {"output": str(path), "kind": kind, "size": [height, width], "shots": capture.shots,
-            "isos": [_num(v) for v in capture.isos]}
-
-
-def _register_previews() -> None:
-    from functools import partial
-
-    from ..preview import register_preview
-
-    descriptions = {
-        "capture": "a coded capture's sensor image, ISO map and mask side by side",
-        "sensor": "a coded capture's sensor image",
-        "iso": "a coded capture's ISO map",
-        "mask": "a coded capture's mask (centre view, CFA colour)",
-    }
-    for kind, text in descriptions.items():
-        register_preview(kind, partial(render_capture_preview, kind=kind), accepts=Capture, description=text)
-
-
-_register_previews()

@@ -25,6 +25,8 @@ import numpy as np
 
 from .._shared.random import check_random_state
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
+from .. import _untrusted as ut
+from ..io.images import imread
 
 __all__ = ["ISO_PATTERNS", "DEFAULT_ISOS", "DEFAULT_BLOCK_PX", "iso_pattern", "describe_iso_pattern"]
 
@@ -43,8 +45,6 @@ def _load_iso_file(path: Path, size: tuple[int, int]) -> np.ndarray:
     if not path.is_file():
         raise MissingFileError(f"{path}: no such ISO map file (or use one of {', '.join(ISO_PATTERNS)})")
     if path.suffix.lower() == ".npy":
-        from .. import _untrusted as ut
-
         def check(shape, dtype):
             if dtype.kind not in "uif":
                 raise FileFormatError(f"{path}: ISO map of dtype {dtype}; expected numbers")
@@ -55,8 +55,6 @@ def _load_iso_file(path: Path, size: tuple[int, int]) -> np.ndarray:
             values = ut.read_npy(fh, path.stat().st_size, source=path, what=".npy ISO map", check=check)
     else:
         import cv2
-
-        from ..io.images import imread
 
         values = imread(path, cv2.IMREAD_UNCHANGED, what="ISO map image (.npy, .png, .tif)")
         if values.ndim != 2:

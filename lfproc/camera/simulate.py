@@ -56,11 +56,16 @@ from .._shared.frozen import freeze
 from .._version import __version__
 from .iso import DEFAULT_BLOCK_PX, DEFAULT_ISOS, ISO_PATTERNS, _num, describe_iso_pattern, iso_pattern
 from .capture import MAX_SHOTS, Capture, _warn_saturation, file_sha256, observations
-from ..calib import load_profile
+from ..sensor import load_profile
 from ..errors import InputError, ShapeError, ViewCountWarning, option_name
 from ..lightfield import LightField, clean_nonfinite
 from .projection import MASK_KINDS, build_operator, make_mask
-from .sensor import expose
+from ..sensor import expose
+from .. import _untrusted as ut
+from ..dictionary import SHIPPED
+from ..dictionary._files import dictionary_patch
+from ..io import read_lightfield
+from ..io._atomic import check_output
 
 __all__ = [
     "ISO_PATTERNS",
@@ -144,16 +149,12 @@ def auto_radiance_scale(
 def _check_memory(shots: int, nv: int, nu: int, h: int, w: int) -> None:
     """Refuse, before anything is allocated, a simulation whose projection operator (one
     float32 weight per shot, view and pixel) would exceed lfproc's array limit."""
-    from .. import _untrusted as ut
-
     ut.check_nbytes((shots, nv, nu, h, w), np.float32, what=f"simulating {shots} shots of {nv} x {nu} views of "
                     f"{h} x {w} pixels: the projection operator", error=InputError)
 
 
 def _check_dictionary_views(dictionary, views: tuple[int, int]) -> None:
     """Warn when ``dictionary``'s patch has other views than the light field (reconstruct would refuse)."""
-    from ..dictionary import SHIPPED, dictionary_patch
-
     name, patch = dictionary_patch(dictionary)
     if tuple(patch[:2]) != tuple(views):
         label = f"the shipped dictionary {name!r}" if name in SHIPPED else f"dictionary {name!r}"
@@ -435,8 +436,6 @@ def simulate_file(
     capture : Capture
     summary : dict (:func:`capture_summary`)
     """
-    from ..io import check_output, read_lightfield
-
     check_output(output_path, force=force)
     lf = read_lightfield(input_path, nonfinite=nonfinite, negative=negative)
     truth = {"path": str(Path(input_path).resolve()), "sha256": file_sha256(input_path)}

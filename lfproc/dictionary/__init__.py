@@ -2,21 +2,35 @@
 
 * :class:`Dictionary`, :func:`load_dictionary`, :func:`save_dictionary`: the type and its
   versioned ``.npz`` files; ``load_dictionary("default")`` is the dictionary shipped in the package;
+* :func:`train_dictionary`, :func:`evaluate_dictionary`, :func:`approximate`, presets
+  (:data:`PRESETS`, :func:`get_preset`): training on light fields with K-SVD (:func:`ksvd`);
 * :func:`batch_omp`: Batch-OMP sparse coding of many signals at once;
-* :func:`dct_dictionary`: the separable 4-D DCT baseline.
+* :func:`dct_dictionary`: the separable 4-D DCT baseline;
+* :func:`training_patches`: patches of light fields for training.
+
+The picture of a dictionary's atoms is :func:`lfproc.preview.render_atoms` (presentation).
+Former exports of internals (``omp_codes``, ``gram_matrix``...) still resolve here.
 """
 
+from . import _files, _ksvd, _omp, _patches, _train
 from ._dct import dct_dictionary
-from ._files import (SHIPPED, Dictionary, dictionary_patch, is_dictionary_file, load_dictionary, save_dictionary,
-                     shipped_path)
-from ._ksvd import KsvdResult, TrainingSignals, ksvd
-from ._omp import batch_omp, codes_to_dense, gram_matrix, omp_codes
-from ._train import PRESETS, Preset, approximate, evaluate_dictionary, get_preset, synthetic_lightfields, train_dictionary
-from ._preview import render_atoms
-from ._patches import collect_lightfields, extract_patches, training_patches
+from ._files import SHIPPED, Dictionary, is_dictionary_file, load_dictionary, save_dictionary
+from ._ksvd import KsvdResult, ksvd
+from ._omp import batch_omp
+from ._patches import training_patches
+from ._train import PRESETS, Preset, approximate, evaluate_dictionary, get_preset, train_dictionary
 
-__all__ = ["Dictionary", "load_dictionary", "save_dictionary", "shipped_path", "SHIPPED", "batch_omp", "omp_codes",
-           "codes_to_dense", "gram_matrix", "dct_dictionary", "ksvd", "KsvdResult", "TrainingSignals",
-           "training_patches", "extract_patches", "collect_lightfields", "PRESETS", "Preset", "get_preset", "train_dictionary",
-           "evaluate_dictionary", "approximate", "synthetic_lightfields", "render_atoms", "is_dictionary_file",
-           "dictionary_patch"]
+__all__ = ["Dictionary", "load_dictionary", "save_dictionary", "is_dictionary_file", "SHIPPED", "batch_omp",
+           "dct_dictionary", "ksvd", "KsvdResult", "training_patches", "PRESETS", "Preset", "get_preset",
+           "train_dictionary", "evaluate_dictionary", "approximate"]
+
+#: former exports of this package -> the module that defines them
+_FORMER = {"shipped_path": _files, "dictionary_patch": _files, "omp_codes": _omp, "codes_to_dense": _omp,
+           "gram_matrix": _omp, "TrainingSignals": _ksvd, "extract_patches": _patches,
+           "collect_lightfields": _patches, "synthetic_lightfields": _train}
+
+
+def __getattr__(name):  # former exports of internals
+    if name in _FORMER:
+        return getattr(_FORMER[name], name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -41,7 +41,7 @@ from .._shared.jsonable import to_jsonable
 from .._shared.zipfiles import zip_first_member
 from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
-from ..io import atomic_file
+from ..io._atomic import atomic_file
 
 __all__ = ["is_dictionary_file", "Dictionary", "load_dictionary", "save_dictionary", "SCHEMA", "SCHEMA_VERSION", "SHIPPED",
            "shipped_path", "dictionary_patch"]

@@ -57,7 +57,7 @@ from .._shared.progress import progress
 from .._shared.parallel import realign
 from .._shared.reprs import short_repr
 from ..errors import FileFormatError, InputError, ShapeError
-from ..io import atomic_file
+from ..io._atomic import atomic_file
 from ._omp import gram_matrix, omp_codes
 
 __all__ = ["ksvd", "KsvdResult", "TrainingSignals"]

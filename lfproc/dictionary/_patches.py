@@ -31,6 +31,7 @@ import numpy as np
 from .._shared.random import check_random_state
 from ..errors import InputError, MissingFileError, ShapeError
 from ..lightfield import LightField
+from ..io.lightfield_files import parse_view_name
 
 __all__ = ["extract_patches", "training_patches", "collect_lightfields", "NORMALISATIONS"]
 
@@ -171,8 +172,6 @@ def collect_lightfields(sources: Sequence[str | os.PathLike]) -> list[Path]:
     """Light-field files from paths: files and view folders as they are; a data set built by
     ``lfproc dataset build`` (a folder with ``manifest.json``) contributes its scenes' ``hdr.exr``;
     any other folder its ``*.exr`` files."""
-    from ..io.lightfield_files import parse_view_name
-
     found: list[Path] = []
     for src in sources:
         path = Path(src)

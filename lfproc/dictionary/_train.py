@@ -37,7 +37,10 @@ from ._dct import dct_dictionary
 from ._files import Dictionary, load_dictionary
 from ._ksvd import ksvd
 from ._omp import gram_matrix, omp_codes
-from ._patches import extract_patches, training_patches
+from ._patches import _data, extract_patches, training_patches
+from .._shared.patches import patch_grid
+from ..metrics._metrics import pu21_psnr
+from ..synth._synth import SCENES, synthesize
 
 __all__ = ["Preset", "PRESETS", "synthetic_lightfields", "train_dictionary", "evaluate_dictionary", "approximate"]
 
@@ -78,8 +81,6 @@ def synthetic_lightfields(n_scenes: int, *, views: tuple[int, int] = (5, 5), siz
                           seed: int = 0) -> Iterable[LightField]:
     """``n_scenes`` procedural HDR light fields: every scene kind in turn, seeds ``seed * 1000 + i``,
     baselines cycled from :data:`SYNTHETIC_BASELINES`."""
-    from ..synth import SCENES, synthesize
-
     kinds = sorted(SCENES)
     if views[0] != views[1]:
         raise InputError(f"synthetic light fields: expected square views, got {views}")
@@ -186,14 +187,12 @@ def approximate(dictionary: Dictionary, lf, *, sparsity: int | None = None, stri
     t = int(sparsity or d.sparsity)
     v, u, p, _, c = d.patch
     data = lf.data if isinstance(lf, LightField) else np.asarray(lf)
-    from ._patches import _data
 
     data = _data(data, d.patch, where=getattr(lf, "source", None) or "light field")
     stride = int(stride or max(1, p // 2))
     if stride < 1 or stride > p:
         raise InputError(f"stride: expected 1..{p} (the patch size), got {stride}")
     h, w = data.shape[2:4]
-    from ..camera.projection import patch_grid  # the reconstruction's grid: same patches
 
     tops, lefts = (a.ravel() for a in np.meshgrid(*patch_grid((h, w), p, stride), indexing="ij"))
     acc = np.zeros((v, u, h, w, c), dtype=np.float64)
@@ -242,8 +241,6 @@ def evaluate_dictionary(dictionary, lightfields: Sequence[Any], *, sparsity: int
         ``compare_dct``, ``dct_relative_error`` and ``dct_pu21_psnr_db``: means over the
         light fields; ``lightfields``: the same per light field.
     """
-    from ..metrics import pu21_psnr
-
     d = load_dictionary(dictionary)
     if not lightfields:
         raise InputError("evaluate: expected at least one light field")
@@ -254,8 +251,6 @@ def evaluate_dictionary(dictionary, lightfields: Sequence[Any], *, sparsity: int
     rows = []
     start = time.perf_counter()
     for i, lf in enumerate(lightfields):
-        from ._patches import _data
-
         ref = _data(lf, d.patch, where=getattr(lf, "source", None) or f"light field {i + 1}").astype(np.float32)
         row: dict[str, Any] = {"source": getattr(lf, "source", None) or f"light field {i + 1}"}
         for prefix, dic in (("", d), ("dct_", dct)):

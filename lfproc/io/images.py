@@ -18,6 +18,8 @@ from .. import _untrusted as ut
 from ..errors import FileFormatError, InputError, MissingFileError, UnsafeFileError
 from ..lightfield import clean_nonfinite
 from ._atomic import atomic_file
+from .._shared.stdio import quiet
+from ._exr import open_exr
 
 __all__ = [
     "read_image",
@@ -64,8 +66,6 @@ def _require_file(path: Path) -> None:
 
 def exr_parts(path: str | os.PathLike) -> list[dict[str, Any]]:
     """Describe the parts of an OpenEXR file: name, view, channels, size (header only)."""
-    from ._exr import open_exr
-
     path = Path(path)
     _require_file(path)
     f = open_exr(path, header_only=True)
@@ -107,8 +107,6 @@ def _pick_channels(names: list[str], prefix: str) -> tuple[str, ...] | None:
 
 
 def _read_exr(path: Path, part: int | str | None, view: str | None) -> tuple[np.ndarray, dict[str, Any]]:
-    from ._exr import open_exr
-
     f = open_exr(path)
     parts = f.parts
     # choose the part
@@ -266,8 +264,6 @@ def imread(path: str | os.PathLike, flags: int | None = None, *, what: str = "im
     (:func:`check_image_size`), the decoders' own messages kept off the terminal, and a
     :class:`FileFormatError` quoting the first of them when nothing could be decoded."""
     import cv2
-
-    from .._shared.stdio import quiet
 
     path = Path(path)
     check_image_size(path)

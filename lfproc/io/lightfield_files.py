@@ -33,10 +33,11 @@ import numpy as np
 from .. import _untrusted as ut
 from .._shared.frozen import freeze
 from .._version import __version__
-from ..errors import FileFormatError, InputError, MissingFileError, ShapeError, option_name
+from ..errors import FileFormatError, InputError, MissingFileError, option_name, SaturationWarning, ShapeError
 from ..lightfield import LightField, clean_nonfinite
 from ._atomic import atomic_dir, atomic_file, check_output
 from .images import IMAGE_SUFFIXES, read_image, write_image
+from ._exr import open_exr
 
 __all__ = ["read_lightfield", "write_lightfield", "view_name", "parse_view_name", "lightfield_metadata", "SIDECAR"]
 
@@ -123,8 +124,6 @@ MAX_VIEWS_PER_SIDE = 64
 
 def _read_exr_lightfield(path: Path, nonfinite: str, negative: str) -> LightField | None:
     """Read a multi-part lfproc EXR; None when the file is not one (then it is an image)."""
-    from ._exr import open_exr
-
     head = open_exr(path, header_only=True)
     if not any("lfproc" in p.header for p in head.parts):
         return None
@@ -393,8 +392,6 @@ _TONEMAP_PYTHON = "lfproc.tonemap.display_transform(lf, exposure_ev=, tonemap=)"
 
 def _warn_clipping(lf: LightField, path: Path) -> None:
     import warnings
-
-    from ..errors import SaturationWarning
 
     frac = float(np.mean(lf.data > 1.0))
     if frac > 0:

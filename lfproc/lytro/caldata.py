@@ -38,9 +38,9 @@ import numpy as np
 from .. import _untrusted as ut
 from .._version import __version__
 from ..errors import InputError, LfpFormatError, MissingFileError, ShapeError
-from ..io import atomic_file
+from ..io._atomic import atomic_file
 from .capture import _get, _packing, _size, frame_fields, split_txt_metadata
-from .container import _parse_json, is_lfp, read_lfp, sha1_ref
+from .container import _deep_update, _parse_json, is_lfp, read_lfp, sha1_ref
 from .raw import pack_raw10, pack_raw12, raw_byte_count, unpack_raw
 from .._shared.reprs import short_repr
 
@@ -153,8 +153,6 @@ def white_metadata(*, height: int = 5368, width: int = 7728, zoom_step: int = 0,
         "type": "lightField",
     }
     if extra:
-        from .container import _deep_update
-
         _deep_update(meta, deepcopy(extra))
     return meta
 

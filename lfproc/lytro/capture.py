@@ -33,6 +33,7 @@ from ..errors import LfpFormatError, MissingFileError
 from .container import LFP_MAGIC, LfpContainer, _norm_sha1, _parse_json, _storage_entries, is_lfp, read_lfp
 from .raw import raw_byte_count, unpack_raw
 from .._shared.reprs import short_repr
+from .extract import contents_summary, lfp_contents, require_raw_image
 
 __all__ = [
     "LytroCapture",
@@ -405,8 +406,6 @@ def _read_raw_pair(path: Path) -> LytroCapture:
 
 
 def _capture_from_container(c: LfpContainer) -> LytroCapture:
-    from .extract import require_raw_image
-
     path = c.path
     require_raw_image(c)  # a processed file: say what it holds before anything else
     meta = c.json("metadataRef") if (c.ref("metadataRef") or c.frame().get("metadata")) else None
@@ -498,7 +497,6 @@ def describe_lytro(path: str | os.PathLike) -> dict[str, Any]:
             "has_raw": c.has("imageRef") and bool(frame.get("imageRef")),
             "storage_files": len(_storage_entries(c.toc, path)),
         })
-        from .extract import contents_summary, lfp_contents
 
         out["holds"] = contents_summary(lfp_contents(c))
         if out["has_raw"]:

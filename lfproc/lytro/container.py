@@ -31,8 +31,8 @@ import numpy as np
 
 from .. import _untrusted as ut
 from .._version import __version__
-from ..errors import InputError, LfpFormatError, MissingFileError, ShapeError
-from ..io import atomic_file
+from ..errors import ChecksumError, InputError, LfpFormatError, MissingFileError, ShapeError
+from ..io._atomic import atomic_file
 from .raw import pack_raw10
 from .._shared.reprs import short_repr
 
@@ -334,8 +334,6 @@ def read_lfp(path: str | os.PathLike, *, verify: bool = True) -> LfpContainer:
     ChecksumError
         A section does not match its SHA-1 (only with ``verify=True``).
     """
-    from ..errors import ChecksumError
-
     path = Path(path)
     if not path.is_file():
         raise MissingFileError(f"{path}: no such file")

@@ -46,10 +46,13 @@ import numpy as np
 from .._shared.validation import check_choice
 from .._shared.frozen import freeze
 from .._version import __version__
-from ..errors import InputError, ShapeError, option_name
+from ..errors import InputError, LfprocError, option_name, ShapeError
 from ..lightfield import LightField
 from .grid import LensletGrid
 from .virtual import VIEW_STEP_DIVISOR, output_shape
+from ..sensor import load_profile
+from .capture import read_capture
+from .whites import load_white_db, read_white_file, select_white
 
 __all__ = [
     "decode_lenslet",
@@ -419,8 +422,6 @@ def _noise_figures(camera_model: str, iso: float | None) -> tuple[float | None, 
     """Gain (DN/e-) and read noise (DN) at ``iso`` from lfproc's camera profile, if it has them."""
     if camera_model != "B01" or iso is None:
         return None, 0.0
-    from ..calib import load_profile
-    from ..errors import LfprocError
 
     try:
         figs = load_profile("illum").iso_figures(float(iso))
@@ -479,9 +480,6 @@ def decode_capture(capture: str | os.PathLike, *, white_db: str | os.PathLike | 
     ShapeError
         The white image's size differs from the capture's.
     """
-    from .capture import read_capture
-    from .whites import load_white_db, read_white_file, select_white
-
     check_choice("colour", colour, ("linear", "srgb"))
     check_choice("demosaic method", demosaic_method, DEMOSAIC_METHODS)
     cap = read_capture(capture, verify=verify)  # first: a file without a raw image is named as such

@@ -47,6 +47,8 @@ import numpy as np
 from .._version import __version__
 from ..errors import LfpFormatError
 from .container import LfpContainer, _last_key, _norm_sha1, _parse_json, _sniff, read_lfp
+from ..io import write_image
+from ..io._atomic import atomic_dir
 
 __all__ = ["lfp_contents", "contents_summary", "has_raw_image", "require_raw_image", "extract_lfp",
            "FLOAT_MAP_KEYS"]
@@ -264,8 +266,6 @@ def extract_lfp(path: str | os.PathLike, out_dir: str | os.PathLike, *, force: b
         As :func:`lfproc.lytro.container.read_lfp`.
     """
     import cv2
-
-    from ..io import atomic_dir, write_image
 
     path = Path(path)
     c = read_lfp(path, verify=verify)

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ShapeError
+from ..sensor import load_profile
 
 __all__ = ["clip_level", "decode_psnr", "score_decode", "PEAK_PERCENTILE", "BORDER_PX"]
 
@@ -36,8 +37,6 @@ def clip_level(info: dict[str, Any], *, profile="illum") -> float:
     """The truth value (decoder units: 1.0 = as bright as the white image) at which the capture
     of ``info`` (``truth.json`` of ``lfproc virtual-illum``) saturates a pixel at full
     transmission: ``min(full well, (white - black) / gain) / white-image electrons``."""
-    from ..calib import load_profile
-
     prof = load_profile(profile)
     iso = next((c.get("iso") for c in info.get("captures", []) if c.get("file") == info.get("truth_capture")), 100)
     gain = prof.iso_figures(iso).gain_dn_per_e

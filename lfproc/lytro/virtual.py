@@ -40,6 +40,13 @@ from .._shared.random import check_random_state
 from .._shared.progress import progress
 from ..errors import InputError, ShapeError
 from .grid import ILLUM_SPACING_PX, LensletGrid
+from .._version import __version__
+from ..io import write_lightfield
+from ..io._atomic import atomic_dir
+from ..lightfield import LightField
+from ..sensor import expose, load_profile
+from .caldata import geometry_correction_bytes, white_metadata, write_caldata_tar
+from .container import illum_metadata, sha1_ref, write_lfr
 
 __all__ = [
     "SENSOR_SIZES",
@@ -281,9 +288,6 @@ def expose_chunked(irradiance_e_per_s: np.ndarray, *, exposure_s: float, iso: fl
     Hot pixels add ``hot_pixel_dn`` (clipped at the white level) to the exposed counts.
     Returns uint16 DN ``(H, W)``.
     """
-    from ..camera.sensor import expose
-    from ..calib import load_profile
-
     prof = load_profile(profile)
     rng = check_random_state(random_state)
     e = np.asarray(irradiance_e_per_s)
@@ -369,13 +373,6 @@ def make_virtual_illum(lf, out_dir, *, sensor: str = "small", exposures_ev=(-2, 
     """
     import json
     from types import SimpleNamespace
-
-    from .._version import __version__
-    from ..calib import load_profile
-    from ..io import atomic_dir, write_lightfield
-    from ..lightfield import LightField
-    from .caldata import geometry_correction_bytes, white_metadata, write_caldata_tar
-    from .container import illum_metadata, sha1_ref, write_lfr
 
     if not isinstance(lf, LightField):
         raise InputError(f"virtual camera: expected a LightField, got {type(lf).__name__}")

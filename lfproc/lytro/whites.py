@@ -33,8 +33,9 @@ from .._shared.reprs import short_repr
 from .._version import __version__
 from ..errors import (CalibrationError, FileFormatError, InputError, MissingFileError, NoWhiteImageError,
                       UnsafeFileError)
-from ..io import atomic_dir
+from ..io._atomic import atomic_dir
 from .grid import ILLUM_SPACING_PX, F01_SPACING_PX, LensletGrid, estimate_grid
+from .caldata import iter_caldata, read_caldata
 
 __all__ = ["WhiteEntry", "WhiteDatabase", "build_white_db", "load_white_db", "select_white", "read_white_file",
            "INDEX_NAME", "white_responses"]
@@ -175,8 +176,6 @@ def build_white_db(caldata: str | os.PathLike, out_dir: str | os.PathLike, *, fo
     CalibrationError
         A white image has no measurable lenslet grid.
     """
-    from .caldata import iter_caldata
-
     caldata = Path(caldata)
     entries: list[WhiteEntry] = []
     skipped: list[dict] = []
@@ -292,7 +291,6 @@ def read_white_file(path: str | os.PathLike) -> tuple[np.ndarray, WhiteEntry]:
             if e.file == path.name:
                 return e.load_raw(db.path), e
         raise InputError(f"{path}: not listed in {path.parent / INDEX_NAME}")
-    from .caldata import read_caldata
 
     frames = [f for f in read_caldata(path) if not f.is_dark]
     if len(frames) != 1:

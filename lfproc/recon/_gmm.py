@@ -53,6 +53,12 @@ from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError, option_name
 from ..lightfield import LightField
 from ._reconstruct import _default_threads, _gather, _int_option
+from .. import _untrusted as ut
+from .._shared.patches import patch_grid
+from .._shared.random import check_random_state
+from ..camera.capture import Capture, load_capture, observations
+from ..camera.projection import patch_operators
+from ..io._atomic import atomic_file
 
 __all__ = ["PatchModel", "train_patch_model", "load_patch_model", "reconstruct_gmm", "shear_matrix",
            "DEFAULT_DISPARITIES", "SATURATION_MODES"]
@@ -155,8 +161,6 @@ class PatchModel:
         """Write the model as ``.npz`` (float32 arrays and a JSON record of its provenance)."""
         import json
 
-        from ..io import atomic_file
-
         path = Path(path)
         with atomic_file(path, force=force) as tmp:
             with open(tmp, "wb") as fh:
@@ -182,8 +186,6 @@ def load_patch_model(model: str | os.PathLike | PatchModel = "default") -> Patch
         Not a patch model, a header of the wrong types or out of range, arrays of other shapes
         or dtypes, NaN/Inf, covariances that are not symmetric positive definite.
     """
-    from .. import _untrusted as ut
-
     if isinstance(model, PatchModel):
         return model
     if not isinstance(model, (str, os.PathLike)):
@@ -249,8 +251,6 @@ def train_patch_model(images, *, patch: int = 8, margin: int = 2, components: in
     -------
     PatchModel
     """
-    from .._shared.random import check_random_state
-
     rng = check_random_state(random_state)
     e = patch + 2 * margin
     per = n_patches // max(len(images), 1) + 1
@@ -359,9 +359,6 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
     ShapeError
         The model's patch does not fit the capture.
     """
-    from ..camera.capture import Capture, load_capture, observations
-    from ..camera.projection import patch_grid, patch_operators
-
     started = time.perf_counter()
     if isinstance(capture, (str, os.PathLike)):
         capture = load_capture(capture)

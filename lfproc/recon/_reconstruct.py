@@ -81,6 +81,10 @@ from ..lightfield import LightField
 from threadpoolctl import threadpool_limits
 
 from ._solvers import SOLVERS, BatchOperator, SharedOperator, _Factor, admm, fista, omp
+from .._shared.patches import patch_grid
+from ..camera.capture import Capture, load_capture, observations
+from ..camera.projection import patch_operators, PatchOperators
+from ..dictionary import Dictionary, load_dictionary
 
 __all__ = ["reconstruct", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "VARIANCES", "patch_count"]
 
@@ -120,8 +124,6 @@ class _Settings:
 
 def patch_count(size: tuple[int, int], patch: int, stride: int) -> int:
     """Number of patches :func:`reconstruct` solves for a sensor of ``size``."""
-    from ..camera.projection import patch_grid
-
     tops, lefts = patch_grid(size, patch, stride)
     return len(tops) * len(lefts)
 
@@ -283,8 +285,6 @@ def _limit_worker_blas() -> None:
 
 
 def _solve_block_here(task: dict, shared: dict) -> dict:
-    from ..camera.projection import PatchOperators
-
     atoms = shared["atoms"]
     n, k_n = atoms.shape
     v_n, u_n, size, _, c_n = shared["patch"]
@@ -368,9 +368,6 @@ def _overlap_weights(overlap: str, scale: np.ndarray, size: int, chi2=None) -> n
 
 
 def _load_inputs(capture, dictionary):
-    from ..camera.capture import Capture, load_capture
-    from ..dictionary import Dictionary, load_dictionary
-
     if isinstance(capture, (str, os.PathLike)):
         capture = load_capture(capture)
     if not isinstance(capture, Capture):
@@ -482,9 +479,6 @@ def reconstruct(
     FileFormatError, MissingFileError
         Unreadable capture or dictionary files.
     """
-    from ..camera.capture import observations
-    from ..camera.projection import patch_grid, patch_operators
-
     started = time.perf_counter()
     check_choice("solver", solver, SOLVERS)
     check_choice("scale", scale, SCALES)

@@ -47,9 +47,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ._version import __version__
-from ._shared.hashing import file_sha256
-from .errors import InputError, LfprocWarning, MissingFileError
+from .._version import __version__
+from .._shared.hashing import file_sha256
+from ..errors import InputError, LfprocWarning, MissingFileError
+from .. import _untrusted as ut
+from .._shared.parallel import max_workers
+from .._shared.progress import progress
+from .._shared.validation import check_count
+from ..hdr._bracket import BRACKET_SUFFIXES, IMAGE_SUFFIXES_LDR, LYTRO_SUFFIXES, merge_files, read_exif_exposure
+from ..io import write_lightfield
+from ..io._atomic import atomic_dir, atomic_file, clean_stale
+from ..lytro import whites
+from ..preview import write_preview
+from ..sensor import load_profile
 
 __all__ = [
     "Scene",
@@ -82,8 +92,6 @@ class Scene:
 
 
 def _scene_of(folder: Path) -> Scene:
-    from .bracket import BRACKET_SUFFIXES, LYTRO_SUFFIXES
-
     caldata = None
     inputs: list[Path] = []
     for p in sorted(folder.iterdir()):
@@ -172,7 +180,6 @@ def read_exposure_file(path: str | os.PathLike, inputs, *, bare_order: str = "so
     in_order: list[float] = []
     if not path.is_file():
         raise MissingFileError(f"{path}: no such exposure file")
-    from . import _untrusted as ut
 
     data = ut.read_bytes(path, max_bytes=ut.MAX_TEXT_BYTES, source=path, error=InputError, what="exposure file")
     try:
@@ -248,8 +255,6 @@ def read_exposure_file(path: str | os.PathLike, inputs, *, bare_order: str = "so
 
 def _check_exposures(scene: Scene) -> None:
     """Without an exposure file, every 2-D image of the bracket needs an EXIF exposure time."""
-    from .bracket import IMAGE_SUFFIXES_LDR, read_exif_exposure
-
     for p in scene.inputs:
         if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES_LDR and read_exif_exposure(p)["exposure_s"] is None:
             raise InputError(
@@ -273,7 +278,6 @@ def _white_db(scene: Scene, workdir: Path) -> Path | None:
     """Build the white-image database of a scene's calibration data (Lytro captures only)."""
     if scene.caldata is None:
         return None
-    from .lytro import whites  # the Lytro white-image database (lfproc whites)
 
     db = workdir / "whites"
     whites.build_white_db(scene.caldata, db)
@@ -281,8 +285,6 @@ def _white_db(scene: Scene, workdir: Path) -> Path | None:
 
 
 def _write_previews(lf, folder: Path) -> None:
-    from .preview import write_preview
-
     write_preview(lf, folder / "preview.png", kind="centre")
     write_preview(lf, folder / "histogram.png", kind="histogram")
 
@@ -301,9 +303,6 @@ def process_scene(
     warnings raised while merging (:class:`lfproc.errors.SaturationWarning`...) are recorded
     in the row's ``warnings`` (``"Category: message"`` strings) instead of being emitted.
     """
-    from .bracket import merge_files
-    from .io import atomic_dir, atomic_file, write_lightfield
-
     out_dir = Path(out_dir)
     start = time.perf_counter()
     if len(scene.inputs) < 2:
@@ -370,8 +369,6 @@ def _is_done(scene: Scene, out_dir: Path) -> bool:
 
 
 def _write_manifest(out_dir: Path, scenes: list[Scene]) -> list[dict[str, Any]]:
-    from .io import atomic_file
-
     rows = []
     for scene in scenes:
         if _is_done(scene, out_dir):
@@ -440,10 +437,6 @@ def build_dataset(
         ``processed``, ``skipped`` and ``failed`` (scene -> error message) scene names,
         ``manifest`` (path) and ``rows`` (the manifest rows).
     """
-    from ._shared.validation import check_count
-    from ._shared.parallel import max_workers
-    from ._shared.progress import progress
-
     if workers is not None:  # before any folder is made or process started
         check_count("--workers", workers, high=max_workers(),
                     why=f"at most 4 per CPU core; this machine has {os.cpu_count() or 1}")
@@ -451,10 +444,7 @@ def build_dataset(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if profile is not None and not isinstance(profile, str):
-        from .calib import load_profile
-
         profile = load_profile(profile)
-    from .io import clean_stale
 
     for folder in (out, out / "scenes", out / "done"):
         clean_stale(folder)  # temporaries left by killed runs (their process is gone)
@@ -476,7 +466,6 @@ def build_dataset(
             _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, failed)
         bar.close()
     rows = _write_manifest(out, scenes)
-    from .io import atomic_file
 
     with atomic_file(out / "failed.json", force=True) as tmp:
         tmp.write_text(json.dumps(failed, indent=2))

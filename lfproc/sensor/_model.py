@@ -44,7 +44,7 @@ from .._shared.frozen import ReadOnlyState, freeze, frozen_array
 from .._shared.validation import check_positive
 from .._shared.random import check_random_state
 from .._shared.reprs import short_repr
-from ..calib import load_profile
+from ._profile import load_profile
 from ..errors import InputError, ShapeError
 
 __all__ = ["expose", "calibrated_observation", "Observation", "iso_maps", "fixed_pattern", "FixedPattern",

@@ -30,9 +30,17 @@ from typing import Any
 
 import numpy as np
 
-from ._shared.frozen import freeze
-from .errors import DependencyError, FileFormatError, InputError, MissingFileError, option_name
-from .lightfield import LightField
+from .._shared.frozen import freeze
+from ..errors import FileFormatError, InputError, MissingFileError, option_name
+from ..lytro.decode import decode_capture
+from ..lightfield import LightField
+from .._shared.jsonable import to_jsonable
+from .._shared.random import check_random_state
+from .._shared.validation import check_choice
+from ..io import read_lightfield
+from ..io._atomic import atomic_outputs
+from ..io.images import imread
+from ._merge import merge_lightfields, MERGE_METHODS
 
 __all__ = [
     "LYTRO_SUFFIXES",
@@ -106,8 +114,6 @@ def read_exif_exposure(path: str | os.PathLike) -> dict[str, float | None]:
 def _read_ldr(path: Path) -> LightField:
     import cv2
 
-    from .io.images import imread
-
     raw = imread(path, cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if raw.ndim == 2:
         raw = raw[..., None]
@@ -155,10 +161,6 @@ def _read_raw(path: Path) -> LightField:
 
 
 def _read_lytro(path: Path, *, white_db) -> LightField:
-    try:
-        from .lytro.decode import decode_capture
-    except ImportError:
-        raise DependencyError(f"{path}: Lytro decoding (lfproc.lytro.decode) is not available in this build") from None
     if white_db is None:
         raise InputError(f"{path}: decoding a Lytro capture needs a white-image database "
                          f"({option_name('white_db=DB', '--white-db DB')})")
@@ -220,8 +222,6 @@ def read_bracket(
         Fewer than two inputs; a count of ``exposures_s`` that does not match; an input with no
         exposure time (and none given); contradictory EXIF exposure bias.
     """
-    from .io import read_lightfield
-
     paths = [Path(p) for p in paths]
     if len(paths) < 2:
         raise InputError(f"a bracket needs at least two inputs (exposures), got {len(paths)}: "
@@ -293,9 +293,6 @@ def merge_files(
     Returns the merged light field (``attrs["sources"]`` are the file paths) and the merge
     information (see :func:`lfproc.merge.merge_lightfields`), plus ``method``.
     """
-    from .merge import MERGE_METHODS, merge_lightfields
-    from ._shared.validation import check_choice
-
     if method is not None:
         check_choice("method", method, MERGE_METHODS)
     names = option_names or {}
@@ -351,8 +348,6 @@ def camera_response(x, kind: str = "camera") -> np.ndarray:
     measured consumer-camera responses (e.g. the DoRF database of Grossberg & Nayar) share
     that shape: sRGB-like in the shadows, compressed in the highlights.
     """
-    from ._shared.validation import check_choice
-
     check_choice("response", kind, CAMERA_RESPONSES)
     x = np.clip(np.asarray(x, dtype=np.float64), 0, None)
     if kind == "camera":
@@ -402,9 +397,6 @@ def simulate_ldr_bracket(
         recover), and the parameters.
     """
     import cv2
-
-    from ._shared.random import check_random_state
-    from .lightfield import LightField
 
     if isinstance(radiance, LightField):
         if radiance.views != (1, 1):
@@ -495,8 +487,6 @@ def write_response(
 
     Returns the written paths.
     """
-    from .io import atomic_outputs
-
     path = Path(path)
     text = format_response(response, suffix=path.suffix, metadata=metadata, where=str(path))
     outputs = [path] if plot is None else [path, Path(plot)]
@@ -523,8 +513,6 @@ def format_response(response, *, suffix: str, metadata: dict[str, Any] | None = 
     import csv as _csv
     import io as _io
     import json
-
-    from ._shared.jsonable import to_jsonable
 
     if suffix.lower() not in RESPONSE_SUFFIXES:
         raise InputError(f"{where}: expected a response file ending in {' or '.join(RESPONSE_SUFFIXES)}, "

@@ -62,6 +62,11 @@ from .._shared.validation import check_choice
 from .._version import __version__
 from ..errors import InputError, SaturationWarning
 from ..lightfield import LightField
+from ..camera.capture import Capture, load_capture, observations
+from ..camera.simulate import _saturation_electrons
+from ..dictionary import Dictionary, load_dictionary
+from ..hdr import merge_debevec, merge_ml
+from ._reconstruct import reconstruct
 
 __all__ = ["MERGES", "split_shots", "reexpose", "merge_reconstructions", "reconstruct_per_shot"]
 
@@ -72,8 +77,6 @@ _ML_UPDATES = 6
 
 def split_shots(capture) -> list:
     """One single-shot :class:`~lfproc.camera.capture.Capture` per shot of ``capture`` (nothing copied in place)."""
-    from ..camera.capture import Capture
-
     if not isinstance(capture, Capture):
         raise InputError(f"split_shots: expected a Capture, got {type(capture).__name__}")
     out = []
@@ -151,8 +154,6 @@ def reexpose(lf: LightField, shot, *, transmittance: float | None = None,
 def _ideal_transmittance(reconstructions, shots) -> float:
     """One ideal pixel for every shot: the mean total transmittance, lowered where needed so the
     least exposed shot's reconstruction saturates it nowhere (module notes)."""
-    from ..camera.simulate import _saturation_electrons
-
     r = float(np.mean([_mean_view_transmittance(s) for s in shots]))
     prof = shots[0].profile
     isos = [float(np.unique(s.iso)[0]) for s in shots]
@@ -169,8 +170,6 @@ def _ideal_transmittance(reconstructions, shots) -> float:
 
 def _guard(shot, dilate: int) -> np.ndarray:
     from scipy.ndimage import binary_dilation
-
-    from ..camera.capture import observations
 
     sat = observations(shot, warn_saturation=False).saturated[0]
     if dilate > 0 and sat.any():
@@ -197,8 +196,6 @@ def merge_reconstructions(
     guard_px : int
         Radius of the saturation guard (0: only the saturated pixels themselves).
     """
-    from ..merge import merge_debevec, merge_ml
-
     check_choice("merge", merge, MERGES)
     if len(reconstructions) != len(shots) or len(shots) < 2:
         raise InputError(f"merge: expected one reconstruction per shot and at least two shots, got "
@@ -272,10 +269,6 @@ def reconstruct_per_shot(
         first shot's reconstruction settings, the per-shot records (``per_shot``), the
         patches and empty patches summed over the shots, and the total seconds.
     """
-    from ..camera.capture import Capture, load_capture, observations
-    from ..dictionary import Dictionary, load_dictionary
-    from ..recon import reconstruct
-
     if not isinstance(capture, Capture):
         capture = load_capture(capture)
     merges = list(merges)

@@ -26,9 +26,12 @@ from typing import Any
 
 import numpy as np
 
-from ._version import __version__
-from .errors import InputError, ShapeError
-from .lightfield import LightField, luminance
+from .._version import __version__
+from ..errors import InputError, ShapeError
+from ..lightfield import LightField, luminance
+from ..io import srgb_encode
+from ..io._atomic import atomic_file, check_output
+from ..metrics._metrics import error_stops
 
 __all__ = [
     "tonemap",
@@ -126,8 +129,6 @@ def tonemap(image: np.ndarray, *, key: float = 0.18, white_percentile: float = 9
     .. [1] E. Reinhard, M. Stark, P. Shirley, J. Ferwerda, "Photographic tone reproduction
        for digital images", ACM TOG 21(3), 2002. https://doi.org/10.1145/566654.566575
     """
-    from .io import srgb_encode
-
     if encoding not in ("srgb", "linear"):
         raise InputError(f"encoding: expected srgb or linear; got {encoding!r}")
     image = np.asarray(image, dtype=np.float32)
@@ -444,8 +445,6 @@ def _write_picture(path, render, text: dict[str, str], *, what: str, force: bool
     from PIL import Image
     from PIL.PngImagePlugin import PngInfo
 
-    from .io import atomic_file, check_output
-
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in PREVIEW_SUFFIXES:
@@ -513,8 +512,6 @@ def render_error_map(result: Any, reference: Any, *, view: tuple[int, int] | Non
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
-
-    from .metrics import error_stops
 
     stops = error_stops(result, reference, view=view)
     h, w = stops.shape

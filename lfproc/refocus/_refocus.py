@@ -25,8 +25,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .errors import InputError
-from .lightfield import LightField
+from ..errors import InputError
+from ..lightfield import LightField
 
 __all__ = ["refocus", "focal_stack", "check_slopes"]
 

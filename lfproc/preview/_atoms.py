@@ -1,11 +1,11 @@
-"""A picture of a dictionary's atoms (``lfproc preview DICT``)."""
+"""A picture of a dictionary's atoms (``lfproc preview DICT``); moved here from ``lfproc.dictionary._preview``."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..errors import InputError
-from ._files import Dictionary
+from ..dictionary import Dictionary
 
 __all__ = ["render_atoms"]
 
@@ -48,14 +48,3 @@ def render_atoms(dictionary: Dictionary, *, count: int = 32, zoom: int = 8, colu
         y1 = y0 + p * zoom + gap
         out[y1:y1 + u * zoom, x0:x0 + cell_w] = np.kron(epi[i], np.ones((zoom, zoom, 1)))
     return np.clip(np.rint(out * 255), 0, 255).astype(np.uint8)
-
-
-def _register() -> None:
-    from ..preview import PREVIEWS, register_preview
-
-    if "atoms" not in PREVIEWS:
-        register_preview("atoms", render_atoms, accepts=Dictionary,
-                         description="a dictionary's most used atoms: centre view above a horizontal EPI")
-
-
-_register()

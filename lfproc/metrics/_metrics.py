@@ -101,9 +101,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ._shared.validation import check_choice, check_positive
-from .errors import InputError, ShapeError, option_name
-from .lightfield import LightField
+from .._shared.validation import check_choice, check_positive
+from ..errors import InputError, ShapeError, option_name
+from ..lightfield import LightField
 
 __all__ = [
     "PU21_PARAMETERS",

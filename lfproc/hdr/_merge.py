@@ -54,13 +54,14 @@ from typing import Any
 
 import numpy as np
 
-from ._shared.validation import check_choice
-from ._shared.random import check_random_state
-from ._shared.frozen import freeze
-from ._shared.warn import warn_convergence, warn_saturation
-from ._version import __version__
-from .errors import InputError, ShapeError, option_name
-from .lightfield import LightField
+from .._shared.validation import check_choice
+from .._shared.random import check_random_state
+from .._shared.frozen import freeze
+from .._shared.warn import warn_convergence, warn_saturation
+from .._version import __version__
+from ..errors import InputError, ShapeError, option_name
+from ..lightfield import LightField
+from ..sensor import calibrated_observation, iso_maps, load_profile
 
 __all__ = [
     "MERGE_METHODS",
@@ -221,9 +222,6 @@ def merge_ml(
         More than :data:`lfproc.errors.SATURATION_WARNING_FRACTION` of the samples are
         saturated in every exposure (also :func:`merge_debevec`, :func:`merge_with_variances`).
     """
-    from .calib import load_profile
-    from .camera.sensor import calibrated_observation, iso_maps
-
     profile = load_profile(profile)
     stack = _as_stack(dn_stack, "dn_stack")
     n = stack.shape[0]
@@ -1151,8 +1149,6 @@ def merge_lightfields(
     check_exposure_order(data, t, names=names, saturation=[1.0 if codes8 else lf.saturation_level for lf in lfs])
     prof = None
     if profile is not None:
-        from .calib import load_profile
-
         prof = load_profile(profile)
     mapping = "dn"
     if method == "ml":

@@ -15,9 +15,9 @@ import math
 
 import numpy as np
 
-from ._shared.validation import check_choice
-from .errors import InputError
-from .lightfield import LightField
+from .._shared.validation import check_choice
+from ..errors import InputError
+from ..lightfield import LightField
 
 __all__ = ["TONEMAPS", "display_transform", "clipped_fraction"]
 

@@ -44,11 +44,13 @@ from typing import Any
 
 import numpy as np
 
-from ._shared.random import check_random_state
-from ._shared.frozen import freeze
-from ._version import __version__
-from .errors import InputError, MissingFileError, ShapeError
-from .lightfield import REC709_LUMA, LightField, luminance
+from .._shared.random import check_random_state
+from .._shared.frozen import freeze
+from .._version import __version__
+from ..errors import InputError, MissingFileError, ShapeError
+from ..lightfield import REC709_LUMA, LightField, luminance
+from .. import _untrusted as ut
+from ..io import read_image
 
 __all__ = ["synthesize", "scene_layers", "render_layers", "Layer", "SCENES", "scene_names", "check_scene"]
 
@@ -482,8 +484,6 @@ def _check_baseline(baseline_px) -> float:
 
 
 def _load_textures(textures) -> tuple[list[np.ndarray], list[str]]:
-    from .io import read_image
-
     if textures is None:
         return [], []
     if isinstance(textures, (str, os.PathLike, np.ndarray)):
@@ -666,7 +666,6 @@ def synthesize(scene: str = "layers", *, size: tuple[int, int] = (256, 256), vie
     h, w = _check_size(size)
     nviews = _check_views(views)
     b = _check_baseline(baseline_px)
-    from . import _untrusted as ut
 
     ut.check_nbytes((*nviews, h, w, 3), np.float32, error=InputError,
                     what=f"size x views: a light field of {nviews[0]} x {nviews[1]} views of {h} x {w} pixels")
