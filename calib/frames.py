@@ -35,6 +35,7 @@ from lfproc.errors import CalibrationError, FileFormatError, InputError, Missing
 from lfproc.lytro.capture import read_capture
 from lfproc._shared.reprs import short_repr
 from lfproc.io.images import imread
+from lfproc._shared.deps import require
 
 __all__ = [
     "FrameRecord",
@@ -308,6 +309,7 @@ def _cfa_from_rawpy(raw) -> str | None:
 
 
 def _read_rawpy(path: Path) -> Frame:
+    require("rawpy", purpose="reading camera raw files")
     import rawpy
 
     try:

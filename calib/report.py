@@ -31,6 +31,7 @@ from lfproc.io._atomic import atomic_dir
 
 from .calibrate import CalibrationResult
 from lfproc.calib.emva import SIGMA2_Q
+from lfproc._shared.deps import require
 
 __all__ = ["write_report", "summary_markdown", "SUMMARY_COLUMNS", "PROFILE_COLUMNS", "EMVA_COLUMNS", "format_value"]
 
@@ -312,6 +313,7 @@ def _histograms(result, Figure, folder, written) -> None:
 
 
 def _plots(result: CalibrationResult, folder: Path) -> list[str]:
+    require("matplotlib", purpose="the calibration report's plots")
     import matplotlib
 
     matplotlib.use("Agg", force=False)

@@ -19,7 +19,7 @@ import numpy as np
 
 from lfproc.errors import FileFormatError, InputError, ShapeError
 from lfproc.io import read_lightfield
-from lfproc.metrics._metrics import evaluate, evaluation_mask, metric_luminance
+from lfproc.metrics import evaluate, evaluation_mask, metric_luminance
 
 from ._common import add_json, add_value_policies, emit
 from lfproc._untrusted import read_npy

@@ -57,6 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"lfproc {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:
+        # the sub-command table above names the modules; each registers its own parser
         importlib.import_module(f"lfproc.cli.{name.replace('-', '_')}").register(sub, common)
     return parser
 

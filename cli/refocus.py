@@ -8,7 +8,7 @@ from ._common import add_json, add_output, emit, parse_floats
 from lfproc.errors import InputError
 from lfproc.io import read_lightfield, write_image
 from lfproc.io._atomic import atomic_dir, check_output
-from lfproc.refocus._refocus import check_slopes, focal_stack
+from lfproc.refocus import check_slopes, focal_stack
 
 #: Suffixes of a single linear HDR output.
 HDR_SUFFIXES = (".exr", ".hdr")

@@ -7,7 +7,7 @@ from pathlib import Path
 from ._common import add_json, add_output, emit, parse_size
 from lfproc.io import write_lightfield
 from lfproc.io._atomic import check_output
-from lfproc.synth._synth import check_scene, SCENES, synthesize
+from lfproc.synth import check_scene, SCENES, synthesize
 
 
 def register(sub, common) -> None:

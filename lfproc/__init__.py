@@ -62,7 +62,8 @@ _LAZY = {"reconstruct": ".recon", "simulate_capture": ".camera", "load_capture":
 
 def __getattr__(name):
     if name in _LAZY:
-        import importlib  # the lazy top-level names: importlib, not an lfproc module
+        import importlib
 
+        # lazy on purpose: `import lfproc` stays light (the solvers, the simulator and the metrics on first use)
         return getattr(importlib.import_module(_LAZY[name], __name__), name)
     raise AttributeError(f"module 'lfproc' has no attribute {name!r}")

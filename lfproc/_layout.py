@@ -61,6 +61,7 @@ class _MovedFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         if WARN_MOVED:
             warnings.warn(f"{spec.name} moved to {MOVED[spec.name]}; import it from there",
                           DeprecationWarning, stacklevel=4)
+        # the old path is an alias: the new module, imported on the first import of the old path
         return importlib.import_module(MOVED[spec.name])
 
     def exec_module(self, module):

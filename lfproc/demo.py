@@ -37,11 +37,11 @@ from .lytro.grid import LensletGrid
 from .lytro.score import clip_level, score_decode
 from .lytro.virtual import make_virtual_illum
 from .lytro.whites import build_white_db
-from .metrics._metrics import evaluate
+from .metrics import evaluate
 from .preview import write_capture_preview, write_preview
 from .recon import reconstruct
 from .sensor import load_profile, save_profile
-from .synth._synth import synthesize
+from .synth import synthesize
 
 __all__ = ["run_demo", "DemoConfig", "STAGES"]
 

@@ -766,7 +766,7 @@ def make_profile_reader(work: Path) -> Reader:
     save_profile(prof, folder / "cam.json", force=True)
     seeds = [Seed("cam.json", {"cam.json": (folder / "cam.json").read_bytes(),
                                "cam.bias.npz": (folder / "cam.bias.npz").read_bytes()}, "cam.json"),
-             Seed("illum.json", {"illum.json": (ROOT / "calib" / "profiles" / "illum.json").read_bytes()}, "illum.json")]
+             Seed("illum.json", {"illum.json": (ROOT / "lfproc" / "sensor" / "profiles" / "illum.json").read_bytes()}, "illum.json")]
     lf = synthesize("layers", size=(16, 16), views=3, random_state=0)
 
     def mutate_profile_json(seed, rng):

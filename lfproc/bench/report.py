@@ -38,8 +38,9 @@ import numpy as np
 
 from .grid import ISO_SETS, NOISE_LEVELS, REFERENCE
 from ..io._atomic import atomic_outputs
-from ..metrics._metrics import metric_luminance, pu21_encode
+from ..metrics import metric_luminance, pu21_encode
 from .cells import BenchScene, load_scene, read_centre
+from .._shared.deps import require
 
 __all__ = ["write_report", "claims", "PAPER", "PLOTS", "REPORT_FILES", "mean_metric"]
 
@@ -470,6 +471,7 @@ def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict,
 
 
 def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path]) -> Path:
+    require("matplotlib", purpose="the bench report's plots")
     import matplotlib
 
     matplotlib.use("Agg", force=False)

@@ -45,9 +45,10 @@ from ..dictionary import Dictionary, load_dictionary
 from ..dictionary._files import shipped_path
 from ..io import read_lightfield
 from ..io._atomic import atomic_file, atomic_outputs, clean_stale
-from ..metrics._metrics import evaluate
-from .baselines import reconstruct_per_shot
+from ..metrics import evaluate
+from ..recon import reconstruct_per_shot
 from .report import REPORT_FILES, write_report
+from .._shared.deps import require
 
 __all__ = ["run_bench", "load_scene", "run_job", "read_cells", "COLUMNS", "BenchScene"]
 
@@ -343,6 +344,7 @@ def _csv_value(value):
 def _run_dask(specs, dictionary, workers, scheduler, bar, failed) -> int:
     import logging
 
+    require("distributed", purpose="a local Dask cluster or a Dask scheduler (--workers/--scheduler)")
     from dask.distributed import Client, LocalCluster, as_completed
 
     cluster = None

@@ -54,8 +54,8 @@ from .._shared.hashing import file_sha256
 from .._shared.jsonable import to_jsonable
 from .._version import __version__
 from ..sensor import load_profile
-from ..errors import (DependencyError, FileFormatError, InputError, LfprocError, LfprocWarning, MissingFileError,
-                      ShapeError)
+from .._shared.deps import require
+from ..errors import FileFormatError, InputError, LfprocError, LfprocWarning, MissingFileError, ShapeError
 from ..io._atomic import atomic_file
 from .iso import _num, DEFAULT_BLOCK_PX, describe_iso_pattern, iso_pattern, ISO_PATTERNS
 from .projection import (
@@ -744,10 +744,7 @@ def read_sensor_frame(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, An
                 f"{image.dtype} with shape {image.shape}"
             )
         return image, {"format": path.suffix.lower().lstrip(".")}
-    try:
-        import rawpy
-    except ImportError:  # pragma: no cover - rawpy is a dependency
-        raise DependencyError("reading raw files needs rawpy (pip install rawpy)") from None
+    rawpy = require("rawpy", purpose="reading camera raw files")
     try:
         with rawpy.imread(str(path)) as raw:
             dn = np.array(raw.raw_image_visible, dtype=np.uint16, copy=True)

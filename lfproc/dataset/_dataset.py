@@ -54,12 +54,14 @@ from .. import _untrusted as ut
 from .._shared.parallel import max_workers
 from .._shared.progress import progress
 from .._shared.validation import check_count
-from ..hdr._bracket import BRACKET_SUFFIXES, IMAGE_SUFFIXES_LDR, LYTRO_SUFFIXES, merge_files, read_exif_exposure
+from ..hdr import BRACKET_SUFFIXES, merge_files, read_exif_exposure
+from ..hdr._bracket import IMAGE_SUFFIXES_LDR, LYTRO_SUFFIXES
 from ..io import write_lightfield
 from ..io._atomic import atomic_dir, atomic_file, clean_stale
 from ..lytro import whites
 from ..preview import write_preview
 from ..sensor import load_profile
+from .._shared.deps import require
 
 __all__ = [
     "Scene",
@@ -476,6 +478,7 @@ def build_dataset(
 def _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, failed) -> None:
     import logging
 
+    require("distributed", purpose="a local Dask cluster or a Dask scheduler (--workers/--scheduler)")
     from dask.distributed import Client, LocalCluster, as_completed
 
     cluster = None

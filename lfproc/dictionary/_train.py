@@ -39,8 +39,8 @@ from ._ksvd import ksvd
 from ._omp import gram_matrix, omp_codes
 from ._patches import _data, extract_patches, training_patches
 from .._shared.patches import patch_grid
-from ..metrics._metrics import pu21_psnr
-from ..synth._synth import SCENES, synthesize
+from ..metrics import pu21_psnr
+from ..synth import SCENES, synthesize
 
 __all__ = ["Preset", "PRESETS", "synthetic_lightfields", "train_dictionary", "evaluate_dictionary", "approximate"]
 

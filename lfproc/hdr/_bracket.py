@@ -41,6 +41,7 @@ from ..io import read_lightfield
 from ..io._atomic import atomic_outputs
 from ..io.images import imread
 from ._merge import merge_lightfields, MERGE_METHODS
+from .._shared.deps import require
 
 __all__ = [
     "LYTRO_SUFFIXES",
@@ -136,6 +137,7 @@ def _read_ldr(path: Path) -> LightField:
 
 
 def _read_raw(path: Path) -> LightField:
+    require("rawpy", purpose="reading camera raw files")
     import rawpy
 
     try:

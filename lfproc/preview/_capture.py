@@ -17,6 +17,7 @@ from ..camera.iso import _num
 from ..errors import InputError
 from ..io._atomic import check_output
 from ._preview import write_preview
+from .._shared.deps import require
 
 __all__ = ["PREVIEW_KINDS", "render_capture_preview", "write_capture_preview"]
 
@@ -52,6 +53,7 @@ def render_capture_preview(capture: Capture, kind: str = "capture", *, shot: int
     -------
     ndarray of shape (H, W, 3), uint8
     """
+    require("matplotlib", purpose="capture previews")
     import matplotlib
 
     matplotlib.use("Agg", force=False)

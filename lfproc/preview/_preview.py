@@ -31,7 +31,8 @@ from ..errors import InputError, ShapeError
 from ..lightfield import LightField, luminance
 from ..io import srgb_encode
 from ..io._atomic import atomic_file, check_output
-from ..metrics._metrics import error_stops
+from ..metrics import error_stops
+from .._shared.deps import require
 
 __all__ = [
     "tonemap",
@@ -318,6 +319,7 @@ def _preview_histogram(lf: LightField, *, exposure_ev: float = 0.0, width_px: in
     The figures are written under the plot, never over the bars. With ``exposure_from`` the
     stops axis spans both light fields, so the two histograms can be laid side by side.
     """
+    require("matplotlib", purpose="histogram previews")
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -508,6 +510,7 @@ def render_error_map(result: Any, reference: Any, *, view: tuple[int, int] | Non
     -------
     ndarray (H', W', 3), uint8
     """
+    require("matplotlib", purpose="error maps")
     import matplotlib
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.colors import Normalize

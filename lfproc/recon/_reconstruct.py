@@ -85,6 +85,7 @@ from .._shared.patches import patch_grid
 from ..camera.capture import Capture, load_capture, observations
 from ..camera.projection import patch_operators, PatchOperators
 from ..dictionary import Dictionary, load_dictionary
+from .._shared.deps import require
 
 __all__ = ["reconstruct", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "VARIANCES", "patch_count"]
 
@@ -687,6 +688,7 @@ def _run_threads(tasks, shared, attach_operators, add, bar, *, threads: int) -> 
 def _run_dask(tasks, shared, attach_operators, add, bar, *, workers, scheduler) -> None:
     import logging
 
+    require("distributed", purpose="a local Dask cluster or a Dask scheduler (--workers/--scheduler)")
     from dask.distributed import Client, LocalCluster, as_completed
 
     cluster = None
