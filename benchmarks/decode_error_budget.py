@@ -42,10 +42,10 @@ import numpy as np
 
 
 def _render(size, seed):
-    from lfproc.sensor._profile import load_profile
+    from lfproc.sensor import load_profile
     from lfproc.lytro.virtual import (NORMALIZED_RESPONSES, Optics, _fit_views, illum_grid, output_shape,
                                       render_irradiance, vignetting)
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     prof = load_profile("illum")
     figs = prof.iso_figures(100)
@@ -69,7 +69,7 @@ def _render(size, seed):
 
 def _levels(electrons, r, *, noise, rng):
     """Electrons -> levels-normalised values ``(raw - black) / (white - black)`` (clipped)."""
-    from lfproc.sensor._model import expose
+    from lfproc.sensor import expose
 
     prof = r["prof"]
     span = prof.white_level_dn - prof.black_level_dn

@@ -220,7 +220,7 @@ def main(argv=None) -> int:
     from lfproc.lytro.score import clip_level, decode_psnr, score_decode
     from lfproc.lytro.virtual import illum_grid, make_virtual_illum, output_shape, SENSOR_SIZES
     from lfproc.lytro.whites import build_white_db
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     work = args.work or Path(tempfile.mkdtemp(prefix="lfproc-bench-illum-"))
     work.mkdir(parents=True, exist_ok=True)

@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_lightfields(shared: Path, size: int):
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     photos = sorted(glob.glob(str(shared / "hdr" / "ScanLines_*.exr")))
     if not photos:

@@ -49,8 +49,8 @@ def main() -> None:
     from lfproc.camera.simulate import NOISE_PROFILES, simulate_capture
     from lfproc.dictionary import get_preset, train_dictionary
     from lfproc.dictionary._train import synthetic_lightfields
-    from lfproc.metrics._metrics import evaluate
-    from lfproc.synth._synth import synthesize
+    from lfproc.metrics import evaluate
+    from lfproc.synth import synthesize
 
     preset = get_preset("tiny")
     t0 = time.perf_counter()

@@ -24,8 +24,8 @@ import numpy as np
 
 
 def make_bracket(views: int, size: tuple[int, int], seed: int = 0):
-    from lfproc.sensor._model import expose
-    from lfproc.synth._synth import synthesize
+    from lfproc.sensor import expose
+    from lfproc.synth import synthesize
 
     lf = synthesize("lamps", size=size, views=views, random_state=seed)
     truth = lf.data.astype(np.float64) * 2e5
@@ -51,7 +51,7 @@ def timed(fn, repeat: int):
 
 
 def main(argv=None) -> int:
-    from lfproc.hdr._merge import merge_debevec, merge_ml
+    from lfproc.hdr import merge_debevec, merge_ml
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--threads", type=int, default=2, help="threads of the merge (default 2)")

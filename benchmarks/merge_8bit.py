@@ -40,10 +40,10 @@ def best_of(fn, repeat: int):
 def main(argv=None) -> int:
     import cv2
 
-    from lfproc.hdr._bracket import simulate_ldr_bracket
+    from lfproc.hdr import simulate_ldr_bracket
     from lfproc.io import read_lightfield
-    from lfproc.hdr._merge import merge_debevec, merge_ml_codes8
-    from lfproc.metrics._metrics import log_luminance_error
+    from lfproc.hdr import merge_debevec, merge_ml_codes8
+    from lfproc.metrics import log_luminance_error
 
     root = Path(__file__).resolve().parents[1]
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])

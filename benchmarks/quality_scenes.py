@@ -76,7 +76,7 @@ def make_scene(name: str, size: tuple[int, int] = (434, 625), views: int = 5, da
     """The light field of scene ``name`` (``TUNE`` or ``TEST``) at ``size``."""
     from lfproc import LightField
     from lfproc.lightfield import luminance
-    from lfproc.synth._synth import Layer, render_layers
+    from lfproc.synth import Layer, render_layers
 
     back, front, d_back, d_front, gain, seed = SETS["all"][name]
     rng = np.random.default_rng(seed)

@@ -71,9 +71,9 @@ def dictionary_for(case: str):
 
 def run_case(case: str, args, rate: float) -> None:
     from lfproc.camera.simulate import simulate_capture
-    from lfproc.metrics._metrics import evaluate
+    from lfproc.metrics import evaluate
     from lfproc.recon import reconstruct
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     dictionary, label = dictionary_for(case)
     size = (434, 625)

@@ -86,7 +86,7 @@ def ablation_settings() -> dict[str, dict]:
 
 
 def scene(kind: str, texture: Path, seed: int, size: tuple[int, int]):
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     return synthesize(kind, size=tuple(size), views=5, textures=[texture], random_state=seed)
 
@@ -101,7 +101,7 @@ def capture(lf, name: str, seed: int, *, mask_period: int | None = 4):
 def oracle(dictionary, lf) -> dict:
     import lfproc
     from lfproc.dictionary import approximate
-    from lfproc.metrics._metrics import evaluate
+    from lfproc.metrics import evaluate
 
     approx = approximate(dictionary, lf, sparsity=10, stride=4)
     out = lfproc.LightField(np.maximum(approx, 0).astype(np.float32), units=lf.units)
@@ -112,7 +112,7 @@ def main() -> None:
     import warnings
 
     from lfproc.dictionary import load_dictionary
-    from lfproc.metrics._metrics import evaluate
+    from lfproc.metrics import evaluate
     from lfproc.recon import reconstruct
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -176,7 +176,7 @@ def ablation(args) -> None:
     import warnings
 
     from lfproc.dictionary import load_dictionary
-    from lfproc.metrics._metrics import evaluate
+    from lfproc.metrics import evaluate
     from lfproc.recon import reconstruct
 
     os.environ.setdefault("LFPROC_PROGRESS", "0")

@@ -60,7 +60,7 @@ def parse_capture(name: str) -> dict:
 
 def figures(result, truth, floor: float) -> dict:
     """PU21 and the HDR figures (:func:`lfproc.metrics.evaluate` computes both in one pass)."""
-    from lfproc.metrics._metrics import evaluate
+    from lfproc.metrics import evaluate
 
     sc = evaluate(result, truth, scale_tolerance_stops=None, noise_floor=floor)
     return {k: sc[k] for k in ("pu21_psnr_db", "pu21_ssim", "max_decade_stops", "zeros_above_floor",

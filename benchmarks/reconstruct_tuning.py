@@ -62,7 +62,7 @@ README_CONFIGS = [
 
 def main() -> None:
     from lfproc.camera.simulate import simulate_capture
-    from lfproc.metrics._metrics import evaluate
+    from lfproc.metrics import evaluate
     from lfproc.recon import reconstruct
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])

@@ -693,7 +693,7 @@ def make_lytro_capture_reader(work: Path) -> Reader:
 def make_exr_reader(work: Path) -> Reader:
     from lfproc.info import describe_lightfield
     from lfproc.io import read_lightfield, write_lightfield
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     lf = synthesize("layers", size=(16, 16), views=3, random_state=1)
     variance = np.full(lf.shape, 0.01, np.float32)
@@ -751,10 +751,10 @@ def make_exr_reader(work: Path) -> Reader:
 
 
 def make_profile_reader(work: Path) -> Reader:
-    from lfproc.sensor._profile import load_profile, save_profile
+    from lfproc.sensor import load_profile, save_profile
     from lfproc.camera.simulate import simulate_capture
     from lfproc.cli.profile import describe_profile
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     base = load_profile("paper-low")
     bias = {iso: np.full((8, 8), base.black_level_dn, np.float32) + np.float32(0.25) for iso in base.iso_values}
@@ -881,7 +881,7 @@ def make_manifest_reader(work: Path) -> Reader:
 def make_capture_reader(work: Path) -> Reader:
     from lfproc.camera.capture import describe_capture
     from lfproc.camera.simulate import simulate_capture
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     lf = synthesize("layers", size=(16, 16), views=3, random_state=0)
     seeds = []

@@ -15,14 +15,14 @@ from lfproc.bench import grid_cells, merge_reconstructions, reconstruct_per_shot
 from lfproc.bench.grid import PRESETS, cell_seed
 from lfproc.bench.report import claims
 from lfproc.bench.run import COLUMNS
-from lfproc.sensor._profile import load_profile
+from lfproc.sensor import load_profile
 from lfproc.camera.simulate import simulate_capture
 from lfproc.cli.main import main
 from lfproc.dictionary import dct_dictionary, save_dictionary
 from lfproc.errors import InputError, SaturationWarning, ShapeError
-from lfproc.metrics._metrics import evaluate
+from lfproc.metrics import evaluate
 from lfproc.recon import PAPER, reconstruct
-from lfproc.synth._synth import synthesize
+from lfproc.synth import synthesize
 
 
 # -- a smooth 14-stop scene the small DCT dictionary represents well -----------------------------

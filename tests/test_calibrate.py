@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
-from lfproc.sensor._profile import load_profile
+from lfproc.sensor import load_profile
 from lfproc.calib.calibrate import calibrate, find_calibration_input
 from lfproc.calib.frames import read_manifest
 from lfproc.calib.report import write_report
@@ -99,7 +99,7 @@ def test_csv_and_json_manifests_agree(frames, result):
 
 
 def test_saved_profile_round_trip(result, tmp_path):
-    from lfproc.sensor._profile import save_profile
+    from lfproc.sensor import save_profile
 
     path = save_profile(result.profile, tmp_path / "measured.json")
     back = load_profile(path)
@@ -110,8 +110,8 @@ def test_saved_profile_round_trip(result, tmp_path):
 def test_flat_field_and_bias_frames_match_the_sensor_maps(result, profile, tmp_path):
     """The measured maps against the simulated sensor's own (lfproc.camera.sensor.fixed_pattern): their
     errors have the standard deviation the calibration records."""
-    from lfproc.sensor._profile import save_profile
-    from lfproc.sensor._model import fixed_pattern
+    from lfproc.sensor import save_profile
+    from lfproc.sensor import fixed_pattern
 
     prof = result.profile
     gain, offset = fixed_pattern(profile, (128, 128))
@@ -144,7 +144,7 @@ def test_flat_field_and_bias_frames_match_the_sensor_maps(result, profile, tmp_p
 def test_measured_maps_make_t_unbiased_per_pixel(result, profile):
     """Captures of the true sensor, observed with its measured maps: per pixel, the mean of 100 draws is
     within the noise of the mean plus the maps' recorded uncertainty; without correction it is not."""
-    from lfproc.sensor._model import calibrated_observation, expose, fixed_pattern_correction
+    from lfproc.sensor import calibrated_observation, expose, fixed_pattern_correction
 
     prof = result.profile
     # the true profile with the measured maps only, so that gain or dark-current errors stay out

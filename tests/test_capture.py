@@ -9,11 +9,11 @@ import cv2
 import numpy as np
 import pytest
 
-from lfproc.sensor._profile import load_profile
+from lfproc.sensor import load_profile
 from lfproc.camera.capture import (
     HEADER_NAME, Capture, capture_from_raw, describe_capture, is_capture_file, load_capture, observations,
 )
-from lfproc.preview._capture import render_capture_preview
+from lfproc.preview import render_capture_preview
 from lfproc.cli.main import main
 from lfproc.errors import FileFormatError, InputError, OutputExistsError, ProfileError, ShapeError
 from lfproc.camera.projection import MaskCode, make_mask

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from lfproc.sensor._profile import load_profile, save_profile
+from lfproc.sensor import load_profile, save_profile
 from lfproc.camera.capture import capture_from_raw, load_capture, observations, read_sensor_frame
 from lfproc.camera.simulate import simulate_capture
 from lfproc.cli.main import main
@@ -242,7 +242,7 @@ def test_calibrate_then_import_uses_the_measured_maps(files, tmp_path, capsys, d
     """The whole real-camera chain on the command line: calibration frames of the sensor -> lfproc
     calibrate (flat field, bias frames) -> DNG shots -> lfproc capture import with the measured profile,
     whose observations are corrected with the measured maps."""
-    from lfproc.sensor._model import calibrated_observation
+    from lfproc.sensor import calibrated_observation
 
     frames = tmp_path / "frames"
     assert main(["calibrate", "simulate-frames", "--profile", str(files["profile"]), "-o", str(frames), "--size",

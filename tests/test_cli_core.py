@@ -82,7 +82,7 @@ def png_views(request, tmp_path):
     """A folder of 8-bit sRGB PNG views: written here from a synthetic scene, or a real one (INRIA)."""
     if request.param == "real":
         return request.getfixturevalue("shared_data") / "lightfields/lowres_5x5/inria_hublais"
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     lf = synthesize("checker", size=(24, 32), views=5, random_state=3)
     lf = lf.replace(data=np.clip(lf.data / np.percentile(lf.data, 90), 0, 1))

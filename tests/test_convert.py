@@ -8,7 +8,7 @@ import pytest
 from lfproc.cli.main import main
 from lfproc.errors import SaturationWarning
 from lfproc.io import read_lightfield, write_lightfield
-from lfproc.synth._synth import synthesize
+from lfproc.synth import synthesize
 
 
 @pytest.fixture(scope="module")

@@ -16,10 +16,10 @@ import pytest
 
 from lfproc import LightField
 from lfproc._shared.frozen import FrozenDict, freeze, frozen_array, is_frozen
-from lfproc.sensor._profile import load_profile
+from lfproc.sensor import load_profile
 from lfproc.camera.capture import Capture, load_capture, observations
 from lfproc.camera.projection import MaskCode, ProjectionOperator, build_operator, make_mask
-from lfproc.sensor._model import Observation, calibrated_observation
+from lfproc.sensor import Observation, calibrated_observation
 from lfproc.errors import InputError, ProfileError, ShapeError
 
 
@@ -151,7 +151,7 @@ def test_operator_is_immutable_and_restrict_shares_its_weights():
 
 def test_patch_operators_and_fixed_pattern_maps_are_read_only():
     from lfproc.camera.projection import patch_operators
-    from lfproc.sensor._model import fixed_pattern_correction
+    from lfproc.sensor import fixed_pattern_correction
 
     cap = _capture()
     ops = patch_operators(cap.mask, views=(3, 3), cfa_pattern="RGGB", tops=np.array([0, 4]),

@@ -18,8 +18,8 @@ from lfproc.cli.main import main
 from lfproc.dataset import build_dataset, find_scenes, read_manifest
 from lfproc.io import read_lightfield, write_lightfield
 from lfproc.lightfield import LightField
-from lfproc.sensor._model import expose
-from lfproc.synth._synth import synthesize
+from lfproc.sensor import expose
+from lfproc.synth import synthesize
 
 TIMES = [0.01 * 2**k for k in range(5)]
 

@@ -20,7 +20,7 @@ from lfproc.dictionary import (
 from lfproc.dictionary._patches import extract_patches
 from lfproc.dictionary._files import HEADER_NAME
 from lfproc.errors import FileFormatError, InputError, LfprocError, ShapeError
-from lfproc.synth._synth import synthesize
+from lfproc.synth import synthesize
 
 
 def _random_dictionary(n, k, seed=0):

@@ -38,7 +38,7 @@ def test_readme_python_examples_run_anywhere(tmp_path, monkeypatch):
 
 
 def test_centre_and_view_are_arrays_as_documented():
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     lf = synthesize("layers", size=(16, 16), views=3, random_state=0)
     assert lf.centre().shape == (16, 16, 3) and lf.centre()[0, 0].shape == (3,)
@@ -51,7 +51,7 @@ def test_main_steps_are_documented_at_the_top_level():
     import lfproc
     from lfproc.camera.capture import load_capture
     from lfproc.camera.simulate import simulate_capture
-    from lfproc.metrics._metrics import evaluate
+    from lfproc.metrics import evaluate
 
     assert lfproc.simulate_capture is simulate_capture and lfproc.load_capture is load_capture
     assert lfproc.evaluate is evaluate

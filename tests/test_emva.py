@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from lfproc.sensor._profile import load_profile
+from lfproc.sensor import load_profile
 from lfproc.calib.calibrate import calibrate
 from lfproc.calib.emva import (EmvaDescriptor, EmvaStep, evaluate_descriptor, format_descriptor, is_descriptor,
                                read_descriptor, saturation_index, write_descriptor)
@@ -270,7 +270,7 @@ def test_emva_sensor_stays_monochrome(emva_set, tmp_path, capsys):
     res = calibrate(emva_set)
     assert res.profile.cfa_pattern == "mono" and res.profile.is_mono
     assert "cfa_pattern" not in res.profile.unknown
-    from lfproc.sensor._profile import save_profile
+    from lfproc.sensor import save_profile
 
     save_profile(res.profile, tmp_path / "m.json")
     assert load_profile(tmp_path / "m.json").cfa_pattern == "mono"
@@ -280,7 +280,7 @@ def test_emva_sensor_stays_monochrome(emva_set, tmp_path, capsys):
     # a Bayer sensor measured per channel: --cfa says so
     assert calibrate(emva_set, cfa_pattern="GRBG").profile.cfa_pattern == "GRBG"
     # the coded-mask camera needs a Bayer sensor: one line naming the reason
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     lf = synthesize("layers", size=(16, 16), views=3, random_state=0)
     with pytest.raises(InputError, match="monochrome"):
@@ -330,8 +330,8 @@ def test_report_labels_stay_inside_the_pictures(emva_set, tmp_path):
 def test_emva_data_give_per_pixel_bias_and_flat_maps(tmp_path):
     from dataclasses import replace
 
-    from lfproc.sensor._profile import save_profile
-    from lfproc.sensor._model import fixed_pattern
+    from lfproc.sensor import save_profile
+    from lfproc.sensor import fixed_pattern
 
     prof = replace(load_profile("paper-high"), prnu=0.01, dsnu_e=1.5, fixed_pattern_seed=2)
     res = calibrate(simulate_frames(prof, tmp_path / "s", format="emva", size=(64, 64), seed=1))
@@ -349,7 +349,7 @@ def test_emva_data_give_per_pixel_bias_and_flat_maps(tmp_path):
 
 
 def test_saturation_mean_key_and_old_profiles(emva_set, tmp_path):
-    from lfproc.sensor._profile import save_profile
+    from lfproc.sensor import save_profile
 
     res = calibrate(emva_set)
     f = res.figures["default"]

@@ -14,8 +14,8 @@ import pytest
 
 from lfproc.cli.main import main
 from lfproc.io import read_lightfield, write_image, write_lightfield
-from lfproc.metrics._metrics import evaluate, pu21_decode, pu21_encode
-from lfproc.synth._synth import synthesize
+from lfproc.metrics import evaluate, pu21_decode, pu21_encode
+from lfproc.synth import synthesize
 
 BEDROOM = "lightfields/lowres_5x5/hci_bedroom"
 
@@ -234,7 +234,7 @@ def test_units_mismatch_needs_gain(tmp_path, capsys):
 def test_merge_output_carries_its_exposure(tmp_path):
     """A relative merge is a radiance per second: exposure_s = 1 (None on main)."""
     from lfproc.lightfield import LightField
-    from lfproc.hdr._merge import merge_lightfields
+    from lfproc.hdr import merge_lightfields
 
     rng = np.random.default_rng(0)
     scene = rng.uniform(0.05, 2.0, size=(1, 1, 16, 16, 3))
@@ -346,7 +346,7 @@ def test_error_map_shows_stops_with_a_colour_bar(tmp_path, capsys):
 
 
 def test_error_map_values_are_log2_ratios():
-    from lfproc.metrics._metrics import error_stops
+    from lfproc.metrics import error_stops
 
     ref = _grey(np.full((2, 2, 4, 5), 2.0))
     res = ref.copy()

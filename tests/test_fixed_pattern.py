@@ -13,9 +13,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from lfproc.sensor._profile import load_profile
+from lfproc.sensor import load_profile
 from lfproc.camera.capture import load_capture, observations
-from lfproc.sensor._model import FixedPattern, calibrated_observation, expose, fixed_pattern, fixed_pattern_correction
+from lfproc.sensor import FixedPattern, calibrated_observation, expose, fixed_pattern, fixed_pattern_correction
 from lfproc.camera.simulate import simulate_capture
 from lfproc.errors import InputError, ShapeError
 

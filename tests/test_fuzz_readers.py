@@ -134,10 +134,10 @@ def _refuses_cleanly(call):
 @pytest.fixture(scope="module")
 def docs(work):
     """Metadata documents of each reader, from files lfproc writes."""
-    from lfproc.sensor._profile import load_profile
+    from lfproc.sensor import load_profile
     from lfproc.lytro.container import illum_metadata
     from lfproc.lytro.caldata import white_metadata
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
     from lfproc.camera.simulate import simulate_capture
 
     cap = simulate_capture(synthesize("layers", size=(16, 16), views=3, random_state=0), profile="paper-low",
@@ -171,7 +171,7 @@ def test_lytro_frame_metadata_fields(docs, data):
 @SETTINGS
 @given(data=st.data())
 def test_profile_fields(docs, data):
-    from lfproc.sensor._profile import CameraProfile
+    from lfproc.sensor import CameraProfile
 
     path = data.draw(st.sampled_from(_paths_of(docs["profile"])))
     doc = _set(docs["profile"], path, data.draw(json_values))

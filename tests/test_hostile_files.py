@@ -18,7 +18,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import fuzzlib  # noqa: E402
 
-from lfproc.sensor._profile import load_profile, save_profile  # noqa: E402
+from lfproc.sensor import load_profile, save_profile  # noqa: E402
 from lfproc.cli.main import main  # noqa: E402
 from lfproc.errors import UnsafeFileError  # noqa: E402
 from lfproc.lytro.caldata import WhiteFrame, white_metadata, write_caldata_tar  # noqa: E402
@@ -231,7 +231,7 @@ def test_capture_compression_bomb_is_refused(tmp_path, capfd):
     """A header consistent with 96 MiB of arrays that compress to about 100 kB."""
     from lfproc.camera.capture import HEADER_NAME, load_capture
     from lfproc.camera.simulate import simulate_capture
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     cap = simulate_capture(synthesize("layers", size=(16, 16), views=3, random_state=0), profile="paper-low",
                            shots=1, mask_period=4, random_state=0)
@@ -271,7 +271,7 @@ def test_capture_compression_bomb_is_refused(tmp_path, capfd):
 def test_exr_with_undecodable_parts_says_so_in_one_line(tmp_path, capfd):
     from lfproc.io import read_lightfield, write_lightfield
     from lfproc.errors import FileFormatError
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     good = tmp_path / "lf.exr"
     write_lightfield(synthesize("layers", size=(16, 16), views=3, random_state=1), good)
@@ -327,7 +327,7 @@ COMMANDS = [
 @pytest.fixture(scope="module")
 def aux(fuzz_work):
     from lfproc.io import write_lightfield
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     lf = fuzz_work / "aux_lf.exr"
     write_lightfield(synthesize("layers", size=(16, 16), views=3, random_state=2), lf, force=True)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lfproc.sensor._profile import load_profile
+from lfproc.sensor import load_profile
 from lfproc.cli.main import main
 from lfproc.io._atomic import atomic_outputs, clean_stale
 from lfproc.io import read_lightfield, write_lightfield
@@ -170,8 +170,8 @@ def test_calibrate_with_report_killed_then_rerun(tmp_path, frames, run_lfproc, c
 
 
 def _bracket(root: Path) -> list[str]:
-    from lfproc.sensor._model import expose
-    from lfproc.synth._synth import synthesize
+    from lfproc.sensor import expose
+    from lfproc.synth import synthesize
 
     truth = synthesize("layers", size=(16, 16), views=(1, 1), random_state=0).data.astype(np.float64) * 2e4
     flat = truth.reshape(-1, truth.shape[-2] * truth.shape[-1])

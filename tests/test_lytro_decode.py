@@ -18,7 +18,7 @@ from lfproc.lytro.grid import LensletGrid
 from lfproc.lytro.score import clip_level, decode_psnr
 from lfproc.lytro.virtual import illum_grid, output_shape
 from lfproc.lytro.whites import INDEX_NAME, load_white_db, select_white
-from lfproc.synth._synth import synthesize
+from lfproc.synth import synthesize
 
 BORDER = 4
 PSNR_MIN_DB = 27.5  # measured 28.5 dB (all views), 25.9 dB the worst view; see README

@@ -16,7 +16,7 @@ from lfproc.lytro.capture import read_capture
 from lfproc.lytro.grid import LensletGrid
 from lfproc.lytro.virtual import (SENSOR_SIZES, WHITE_STEPS, illum_grid, make_virtual_illum, output_shape,
                                   render_irradiance, vignetting)
-from lfproc.synth._synth import synthesize
+from lfproc.synth import synthesize
 
 
 @pytest.fixture(scope="module")

@@ -11,9 +11,9 @@ from lfproc.cli.main import main
 from lfproc.errors import InputError, SaturationWarning, ShapeError
 from lfproc.io import read_lightfield, write_lightfield
 from lfproc.lightfield import LightField
-from lfproc.hdr._merge import merge_debevec, merge_lightfields, merge_ml, recover_response
-from lfproc.sensor._model import calibrated_observation, expose
-from lfproc.synth._synth import synthesize
+from lfproc.hdr import merge_debevec, merge_lightfields, merge_ml, recover_response
+from lfproc.sensor import calibrated_observation, expose
+from lfproc.synth import synthesize
 
 TIMES = [0.01 * 2**k for k in range(5)]  # 5 exposures 1 EV apart
 GAIN_100 = 0.22733333333333333  # illum profile, ISO 100 (DN per electron)
@@ -152,7 +152,7 @@ def frobisher(shared_data):
 def test_frobisher_exif_and_response_recovery(frobisher):
     import cv2
 
-    from lfproc.hdr._bracket import read_bracket, read_exif_exposure
+    from lfproc.hdr import read_bracket, read_exif_exposure
 
     paths, images = frobisher
     assert [read_exif_exposure(p)["exposure_s"] for p in paths] == [0.125, 1.0, 8.0]
@@ -284,7 +284,7 @@ def test_cli_merge_error_paths(tmp_path, capsys, bracket):
 
 
 def test_exif_bias_contradiction_is_an_error(tmp_path):
-    from lfproc.hdr._bracket import read_bracket
+    from lfproc.hdr import read_bracket
 
     # tags: 0x829A ExposureTime, 0x8827 ISO, 0x9204 ExposureBiasValue
     good = [{0x829A: t, 0x8827: 100, 0x9204: b} for t, b in ((0.25, -1.0), (0.5, 0.0), (1.0, 1.0))]
@@ -322,7 +322,7 @@ def test_cli_merge_ml_light_field_files(tmp_path, capsys):
 
 
 def test_merge_with_variances_decoded_style_inputs():
-    from lfproc.hdr._merge import merge_with_variances
+    from lfproc.hdr import merge_with_variances
 
     rng = np.random.default_rng(4)
     x_true = rng.uniform(0.1, 2.0, size=(2000,))
@@ -362,9 +362,9 @@ def test_synthetic_8bit_bracket_lower_log_error_than_opencv(shared_data, name):
     comparison: OpenCV's CalibrateDebevec + MergeDebevec on the same codes and times."""
     import cv2
 
-    from lfproc.hdr._bracket import simulate_ldr_bracket
-    from lfproc.hdr._merge import merge_ml_codes8
-    from lfproc.metrics._metrics import log_luminance_error
+    from lfproc.hdr import simulate_ldr_bracket
+    from lfproc.hdr import merge_ml_codes8
+    from lfproc.metrics import log_luminance_error
 
     path = shared_data / name
     if not path.exists():
@@ -454,7 +454,7 @@ def test_ml_8bit_frobisher_dark_deciles_agree_with_debevec_and_opencv(frobisher)
 
     import cv2
 
-    from lfproc.hdr._merge import merge_ml_codes8
+    from lfproc.hdr import merge_ml_codes8
 
     paths, images = frobisher
     t = [0.125, 1.0, 8.0]
@@ -491,9 +491,9 @@ def test_ml_8bit_noisy_16_exposure_bracket_is_not_biased_dark(shared_data):
     (Debevec 0.20). With the variance taken at the estimate: 0.99-1.03 of the truth, log error 0.075. The
     reference is the truth, not the Debevec merge: on so noisy a bracket Debevec's log-domain hat mean is
     itself 0.88-1.30 of the truth (too bright in the shadows)."""
-    from lfproc.hdr._bracket import simulate_ldr_bracket
-    from lfproc.hdr._merge import merge_ml_codes8
-    from lfproc.metrics._metrics import log_luminance_error
+    from lfproc.hdr import simulate_ldr_bracket
+    from lfproc.hdr import merge_ml_codes8
+    from lfproc.metrics import log_luminance_error
 
     path = shared_data / "hdr" / "ScanLines_Desk.exr"
     if not path.exists():
@@ -524,7 +524,7 @@ def test_ml_8bit_weights_do_not_overflow():
     RuntimeWarning reached the terminal)."""
     import warnings
 
-    from lfproc.hdr._merge import merge_ml_codes8
+    from lfproc.hdr import merge_ml_codes8
 
     rng = np.random.default_rng(0)
     radiance = np.exp(rng.uniform(np.log(0.02), np.log(50), size=(64, 64)))

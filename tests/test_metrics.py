@@ -10,7 +10,7 @@ from scipy.integrate import cumulative_trapezoid
 
 from lfproc import LightField, read_lightfield
 from lfproc.errors import InputError, ShapeError
-from lfproc.metrics._metrics import (
+from lfproc.metrics import (
     PU21_VARIANTS, evaluate, log_psnr, mean_relative_error, metric_luminance, psnr, pu2_encode, pu2_psnr,
     pu21_decode, pu21_encode, pu21_psnr, pu21_ssim,
 )
@@ -229,7 +229,7 @@ def test_array_metric_errors(hdr_image):
 def bedroom(request):
     """A 5x5 light field: a synthetic HDR scene, and the real HCI bedroom when the shared data is there."""
     if request.param == "synthetic":
-        from lfproc.synth._synth import synthesize
+        from lfproc.synth import synthesize
 
         return synthesize("layers", size=(32, 48), views=5, random_state=1)
     return read_lightfield(request.getfixturevalue("shared_data") / "lightfields/lowres_5x5/hci_bedroom")
@@ -342,7 +342,7 @@ def hdr_lf():
 
 
 def test_hdr_figures_identity(hdr_lf):
-    from lfproc.metrics._metrics import hdr_figures
+    from lfproc.metrics import hdr_figures
 
     out = hdr_figures(hdr_lf, hdr_lf)
     assert out["max_decade_stops"] == 0.0
@@ -361,7 +361,7 @@ def test_hdr_figures_identity(hdr_lf):
 
 
 def test_hdr_figures_twice_as_bright(hdr_lf):
-    from lfproc.metrics._metrics import hdr_figures
+    from lfproc.metrics import hdr_figures
 
     out = hdr_figures(2.0 * hdr_lf.data, hdr_lf.data)  # arrays as well as light fields
     for d in out["stops_by_decade"]:
@@ -375,7 +375,7 @@ def test_hdr_figures_twice_as_bright(hdr_lf):
 def test_hdr_figures_blurred_detail_ratio(hdr_lf):
     from scipy.ndimage import gaussian_filter, laplace
 
-    from lfproc.metrics._metrics import hdr_figures
+    from lfproc.metrics import hdr_figures
 
     blurred = gaussian_filter(hdr_lf.data.astype(np.float64), sigma=(0, 0, 1.0, 1.0, 0))
     out = hdr_figures(blurred, hdr_lf.data, peak_luminance=500.0)
@@ -394,7 +394,7 @@ def test_hdr_figures_blurred_detail_ratio(hdr_lf):
 
 
 def test_hdr_figures_zeros_in_the_dark(hdr_lf):
-    from lfproc.metrics._metrics import hdr_figures
+    from lfproc.metrics import hdr_figures
 
     y = metric_luminance(hdr_lf.data.astype(np.float64))
     dark = y < np.percentile(y, 10)
@@ -412,7 +412,7 @@ def test_hdr_figures_zeros_in_the_dark(hdr_lf):
 
 
 def test_hdr_figures_mask_and_emitters(hdr_lf):
-    from lfproc.metrics._metrics import hdr_figures
+    from lfproc.metrics import hdr_figures
 
     data = hdr_lf.data.copy()
     data[:, :, :, :4] *= 8.0  # three stops off in the first four columns
@@ -436,7 +436,7 @@ def test_hdr_figures_mask_and_emitters(hdr_lf):
 
 
 def test_hdr_figures_bad_inputs(hdr_lf):
-    from lfproc.metrics._metrics import hdr_figures
+    from lfproc.metrics import hdr_figures
 
     with pytest.raises(ShapeError, match="same shape"):
         hdr_figures(hdr_lf.data[:, :, :10], hdr_lf.data)
@@ -457,7 +457,7 @@ def test_evaluate_reports_hdr_figures_and_keeps_its_keys(bedroom):
     for key in ("pu21_psnr_db", "pu21_ssim", "pu2_psnr_db", "log_psnr_db", "linear_psnr_db",
                 "mean_relative_error", "views", "scale_factor", "align", "gain"):
         assert key in out
-    from lfproc.metrics._metrics import hdr_figures
+    from lfproc.metrics import hdr_figures
 
     expected = hdr_figures(_noisy(bedroom, 0.05, 1), bedroom)
     for key in ("max_decade_stops", "zeros_above_floor", "highlight_energy", "detail_ratio", "emitter_share"):
@@ -467,7 +467,7 @@ def test_evaluate_reports_hdr_figures_and_keeps_its_keys(bedroom):
 
 
 def test_evaluate_mask_and_exclude_above_restrict_every_figure():
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     ref = synthesize("layers", size=(32, 48), views=3, random_state=2)
     data = ref.data.copy()
@@ -505,7 +505,7 @@ def test_evaluate_mask_and_exclude_above_restrict_every_figure():
 
 
 def test_evaluate_mask_that_leaves_a_view_empty():
-    from lfproc.synth._synth import synthesize
+    from lfproc.synth import synthesize
 
     ref = synthesize("layers", size=(24, 32), views=3, random_state=3)
     res = _noisy(ref, 0.05, 2)

@@ -13,10 +13,10 @@ from PIL import Image
 from lfproc.errors import InputError, OutputExistsError, ShapeError
 from lfproc.io import srgb_encode, write_lightfield
 from lfproc.lightfield import LightField
-from lfproc.preview._preview import (
+from lfproc.preview import (
     PREVIEWS, epi_stretch, register_preview, reinhard_parameters, render_preview, tonemap, write_preview,
 )
-from lfproc.synth._synth import synthesize
+from lfproc.synth import synthesize
 
 
 @pytest.fixture(scope="module")
@@ -347,7 +347,7 @@ def test_sheet_is_labelled_with_view_indices():
 
 
 def test_sheet_is_downscaled_to_its_pixel_budget():
-    from lfproc.preview._preview import SHEET_MAX_PIXELS, sheet_tile_size
+    from lfproc.preview import SHEET_MAX_PIXELS, sheet_tile_size
 
     big = LightField(data=np.zeros((5, 5, 434, 625, 1), np.float32))  # Lytro size, as the 9.7 MB sheet
     th, tw = sheet_tile_size(big)
@@ -375,7 +375,7 @@ def test_sheet_of_a_real_light_field_is_at_most_2_mb(shared_data, tmp_path):
 
 
 def test_capture_preview_has_colour_bars(lf):
-    from lfproc.preview._capture import render_capture_preview
+    from lfproc.preview import render_capture_preview
     from lfproc.camera.simulate import simulate_capture
 
     cap = simulate_capture(lf.data[:, :, :32, :32], profile="paper-medium", shots=1, mask_period=4, random_state=1)

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from lfproc.sensor._profile import SHIPPED_PROFILES, load_profile, save_profile
+from lfproc.sensor import SHIPPED_PROFILES, load_profile, save_profile
 from lfproc.calib.defaults import build_all
 from lfproc.cli.main import main
 from lfproc.errors import FileFormatError, MissingFileError, OutputExistsError, ProfileError
@@ -115,7 +115,7 @@ def test_cli_profile_show_errors(tmp_path, capsys):
 
 def test_cli_info_describes_a_profile(tmp_path, capsys):
     """`lfproc info PROFILE.json` (info --help names profiles) prints what `profile show` prints."""
-    from lfproc.sensor._profile import save_profile
+    from lfproc.sensor import save_profile
 
     path = save_profile(load_profile("paper-high"), tmp_path / "p.json")
     assert main(["info", str(path), "--json"]) == 0

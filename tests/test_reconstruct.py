@@ -398,8 +398,8 @@ def test_two_shots_beat_one_on_a_textured_hdr_scene(shared_data):
 
     from lfproc.dictionary import load_dictionary
     from lfproc.dictionary._files import shipped_path
-    from lfproc.metrics._metrics import evaluate
-    from lfproc.synth._synth import synthesize
+    from lfproc.metrics import evaluate
+    from lfproc.synth import synthesize
 
     texture = shared_data / "hdr" / "ScanLines_Desk.exr"
     if not texture.is_file() or not shipped_path("default").is_file():

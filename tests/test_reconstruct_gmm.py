@@ -14,11 +14,11 @@ from lfproc import LightField
 from lfproc.camera.simulate import simulate_capture
 from lfproc.cli.main import main
 from lfproc.errors import FileFormatError, InputError, MissingFileError, ShapeError
-from lfproc.metrics._metrics import evaluate
+from lfproc.metrics import evaluate
 from lfproc.recon import PatchModel, load_patch_model, reconstruct_gmm, train_patch_model
 from lfproc.camera.projection import patch_operators
 from lfproc.recon._gmm import _wiener, shear_matrix
-from lfproc.synth._synth import Layer, render_layers
+from lfproc.synth import Layer, render_layers
 
 
 @pytest.mark.parametrize("d", [1.0, -1.0, 0.5, -0.25, 0.0])
@@ -216,7 +216,7 @@ def test_output_does_not_depend_on_threads_or_chunks_and_staged_search_runs():
 def test_noise_floor_of_a_capture_is_one_read_noise_per_measurement(tmp_path, capsys):
     """Known answer: at the floor, one measurement of the highest ISO holds read_noise_e electrons."""
     from lfproc.camera.capture import noise_floor
-    from lfproc.sensor._model import iso_maps
+    from lfproc.sensor import iso_maps
     from lfproc.io import write_lightfield
 
     lf = _plane(0.0, size=(24, 24))

@@ -12,7 +12,7 @@ from lfproc import LightField
 from lfproc.cli.main import main
 from lfproc.errors import InputError
 from lfproc.io import read_image, write_lightfield
-from lfproc.refocus._refocus import focal_stack, refocus
+from lfproc.refocus import focal_stack, refocus
 
 
 def _plane(d: float, *, views=5, size=40, smooth=False, seed=0):

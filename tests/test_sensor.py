@@ -5,9 +5,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from lfproc.sensor._profile import load_profile
+from lfproc.sensor import load_profile
 from lfproc.errors import InputError, ProfileError, ShapeError
-from lfproc.sensor._model import calibrated_observation, expose
+from lfproc.sensor import calibrated_observation, expose
 
 
 def test_noiseless_codes_follow_the_formula():

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from lfproc.sensor._profile import load_profile
+from lfproc.sensor import load_profile
 from lfproc.camera.capture import load_capture, observations
 from lfproc.cli.main import main
 from lfproc.errors import FileFormatError, InputError, ProfileError

@@ -10,7 +10,7 @@ import pytest
 from lfproc.errors import InputError, MissingFileError, ShapeError
 from lfproc.io import read_lightfield
 from lfproc.lightfield import LightField
-from lfproc.synth._synth import SCENES, Layer, render_layers, scene_layers, synthesize
+from lfproc.synth import SCENES, Layer, render_layers, scene_layers, synthesize
 
 KINDS = list(SCENES)
 

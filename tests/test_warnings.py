@@ -14,13 +14,14 @@ import pytest
 
 from lfproc.camera.capture import Capture, observations
 from lfproc.camera.projection import make_mask
-from lfproc.sensor._model import expose
+from lfproc.sensor import expose
 from lfproc.camera.simulate import capture_summary, simulate_capture
 from lfproc.cli.main import main
 from lfproc.errors import SATURATION_WARNING_FRACTION, ConvergenceWarning, SaturationWarning
 from lfproc.io import write_lightfield
-from lfproc.hdr._merge import ML_TOLERANCE_STD, merge_debevec, merge_ml
-from lfproc.synth._synth import synthesize
+from lfproc.hdr._merge import ML_TOLERANCE_STD
+from lfproc.hdr import merge_debevec, merge_ml
+from lfproc.synth import synthesize
 
 TIMES = [0.01 * 2**k for k in range(5)]
 
