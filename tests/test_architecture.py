@@ -239,6 +239,14 @@ def test_moved_modules_keep_their_old_paths():
     assert lfproc.bench.reconstruct_per_shot is lfproc.recon.reconstruct_per_shot
     with pytest.raises(AttributeError):
         lfproc.lytro.no_such_name  # noqa: B018
+    # names that moved up to the presentation layer: still found, with a DeprecationWarning
+    import lfproc.camera.capture
+    import lfproc.preview
+
+    with pytest.warns(DeprecationWarning, match="lfproc.preview"):
+        assert lfproc.camera.capture.write_capture_preview is lfproc.preview.write_capture_preview
+    with pytest.warns(DeprecationWarning, match="lfproc.preview"):
+        assert lfproc.dictionary.render_atoms is lfproc.preview.render_atoms
 
 
 def test_own_code_uses_the_new_paths():

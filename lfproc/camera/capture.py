@@ -914,3 +914,20 @@ def capture_from_raw(
         if mask_source and "mask" in str(exc):
             raise ShapeError(f"{mask_source}: {exc}") from None
         raise
+
+
+#: Former names of this module, now in the presentation layer (lfproc.preview).
+_MOVED_TO_PREVIEW = ("render_capture_preview", "write_capture_preview", "PREVIEW_KINDS")
+
+
+def __getattr__(name):  # the capture previews moved to lfproc.preview (presentation)
+    if name in _MOVED_TO_PREVIEW:
+        import importlib
+        import warnings
+
+        warnings.warn(f"lfproc.camera.capture.{name} moved to lfproc.preview; import it from there",
+                      DeprecationWarning, stacklevel=2)
+        # deprecated old path only: a stage must not import presentation, so it is looked up on use
+        preview = importlib.import_module("lfproc.preview._capture")
+        return getattr(preview, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -33,4 +33,12 @@ _FORMER = {"shipped_path": _files, "dictionary_patch": _files, "omp_codes": _omp
 def __getattr__(name):  # former exports of internals
     if name in _FORMER:
         return getattr(_FORMER[name], name)
+    if name == "render_atoms":  # moved to the presentation layer
+        import importlib
+        import warnings
+
+        warnings.warn("lfproc.dictionary.render_atoms moved to lfproc.preview; import it from there",
+                      DeprecationWarning, stacklevel=2)
+        # deprecated old path only: a stage must not import presentation, so it is looked up on use
+        return importlib.import_module("lfproc.preview._atoms").render_atoms
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
