@@ -626,7 +626,7 @@ def local_signal(capture: Capture, obs: Observation, *, radius: int = 1) -> np.n
     The photon-noise variance of ``T`` needs the expected signal. ``T`` itself (the plug-in)
     gives a measurement that fell low a smaller variance, so a larger weight, and every weighted
     fit comes out low: by about one electron per pixel (Neyman's chi-square; 0.853 of a flat
-    scene at 8 electrons, 0.996 with this estimate: tests/test_capture.py), black where the
+    scene at 8 electrons, 0.996 with this estimate: tests/camera/test_capture.py), black where the
     scene has a few electrons per pixel. Here measurement ``i`` gets ``r_i sum_j T_j / sum_j r_j`` over the usable
     measurements ``j != i`` of the same shot and Bayer colour in the ``(2 radius + 1)^2``
     neighbourhood of its colour plane (``r``: the pixel's total mask transmittance,

@@ -79,7 +79,7 @@ __all__ = [
 MERGE_METHODS = ("ml", "debevec")
 #: Convergence test of the ML merge's fixed-point updates: the last update must move every
 #: sample by at most this fraction of its standard deviation, else :class:`ConvergenceWarning`.
-#: Measured with merge_ml at n_iter = 0..5 on the simulated brackets of tests/test_merge.py and
+#: Measured with merge_ml at n_iter = 0..5 on the simulated brackets of tests/hdr/test_merge.py and
 #: tests/test_warnings.py: each update shrinks the change 6-15x; the second update (default
 #: n_iter=2) moves samples by at most 0.03-0.12 sd, the first by up to 1.8 sd.
 ML_TOLERANCE_STD = 0.25
@@ -807,7 +807,7 @@ def merge_ml_codes8(
        fixed-point updates (at least one; the error changed by under 10 % between 1 and 4
        updates on the brackets of ``benchmarks/merge_8bit.py``). Weights taken at the observed
        code, ``t_i^2 / V(z_i)``, favour the samples that noise pushed down, since ``V`` grows
-       with ``x``: on a noisy 16-exposure bracket of a real photograph (``tests/test_merge.py``)
+       with ``x``: on a noisy 16-exposure bracket of a real photograph (``tests/hdr/test_merge.py``)
        that mean had a log error of 0.21 against 0.075 now, and 0.61-0.96 of the Debevec merge.
        Its variance is ``1 / sum_i w_i``.
 

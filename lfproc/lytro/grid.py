@@ -408,7 +408,7 @@ def estimate_grid(white_image: np.ndarray, *, approx_spacing_px: float | None = 
     Notes
     -----
     On synthetic white images with a known grid the spacing is recovered to better than
-    0.01 px and the rotation to better than 1e-4 rad (``tests/test_lytro_grid.py``).
+    0.01 px and the rotation to better than 1e-4 rad (``tests/lytro/test_lytro_grid.py``).
     """
     img = np.asarray(white_image)
     if img.ndim != 2:

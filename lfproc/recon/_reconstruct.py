@@ -20,7 +20,7 @@ the ``m`` measurements: each patch solves
 light-field patch of unit l2 norm with weights of mean square one, the same for dark and
 bright patches, and does not change with the number of shots; the code is scaled back by
 ``c_p``. With this reading the paper's ``mu = 1e-4`` works on a smooth noisy scene
-(tests/test_reconstruct.py), whereas ``1e-4`` against the summed data term (100x less
+(tests/recon/test_reconstruct.py), whereas ``1e-4`` against the summed data term (100x less
 regularisation) overfits the noise. ``scale="global"`` uses one ``c`` and one weight scale for
 the whole capture instead (the 99.9th percentile of the usable ``T`` over the mean row
 transmittance, and the rms of all usable weights): what normalising the capture to its peak
