@@ -6,8 +6,6 @@ import sys
 from pathlib import Path
 
 from ._common import add_json, emit
-from lfproc.bench import run_bench
-from lfproc.bench.grid import get_preset
 from lfproc.errors import InputError
 
 
@@ -39,6 +37,9 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
+    # lfproc.bench loads the reconstruction (scipy.linalg): imported when the command runs, so `lfproc --help` starts fast
+    from lfproc.bench import get_preset, run_bench
+
     get_preset(args.preset)  # an unknown preset fails before anything is read
     if not args.scenes:
         raise InputError("LF: expected at least one light field, got none")

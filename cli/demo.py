@@ -5,7 +5,6 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from lfproc.demo import run_demo
 
 from ._common import add_json, emit
 from lfproc.errors import OutputExistsError
@@ -22,6 +21,9 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
+    # lfproc.demo loads every stage (scipy.linalg too): imported when the command runs, so `lfproc --help` starts fast
+    from lfproc.demo import run_demo
+
     if args.output.exists() and not args.force:
         raise OutputExistsError(
             f"{args.output}: the output folder exists (an earlier demo?); run 'lfproc demo -o {args.output} --force' "

@@ -5,13 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from ._common import add_json, add_output, emit
-from lfproc.bench import reconstruct_per_shot
 from lfproc.camera.capture import load_capture
 from lfproc.dictionary import load_dictionary
 from lfproc.errors import InputError
 from lfproc.io import write_lightfield
 from lfproc.io._atomic import check_output
-from lfproc.recon import DEFAULTS, load_patch_model, PAPER, reconstruct, reconstruct_gmm
 
 
 def register(sub, common) -> None:
@@ -72,7 +70,7 @@ def register(sub, common) -> None:
     p.add_argument("--per-shot", default=None, metavar="debevec|ml", dest="per_shot",
                    help="the paper's baselines (captures of global-ISO shots: simulate --baseline individual-iso|"
                         "bracketing): reconstruct every shot alone and merge them view by view with Debevec hat "
-                        "weights or the noise-aware ML merge (lfproc.bench.reconstruct_per_shot)")
+                        "weights or the noise-aware ML merge (lfproc.recon.reconstruct_per_shot)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=None,
                        help="solve blocks of patches on a local Dask cluster of N processes")
@@ -90,6 +88,9 @@ def _numbers(text: str, option: str) -> list[float]:
 
 
 def _run_gmm(args) -> int:
+    # lfproc.recon loads scipy.linalg: imported when the command runs, so `lfproc --help` starts fast
+    from lfproc.recon import load_patch_model, reconstruct_gmm
+
     ignored = [f"--{name.replace('_', '-')}" for name in ("mu", "tol", "max_iter", "sparsity", "scale", "overlap",
                                                            "variance", "per_shot", "workers", "scheduler")
                if getattr(args, name) is not None]
@@ -118,6 +119,9 @@ def _run_gmm(args) -> int:
 
 
 def run(args) -> int:
+    # lfproc.recon loads scipy.linalg: imported when the command runs, so `lfproc --help` starts fast
+    from lfproc.recon import DEFAULTS, PAPER, reconstruct, reconstruct_per_shot
+
     if args.method == "gmm":
         return _run_gmm(args)
     given = [o for o, v in (("--model", args.model), ("--disparities", args.disparities), ("--scales", args.scales))

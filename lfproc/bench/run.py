@@ -36,7 +36,7 @@ from .._shared.jsonable import to_jsonable
 from .._version import __version__
 from ..errors import InputError, OutputExistsError, SaturationWarning, ShapeError
 from ..camera.iso import DEFAULT_BLOCK_PX
-from ..recon import DEFAULTS as RECON_DEFAULTS, reconstruct
+from ..recon import DEFAULTS as RECON_DEFAULTS, reconstruct, reconstruct_per_shot
 from .grid import Cell, Job, Preset, cell_id, cell_seed, get_preset, grid_cells, group_jobs
 from .cells import BenchScene, _cell_path, load_scene, read_cells, read_centre  # noqa: F401  (read_centre: its old path)
 from ..camera.capture import observations
@@ -46,7 +46,6 @@ from ..dictionary._files import shipped_path
 from ..io import read_lightfield
 from ..io._atomic import atomic_file, atomic_outputs, clean_stale
 from ..metrics import evaluate
-from ..recon import reconstruct_per_shot
 from .report import REPORT_FILES, write_report
 from .._shared.deps import require
 

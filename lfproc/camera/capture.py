@@ -53,7 +53,7 @@ from .._shared.frozen import ReadOnlyState, freeze, frozen_array
 from .._shared.hashing import file_sha256
 from .._shared.jsonable import to_jsonable
 from .._version import __version__
-from ..sensor import load_profile
+from ..sensor import calibrated_observation, CameraProfile, iso_maps, load_profile, Observation
 from .._shared.deps import require
 from ..errors import FileFormatError, InputError, LfprocError, LfprocWarning, MissingFileError, ShapeError
 from ..io._atomic import atomic_file
@@ -62,7 +62,6 @@ from .projection import (
     build_operator, CFA_PATTERNS, decode_levels, encode_levels, MASK_KINDS, MaskCode, ProjectionOperator,
     sampling_rate, transmittance_map,
 )
-from ..sensor import calibrated_observation, CameraProfile, iso_maps, Observation
 from .._shared.validation import check_choice
 from .._shared.warn import warn_saturation
 from .._shared.zipfiles import zip_first_member

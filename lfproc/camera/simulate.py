@@ -56,11 +56,10 @@ from .._shared.frozen import freeze
 from .._version import __version__
 from .iso import DEFAULT_BLOCK_PX, DEFAULT_ISOS, ISO_PATTERNS, _num, describe_iso_pattern, iso_pattern
 from .capture import MAX_SHOTS, Capture, _warn_saturation, file_sha256, observations
-from ..sensor import load_profile
+from ..sensor import expose, load_profile
 from ..errors import InputError, ShapeError, ViewCountWarning, option_name
 from ..lightfield import LightField, clean_nonfinite
 from .projection import MASK_KINDS, build_operator, make_mask
-from ..sensor import expose
 from .. import _untrusted as ut
 from ..dictionary import SHIPPED
 from ..dictionary._files import dictionary_patch

@@ -52,6 +52,7 @@ from typing import Any
 
 import numpy as np
 
+from .._shared.deps import require
 from .._shared.random import check_random_state
 from .._shared.progress import progress
 from .._shared.parallel import realign
@@ -417,6 +418,7 @@ def ksvd(
         resumed_from = 0
     client = None
     if scheduler is not None:
+        require("distributed", purpose="K-SVD on a Dask scheduler (--scheduler)")
         from distributed import Client
 
         client = Client(scheduler, set_as_default=False)
