@@ -89,6 +89,7 @@ def test_merging_exact_reconstructions_returns_the_truth(ramp, baseline, shots, 
     assert np.median(rel) < 1e-3 and rel.max() < 0.02, (np.median(rel), rel.max())
 
 
+@pytest.mark.slow  # 8 reconstructions at the paper's settings
 def test_individual_iso_baseline_against_the_truth(ramp, dct8):
     """Four single-ISO shots, each reconstructed, merged: close to the truth and better than any
     single shot (log-PSNR: every shot misses the dark end or the bright end). Bounds measured
@@ -246,6 +247,7 @@ def _cell_files(out):
             if not p.name.startswith(".")}
 
 
+@pytest.mark.slow  # a 70-cell bench in a killed subprocess, resumed on Dask
 def test_bench_quick_killed_then_resumed(tiny_inputs, capsys, kill_when):
     root, scenes, dictionary = tiny_inputs
     out = root / "run"
@@ -283,6 +285,7 @@ def test_bench_quick_killed_then_resumed(tiny_inputs, capsys, kill_when):
     assert again["computed"] == 0 and again["cached"] == 70
 
 
+@pytest.mark.slow  # two 35-cell bench runs
 def test_cells_made_with_other_library_defaults_are_not_reused(tiny_inputs, monkeypatch):
     """A cell's identity includes lfproc's reconstruction defaults and block size, so an upgrade that
     changes them recomputes the cells instead of reporting results of the old defaults."""

@@ -177,6 +177,7 @@ def test_measured_maps_make_t_unbiased_per_pixel(result, profile):
     assert ((T_plain - E) / np.sqrt(noise_var / draws + map_var)).var() > 3
 
 
+@pytest.mark.slow  # calibration report plots
 def test_report(result, tmp_path):
     files = write_report(result, tmp_path / "rep")
     names = {f.name for f in files}
@@ -328,6 +329,7 @@ def test_hot_pixels_are_found_and_masked(tmp_path, profile):
 
 
 # -- CLI ---------------------------------------------------------------------------------------
+@pytest.mark.slow  # calibration with plots
 def test_cli_calibrate_json(frames, result, tmp_path, capsys):
     out = tmp_path / "p.json"
     assert main(["calibrate", str(frames), "-o", str(out), "--json", "--report", str(tmp_path / "rep")]) == 0

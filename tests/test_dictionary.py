@@ -46,12 +46,14 @@ def test_batch_omp_recovers_planted_supports_exactly():
     np.testing.assert_allclose(coef, a, atol=2e-4)
 
 
-def test_batch_omp_agrees_with_scikit_learn():
+@pytest.mark.parametrize("n_signals, n_tol", [(200, 50),  # fast: the same check on fewer signals
+                                               pytest.param(3000, 500, marks=pytest.mark.slow)])
+def test_batch_omp_agrees_with_scikit_learn(n_signals, n_tol):
     """Reference: sklearn.linear_model.orthogonal_mp_gram (float64, one signal at a time)."""
     from sklearn.linear_model import orthogonal_mp_gram
 
     d = _random_dictionary(128, 300, seed=3)
-    x = np.random.default_rng(4).standard_normal((128, 3000)).astype(np.float32)
+    x = np.random.default_rng(4).standard_normal((128, n_signals)).astype(np.float32)
     ours = batch_omp(d, x, 10)
     d64 = d.astype(np.float64)
     ref = orthogonal_mp_gram(d64.T @ d64, d64.T @ x.astype(np.float64), n_nonzero_coefs=10)
@@ -60,9 +62,9 @@ def test_batch_omp_agrees_with_scikit_learn():
     np.testing.assert_allclose(ours[:, same_support], ref[:, same_support], atol=5e-4)
     # error-constrained stop (scikit-learn's tol overrides the sparsity: give ours room to reach it)
     tol = 0.5 * float(np.median((x.astype(np.float64) ** 2).sum(axis=0)))
-    ours_t = batch_omp(d, x[:, :500], 128, tol=tol)
-    ref_t = orthogonal_mp_gram(d64.T @ d64, d64.T @ x[:, :500].astype(np.float64), tol=tol,
-                               norms_squared=(x[:, :500].astype(np.float64) ** 2).sum(axis=0))
+    ours_t = batch_omp(d, x[:, :n_tol], 128, tol=tol)
+    ref_t = orthogonal_mp_gram(d64.T @ d64, d64.T @ x[:, :n_tol].astype(np.float64), tol=tol,
+                               norms_squared=(x[:, :n_tol].astype(np.float64) ** 2).sum(axis=0))
     assert ((ours_t != 0) == (ref_t != 0)).all(axis=0).mean() >= 0.99
     used = (ours_t != 0).sum(axis=0)
     assert 5 < used.mean() < 128  # the tolerance, not the sparsity, stopped the signals
@@ -203,6 +205,7 @@ def test_ksvd_resumes_from_checkpoint_with_the_same_result(tmp_path):
         ksvd(x, 40, 3, 5, random_state=7, checkpoint=tmp_path / "ck")
 
 
+@pytest.mark.slow  # a Dask cluster
 def test_ksvd_on_a_dask_cluster_gives_the_in_process_result():
     distributed = pytest.importorskip("distributed")
     _, x = _planted(seed=3)
@@ -485,6 +488,7 @@ def test_evaluate_matches_an_independent_best_k_term_dct_approximation():
     assert r3["relative_error"] == pytest.approx(expected3, rel=1e-4) and expected3 > expected
 
 
+@pytest.mark.slow  # two K-SVD trainings
 def test_train_tiny_dictionary_beats_nothing_and_records_provenance():
     lf = synthesize("lamps", size=(40, 40), views=5, random_state=4)
     d = train_dictionary([lf], preset="tiny", atoms=200, patches=1500, iterations=3, seed=5, command="test")
@@ -576,6 +580,7 @@ def test_cli_dictionary_errors(tmp_path, capsys, argv, match):
     assert not (tmp_path / "x.npz").exists()
 
 
+@pytest.mark.slow  # killed subprocess
 def test_cli_train_killed_then_resumed_gives_the_uninterrupted_dictionary(tmp_path, kill_when):
     base = [sys.executable, "-m", "lfproc.cli.main", "dictionary", "train", "--synthetic", "--preset", "tiny",
             "--atoms", "150", "--patches", "1500", "--iterations", "4", "--seed", "9"]
@@ -626,6 +631,7 @@ def test_shipped_default_dictionary_is_described(capsys):
     assert 0 < info["final_relative_error"] < 0.2
 
 
+@pytest.mark.slow  # real HDR photographs
 def test_shipped_default_beats_dct_on_unseen_hdr_photographs(shared_data):
     """Light fields the dictionary never saw: lfproc synth scenes textured with real HDR photographs."""
     photos = sorted((shared_data / "hdr").glob("ScanLines_*.exr"))[:2]

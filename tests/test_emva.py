@@ -231,6 +231,7 @@ def test_wrong_frame_size_is_named(tmp_path):
         evaluate_descriptor(path)
 
 
+@pytest.mark.slow  # calibration through CLI and report
 def test_emva_figures_shown_and_consistent_everywhere(emva_set, tmp_path, capsys):
     """QE, sigma_y.dark and the saturation capacity appear in the calibrate output, the report
     summary and profile show, and the saturation code is the same number in all of them."""
@@ -291,6 +292,7 @@ def test_emva_sensor_stays_monochrome(emva_set, tmp_path, capsys):
 
 # -- the report of an EMVA 1288 data set (issue 20, item 5) ---------------------------------------
 
+@pytest.mark.slow  # report plots
 def test_emva_report_names_the_stored_iso_and_draws_the_emva_plots(emva_set, tmp_path):
     from PIL import Image
 
@@ -307,6 +309,7 @@ def test_emva_report_names_the_stored_iso_and_draws_the_emva_plots(emva_set, tmp
     assert len(set(titles)) == len(titles), titles  # one title per plot
 
 
+@pytest.mark.slow  # report plots
 def test_report_labels_stay_inside_the_pictures(emva_set, tmp_path):
     """Wide tick labels (a dark variance near 1e6 DN^2) used to push the y label out of the PNG."""
     from dataclasses import replace

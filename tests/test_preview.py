@@ -367,6 +367,7 @@ def test_sheet_is_downscaled_to_its_pixel_budget():
         render_preview(big, "sheet", max_pixels=0)
 
 
+@pytest.mark.slow  # a full-size real light field
 def test_sheet_of_a_real_light_field_is_at_most_2_mb(shared_data, tmp_path):
     from lfproc.io import read_lightfield
 
