@@ -62,11 +62,14 @@ def _state(root: Path) -> tuple:
     return tuple(p.read_text() if p.exists() else None for p in files)
 
 
-# every point with new outputs, and one replacement (moved#1, a partial state), in the fast run; the
-# other replacements (four subprocesses each) are slow
+# the fast run kills before the journal (staged), in the middle of the moves (moved#1, new and
+# replacing) and after the commit; the other cases (three or four subprocesses each) are slow
+_FAST_KILLS = {("staged", False), ("moved#1", False), ("moved#1", True), ("committed", False)}
+
+
 @pytest.mark.parametrize("point, replace", [
     pytest.param(point, replace, id=f"{point}-{'replace' if replace else 'new'}",
-                 marks=[pytest.mark.slow] if replace and point != "moved#1" else [])
+                 marks=[] if (point, replace) in _FAST_KILLS else [pytest.mark.slow])
     for replace in (False, True) for point in ("staged", "journal", "moved#1", "moved#2", "moved#3", "committed")])
 def test_outputs_are_all_new_or_all_as_before_after_a_kill(tmp_path, point, replace):
     (tmp_path / "a").mkdir()

@@ -355,7 +355,8 @@ def test_merge_with_variances_decoded_style_inputs():
 
 # -- 8-bit brackets against OpenCV, with a known answer -------------------------------------------------
 
-@pytest.mark.parametrize("name", ["hdr/ScanLines_Desk.exr", "hdr_cc0/courtyard.exr"])
+@pytest.mark.parametrize("name", ["hdr/ScanLines_Desk.exr",
+                                  pytest.param("hdr_cc0/courtyard.exr", marks=pytest.mark.slow)])  # fast: one photo
 def test_synthetic_8bit_bracket_lower_log_error_than_opencv(shared_data, name):
     """A real HDR photograph through a camera-like response, photon and read noise, 8-bit codes and
     JPEG (lfproc.bracket.simulate_ldr_bracket); the photograph is the reference. Independent

@@ -24,7 +24,7 @@ VIEWS = (5, 5)
 # -- per-phase patch operators ----------------------------------------------------------------
 
 @pytest.mark.parametrize("kind", MASK_KINDS)
-@pytest.mark.parametrize("period", [None, 4, 3])
+@pytest.mark.parametrize("period", [None, 4, pytest.param(3, marks=pytest.mark.slow)])  # fast: aperiodic, period 4
 def test_patch_operators_equal_the_operators_patch_matrices(kind, period):
     """The reference is ProjectionOperator.patch_matrix, built from the expanded weights array."""
     size = (21, 19)
