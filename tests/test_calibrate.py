@@ -258,7 +258,7 @@ def test_mixed_sizes_name_the_files(frames, tmp_path):
         calibrate(_manifest(tmp_path, rows), frames_root=tmp_path.parent)
 
 
-def test_single_bias_frame_records_unknown_read_noise(frames, tmp_path):
+def test_single_bias_frame_records_unknown_read_noise(frames, profile, tmp_path):
     rows = _rows(frames)
     first_bias = next(r for r in rows if r["kind"] == "bias" and float(r["iso"]) == 400)
     rows = [r for r in rows if not (r["kind"] == "bias" and float(r["iso"]) == 400) or r is first_bias]
@@ -274,7 +274,9 @@ def test_single_bias_frame_records_unknown_read_noise(frames, tmp_path):
     assert "needs a pair of bias frames; ISO 400 has 1 bias frame" in res.unknown["isos.400.read_noise_dn"]
     assert "dark" in res.unknown["isos.400.dark_current_e_per_s"]
     assert res.profile.isos[400].read_noise_e is None
-    assert res.figures["100"]["gain_dn_per_e"] is not None  # the other ISOs are unaffected
+    # the other ISOs are unaffected: still measured, at the simulated profile's gain
+    assert res.figures["100"]["gain_dn_per_e"] == pytest.approx(expected_figures(profile, 100)["gain_dn_per_e"],
+                                                                rel=0.02)
 
 
 def test_flats_without_pairs_record_unknown_gain(frames, tmp_path):

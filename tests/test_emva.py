@@ -241,7 +241,10 @@ def test_emva_figures_shown_and_consistent_everywhere(emva_set, tmp_path, capsys
     figs = json.loads(capsys.readouterr().out)["isos"]["default"]
     assert figs["quantum_efficiency"] == pytest.approx(1.0, rel=0.02)  # lfproc's sensor has QE 1
     assert figs["temporal_dark_noise_dn"] == pytest.approx(np.hypot(0.5733, np.sqrt(1 / 12)), rel=0.03)
-    assert figs["saturation_capacity_emva_e"] is not None
+    # the simulated sensor's saturation capacity (expected_figures), reached just below the clip level
+    want_sat = expected_figures(load_profile("paper-high"), 100)["saturation_capacity_e"]
+    assert figs["saturation_capacity_emva_e"] == pytest.approx(want_sat, rel=0.05)
+    assert figs["saturation_capacity_emva_e"] < want_sat
     # the simulated set's brightest pairs clip at the 12-bit ADC code (test_simulated_emva_set_layout)
     assert figs["saturation_dn"] == 4095
     assert main(["profile", "show", str(prof), "--json"]) == 0
