@@ -246,7 +246,9 @@ def test_cli_preview(lf, tmp_path, capsys):
     assert not (tmp_path / "k.png").exists() and not (tmp_path / "n.png").exists()
 
 
-@pytest.mark.parametrize("kind", ["centre", "sheet", "epi", "histogram"])
+@pytest.mark.parametrize("kind", ["centre", "epi",  # fast: two kinds; the sheet and histogram of a real folder slow
+                                  pytest.param("sheet", marks=pytest.mark.slow),
+                                  pytest.param("histogram", marks=pytest.mark.slow)])
 def test_previews_of_real_light_field(shared_data, tmp_path, kind):
     """The command on a real folder of 8-bit views writes exactly what the renderer draws."""
     from lfproc.cli.main import main
@@ -352,6 +354,7 @@ def test_sheet_is_labelled_with_view_indices():
     np.testing.assert_array_equal(img[band:band + 40, :60], plain[:40, :60])
 
 
+@pytest.mark.slow  # renders a Lytro-size sheet
 def test_sheet_is_downscaled_to_its_pixel_budget():
     from lfproc.preview import SHEET_MAX_PIXELS, sheet_tile_size
 

@@ -171,6 +171,7 @@ def test_model_files_round_trip_and_bad_files_are_refused(tmp_path):
     assert shipped.patch == 8 and shipped.margin == 2 and "photographs" in shipped.attrs
 
 
+@pytest.mark.slow  # two simulations and a reconstruction through the CLI
 def test_cli_method_gmm(tmp_path, capsys):
     from lfproc.io import write_lightfield
 
