@@ -354,7 +354,6 @@ def test_sheet_is_labelled_with_view_indices():
     np.testing.assert_array_equal(img[band:band + 40, :60], plain[:40, :60])
 
 
-@pytest.mark.slow  # renders a Lytro-size sheet
 def test_sheet_is_downscaled_to_its_pixel_budget():
     from lfproc.preview import SHEET_MAX_PIXELS, sheet_tile_size
 
@@ -364,10 +363,18 @@ def test_sheet_is_downscaled_to_its_pixel_budget():
     assert abs(tw / th - 625 / 434) < 0.01  # the aspect is kept
     assert sheet_tile_size(big, None) == (434, 625)
     assert sheet_tile_size(_dark_lf(3, 40, 60)) == (40, 60)  # small light fields keep full size
-    img = render_preview(big, "sheet")
-    assert img.shape[1] == 5 * tw + 4 * 2
     with pytest.raises(InputError, match="max_pixels: expected a positive integer"):
         render_preview(big, "sheet", max_pixels=0)
+
+
+@pytest.mark.slow  # renders a Lytro-size sheet
+def test_a_lytro_size_sheet_is_rendered_at_the_budgeted_tile_size():
+    from lfproc.preview import sheet_tile_size
+
+    big = LightField(data=np.zeros((5, 5, 434, 625, 1), np.float32))
+    th, tw = sheet_tile_size(big)
+    img = render_preview(big, "sheet")
+    assert img.shape[1] == 5 * tw + 4 * 2
 
 
 @pytest.mark.slow  # a full-size real light field
