@@ -6,12 +6,20 @@ import os
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("LFPROC_SHARED_DATA", ROOT.parent / "shared" / "data"))
 
 os.environ.setdefault("LFPROC_PROGRESS", "0")
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+# Hypothesis: the same examples on every run and machine (a failure reproduces, and no example
+# database left by an earlier run changes what runs). Every @settings in the tests inherits this
+# profile; the test files also say derandomize=True where they set their own settings.
+settings.register_profile("lfproc", derandomize=True, database=None, deadline=None,
+                          suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("lfproc")
 
 
 @pytest.fixture(scope="session")

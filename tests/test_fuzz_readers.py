@@ -63,15 +63,22 @@ def _run(reader, n, tmp_path, base_seed=BASE_SEED):
     return kinds, bad
 
 
+#: Cases per reader in the fast run (``-m "not slow"``): the first cases of the same sequence.
+FAST_CASES = 20
+
+
 @pytest.mark.parametrize("name", list(fuzzlib.READERS))
-def test_reader_survives_damaged_and_hostile_files(name, work, tmp_path):
+@pytest.mark.parametrize("fast", [True, pytest.param(False, marks=pytest.mark.slow)], ids=["fast", "full"])
+def test_reader_survives_damaged_and_hostile_files(name, fast, work, tmp_path):
+    n = FAST_CASES if fast else CASES[name]
     reader = fuzzlib.READERS[name](work)
-    kinds, bad = _run(reader, CASES[name], tmp_path)
-    assert not bad, f"{len(bad)} of {CASES[name]} cases outside success/LfprocError:\n" + "\n".join(bad[:20])
+    kinds, bad = _run(reader, n, tmp_path)
+    assert not bad, f"{len(bad)} of {n} cases outside success/LfprocError:\n" + "\n".join(bad[:20])
     # the mutations reach both outcomes: some inputs are refused, some still read
-    assert kinds["lfproc"] > CASES[name] // 10 and kinds["ok"] > 0, kinds
+    assert kinds["lfproc"] > n // 10 and (fast or kinds["ok"] > 0), kinds
 
 
+@pytest.mark.slow  # 100 cases on the real containers
 def test_real_lytro_containers_survive_mutations(lytro_dir, work, tmp_path):
     """The real containers of ../shared/data/lytro (skipped with the reason when absent)."""
     reader = fuzzlib.make_lytro_container_reader(work)
@@ -156,6 +163,7 @@ def docs(work):
                     "source": "x", "attrs": {}}}
 
 
+@pytest.mark.slow  # Hypothesis on full Lytro frames
 @SETTINGS
 @given(data=st.data())
 def test_lytro_frame_metadata_fields(docs, data):

@@ -63,8 +63,15 @@ def _state(root: Path) -> tuple:
     return tuple(p.read_text() if p.exists() else None for p in files)
 
 
-@pytest.mark.parametrize("replace", [False, True], ids=["new", "replace"])
-@pytest.mark.parametrize("point", ["staged", "journal", "moved#1", "moved#2", "moved#3", "committed"])
+# the fast run kills before the journal (staged), in the middle of the moves (moved#1, new and
+# replacing) and after the commit; the other cases (three or four subprocesses each) are slow
+_FAST_KILLS = {("staged", False), ("moved#1", False), ("moved#1", True), ("committed", False)}
+
+
+@pytest.mark.parametrize("point, replace", [
+    pytest.param(point, replace, id=f"{point}-{'replace' if replace else 'new'}",
+                 marks=[] if (point, replace) in _FAST_KILLS else [pytest.mark.slow])
+    for replace in (False, True) for point in ("staged", "journal", "moved#1", "moved#2", "moved#3", "committed")])
 def test_outputs_are_all_new_or_all_as_before_after_a_kill(tmp_path, point, replace):
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
@@ -149,6 +156,7 @@ def frames(tmp_path_factory):
 # calibrate --report stages p.json (itself staged with its bias and flat-field sidecars: journal#1,
 # moved#1-3), then publishes p.json, p.bias.npz, p.flat.npz and the report folder together
 # (journal#2, moved#4-7, committed#2)
+@pytest.mark.slow  # calibration with report in killed subprocesses
 @pytest.mark.parametrize("point", ["dir-written", "journal#2", "moved#4", "moved#6", "committed#2"])
 def test_calibrate_with_report_killed_then_rerun(tmp_path, frames, run_lfproc, capsys, point):
     args = ["calibrate", frames, "-o", tmp_path / "p.json", "--report", tmp_path / "rep"]
@@ -183,7 +191,8 @@ def _bracket(root: Path) -> list[str]:
     return paths
 
 
-@pytest.mark.parametrize("point", ["file-written#2", "moved#1", "committed"])
+@pytest.mark.parametrize("point", [pytest.param("file-written#2", marks=pytest.mark.slow),  # fast: one point
+                                   "moved#1", pytest.param("committed", marks=pytest.mark.slow)])
 def test_merge_with_mask_killed_then_rerun(tmp_path, run_lfproc, point):
     inputs = _bracket(tmp_path)
     (tmp_path / "out").mkdir()
@@ -200,8 +209,9 @@ def test_merge_with_mask_killed_then_rerun(tmp_path, run_lfproc, point):
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["hdr.exr", "mask.exr"]
 
 
-@pytest.mark.parametrize("output, point", [("lf.exr", "file-written"), ("views", "file-written#4"),
-                                           ("views", "dir-written")])
+@pytest.mark.parametrize("output, point", [("lf.exr", "file-written"),  # fast: one point, the others slow
+                                           pytest.param("views", "file-written#4", marks=pytest.mark.slow),
+                                           pytest.param("views", "dir-written", marks=pytest.mark.slow)])
 def test_convert_killed_then_rerun(tmp_path, run_lfproc, output, point):
     lf = LightField(np.random.default_rng(0).random((3, 3, 6, 8, 3)).astype(np.float32))
     src = write_lightfield(lf, tmp_path / "src.exr")

@@ -231,6 +231,7 @@ def test_wrong_frame_size_is_named(tmp_path):
         evaluate_descriptor(path)
 
 
+@pytest.mark.slow  # calibration through CLI and report
 def test_emva_figures_shown_and_consistent_everywhere(emva_set, tmp_path, capsys):
     """QE, sigma_y.dark and the saturation capacity appear in the calibrate output, the report
     summary and profile show, and the saturation code is the same number in all of them."""
@@ -240,7 +241,10 @@ def test_emva_figures_shown_and_consistent_everywhere(emva_set, tmp_path, capsys
     figs = json.loads(capsys.readouterr().out)["isos"]["default"]
     assert figs["quantum_efficiency"] == pytest.approx(1.0, rel=0.02)  # lfproc's sensor has QE 1
     assert figs["temporal_dark_noise_dn"] == pytest.approx(np.hypot(0.5733, np.sqrt(1 / 12)), rel=0.03)
-    assert figs["saturation_capacity_emva_e"] is not None
+    # the simulated sensor's saturation capacity (expected_figures), reached just below the clip level
+    want_sat = expected_figures(load_profile("paper-high"), 100)["saturation_capacity_e"]
+    assert figs["saturation_capacity_emva_e"] == pytest.approx(want_sat, rel=0.05)
+    assert figs["saturation_capacity_emva_e"] < want_sat
     # the simulated set's brightest pairs clip at the 12-bit ADC code (test_simulated_emva_set_layout)
     assert figs["saturation_dn"] == 4095
     assert main(["profile", "show", str(prof), "--json"]) == 0
@@ -291,6 +295,7 @@ def test_emva_sensor_stays_monochrome(emva_set, tmp_path, capsys):
 
 # -- the report of an EMVA 1288 data set (issue 20, item 5) ---------------------------------------
 
+@pytest.mark.slow  # report plots
 def test_emva_report_names_the_stored_iso_and_draws_the_emva_plots(emva_set, tmp_path):
     from PIL import Image
 
@@ -307,6 +312,7 @@ def test_emva_report_names_the_stored_iso_and_draws_the_emva_plots(emva_set, tmp
     assert len(set(titles)) == len(titles), titles  # one title per plot
 
 
+@pytest.mark.slow  # report plots
 def test_report_labels_stay_inside_the_pictures(emva_set, tmp_path):
     """Wide tick labels (a dark variance near 1e6 DN^2) used to push the y label out of the PNG."""
     from dataclasses import replace

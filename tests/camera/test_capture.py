@@ -200,6 +200,7 @@ def _colour_count(image, rgb):
     return int(np.sum(np.abs(image.astype(int) - np.round(np.asarray(rgb) * 255).astype(int)).sum(-1) <= 3))
 
 
+@pytest.mark.slow  # every preview kind of a capture
 def test_preview(tmp_path, capsys, capture):
     import matplotlib
 

@@ -107,6 +107,7 @@ def test_cli_import_then_info(simulated, files, tmp_path, capsys):
     assert main(argv + ["--force"]) == 0
 
 
+@pytest.mark.slow  # import and reconstruction
 def test_dng_capture_imports_then_reconstructs(simulated, files, tmp_path, capsys):
     """DNG -> ``lfproc capture import`` -> ``lfproc reconstruct`` (default dictionary). Reference: the
     reconstruction of the simulated capture the DNGs were written from; the imported capture has

@@ -15,6 +15,7 @@ def demo_dir(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow  # the whole demo (module fixture)
 def test_report_lists_every_stage_with_figures(demo_dir):
     report = json.loads((demo_dir / "report.json").read_text())
     assert [row["stage"] for row in report["stages"]] == [name for name, _ in STAGES]
@@ -27,6 +28,7 @@ def test_report_lists_every_stage_with_figures(demo_dir):
             assert (demo_dir / f).is_file()
 
 
+@pytest.mark.slow  # the whole demo (module fixture)
 def test_stage_figures_are_right(demo_dir):
     stages = {row["stage"]: row["figures"] for row in json.loads((demo_dir / "report.json").read_text())["stages"]}
     assert stages["synthesize"]["dynamic_range_stops"] >= 16
@@ -52,12 +54,14 @@ def test_stage_figures_are_right(demo_dir):
     assert rec["pu21_psnr_db"] > 20 and rec["pu21_ssim"] > 0.8, rec
 
 
+@pytest.mark.slow  # the whole demo (module fixture)
 def test_existing_output_needs_force(demo_dir, capsys):
     assert main(["demo", "-o", str(demo_dir)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"lfproc demo -o {demo_dir} --force" in err[0]  # the command to re-run
 
 
+@pytest.mark.slow  # the whole demo (module fixture)
 def test_report_is_short_with_a_contact_sheet(demo_dir):
     """The report lists the raw calibration frames as one folder and shows a contact sheet of them,
     and every picture it embeds exists."""
@@ -78,3 +82,20 @@ def test_report_is_short_with_a_contact_sheet(demo_dir):
     report = json.loads((demo_dir / "report.json").read_text())
     calib = next(row for row in report["stages"] if row["stage"] == "calibrate")
     assert sum(f.startswith("calibration/simulated/frames/") for f in calib["files"]) == 288
+
+
+def test_an_existing_folder_is_refused_before_any_stage_runs(tmp_path, capsys, monkeypatch):
+    """The fast check of the demo's command line: an existing output is refused in one line naming the
+    command with --force, before any stage runs, and the folder is left as it was."""
+    import lfproc.demo as demo
+
+    ran = []
+    monkeypatch.setattr(demo, "STAGES", [(name, lambda ctx, name=name: ran.append(name)) for name, _ in STAGES])
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "mine.txt").write_text("keep")
+    assert main(["demo", "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("lfproc demo: error:") and f"lfproc demo -o {out} --force" in err[0]
+    assert ran == [] and [p.name for p in out.iterdir()] == ["mine.txt"]
+    assert (out / "mine.txt").read_text() == "keep"

@@ -95,7 +95,7 @@ def test_identical_json_is_valid_with_inf(scene, capsys):
 
 # -- ordering and formats ------------------------------------------------------------------------------
 
-@pytest.fixture(params=["synthetic", "real"])
+@pytest.fixture(params=["synthetic", pytest.param("real", marks=pytest.mark.slow)])  # real: a full-size light field
 def reference(request, scene):
     if request.param == "synthetic":
         return scene

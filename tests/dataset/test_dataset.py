@@ -108,6 +108,7 @@ def test_build_failure_reported_then_resumed(scenes, tmp_path):
     assert len(read_manifest(out)) == 4
 
 
+@pytest.mark.slow  # killed subprocess, Dask
 def test_cli_dataset_build_killed_then_resumed(scenes, tmp_path, capsys, kill_when):
     _make_scene(scenes / "scene3", seed=3)
     out = tmp_path / "dataset"
@@ -153,6 +154,7 @@ def test_cli_dataset_errors(tmp_path, capsys):
     assert "\n" not in err and not (tmp_path / "p").exists()
 
 
+@pytest.mark.slow  # virtual Illum brackets decoded and merged
 def test_dataset_build_virtual_illum_brackets(tmp_path):
     lf = synthesize("lamps", size=(32, 32), views=5, random_state=2)
     write_lightfield(lf, tmp_path / "lf.exr")
@@ -196,6 +198,7 @@ def _scene_mtimes(out, names):
     return {str(p.relative_to(out)): p.stat().st_mtime_ns for p in files}
 
 
+@pytest.mark.slow  # killed subprocess, Dask
 def test_cli_dataset_build_virtual_illum_killed_then_resumed(tmp_path, capsys, kill_when):
     names = ["v0", "v1", "v2"]
     scenes = _virtual_illum_scenes(tmp_path / "scenes", tmp_path, len(names))
@@ -286,6 +289,7 @@ def test_exposure_file_forms_and_errors(tmp_path):
             read_exposure_file(f, inputs)
 
 
+@pytest.mark.slow  # a Dask cluster in a subprocess
 def test_bracket_without_exif_points_to_the_exposure_file(tmp_path):
     """No EXIF: the build says to write SCENE/exposures.txt (lfproc merge's --exposures-s does not exist
     here) in one line, with no Dask traceback; with the file the scene is built with its times."""

@@ -49,12 +49,14 @@ def test_batch_omp_recovers_planted_supports_exactly():
     np.testing.assert_allclose(coef, a, atol=2e-4)
 
 
-def test_batch_omp_agrees_with_scikit_learn():
+@pytest.mark.parametrize("n_signals, n_tol", [(200, 50),  # fast: the same check on fewer signals
+                                               pytest.param(3000, 500, marks=pytest.mark.slow)])
+def test_batch_omp_agrees_with_scikit_learn(n_signals, n_tol):
     """Reference: sklearn.linear_model.orthogonal_mp_gram (float64, one signal at a time)."""
     from sklearn.linear_model import orthogonal_mp_gram
 
     d = _random_dictionary(128, 300, seed=3)
-    x = np.random.default_rng(4).standard_normal((128, 3000)).astype(np.float32)
+    x = np.random.default_rng(4).standard_normal((128, n_signals)).astype(np.float32)
     ours = batch_omp(d, x, 10)
     d64 = d.astype(np.float64)
     ref = orthogonal_mp_gram(d64.T @ d64, d64.T @ x.astype(np.float64), n_nonzero_coefs=10)
@@ -63,9 +65,9 @@ def test_batch_omp_agrees_with_scikit_learn():
     np.testing.assert_allclose(ours[:, same_support], ref[:, same_support], atol=5e-4)
     # error-constrained stop (scikit-learn's tol overrides the sparsity: give ours room to reach it)
     tol = 0.5 * float(np.median((x.astype(np.float64) ** 2).sum(axis=0)))
-    ours_t = batch_omp(d, x[:, :500], 128, tol=tol)
-    ref_t = orthogonal_mp_gram(d64.T @ d64, d64.T @ x[:, :500].astype(np.float64), tol=tol,
-                               norms_squared=(x[:, :500].astype(np.float64) ** 2).sum(axis=0))
+    ours_t = batch_omp(d, x[:, :n_tol], 128, tol=tol)
+    ref_t = orthogonal_mp_gram(d64.T @ d64, d64.T @ x[:, :n_tol].astype(np.float64), tol=tol,
+                               norms_squared=(x[:, :n_tol].astype(np.float64) ** 2).sum(axis=0))
     assert ((ours_t != 0) == (ref_t != 0)).all(axis=0).mean() >= 0.99
     used = (ours_t != 0).sum(axis=0)
     assert 5 < used.mean() < 128  # the tolerance, not the sparsity, stopped the signals
@@ -206,6 +208,7 @@ def test_ksvd_resumes_from_checkpoint_with_the_same_result(tmp_path):
         ksvd(x, 40, 3, 5, random_state=7, checkpoint=tmp_path / "ck")
 
 
+@pytest.mark.slow  # a Dask cluster
 def test_ksvd_on_a_dask_cluster_gives_the_in_process_result():
     distributed = pytest.importorskip("distributed")
     _, x = _planted(seed=3)
@@ -394,32 +397,101 @@ def test_training_patches_are_seeded_normalised_and_reject_flat():
         training_patches([np.ones((5, 5, 3, 8, 3))], patch=(5, 5, 4, 4, 3), n_patches=10)
 
 
-def test_dct_dictionary_is_the_orthonormal_dct_ii():
-    """Reference: scipy.fft.dct (type II, orthonormal) on each axis."""
+def _reference_dct_atoms(patch):
+    """Independent reference: the orthonormal DCT-II atoms built by hand, ``(n, n)`` (columns), with each
+    one's frequencies. Every axis of (V, U, P, P) uses scipy.fft.dct's type-II orthonormal matrix
+    (its rows are the basis functions); the colour axis the luminance/opponent basis written out here
+    ((1, 1, 1)/sqrt 3, (1, 0, -1)/sqrt 2, (1, -2, 1)/sqrt 6)."""
     from scipy.fft import dct
 
-    d = dct_dictionary((1, 1, 4, 4, 1))
-    assert d.n_atoms == 16
-    np.testing.assert_allclose(d.atoms.T @ d.atoms, np.eye(16), atol=1e-6)
-    c = dct(np.eye(4), norm="ortho", axis=0)  # rows: frequencies
-    ref = np.einsum("ay,bx->abyx", c, c).reshape(16, 16).T  # columns: 2-D DCT-II atoms
-    match = np.abs(d.atoms.T.astype(np.float64) @ ref)
-    np.testing.assert_allclose(np.sort(match, axis=1)[:, -1], 1, atol=1e-6)  # each atom is one of scipy's
+    colour = np.array([[1, 1, 1], [1, 0, -1], [1, -2, 1]]) / np.sqrt([[3], [2], [6]])
+    mats = [dct(np.eye(s), norm="ortho", axis=0) for s in patch[:4]] + [colour if patch[4] == 3 else np.eye(1)]
+    atoms, freqs = [], []
+    for f in np.ndindex(*patch):
+        atom = mats[0][f[0]]
+        for m, k in zip(mats[1:], f[1:]):
+            atom = np.multiply.outer(atom, m[k])
+        atoms.append(atom.ravel())
+        freqs.append(f)
+    return np.array(atoms).T, np.array(freqs)
+
+
+@pytest.mark.parametrize("patch", [(1, 1, 4, 4, 1), (2, 3, 4, 4, 3)])
+def test_dct_dictionary_is_the_orthonormal_dct_ii(patch):
+    """Reference: the hand-built separable DCT-II (scipy.fft.dct matrices, _reference_dct_atoms). The
+    complete dictionary is that basis exactly: D^T R is a permutation matrix (each atom equals one
+    reference atom, sign included), and its atoms come in order of total normalised frequency."""
+    d = dct_dictionary(patch)
+    ref, freqs = _reference_dct_atoms(patch)
+    n = ref.shape[1]
+    assert d.n_atoms == n
+    match = d.atoms.T.astype(np.float64) @ ref
+    np.testing.assert_allclose(np.sort(np.abs(match), axis=1)[:, -1], 1, atol=1e-6)
+    perm = np.argmax(match, axis=1)
+    assert sorted(perm) == list(range(n))  # one to one
+    np.testing.assert_allclose(d.atoms, ref[:, perm], atol=1e-6)  # same atoms, same signs
+    total = (freqs[perm, :4] / np.array(patch[:4])).sum(axis=1)
+    assert np.all(np.diff(total) >= -1e-12)
+    # a truncated dictionary keeps the lowest frequencies: on a 4 x 4 patch, 6 atoms are DC, the two
+    # first harmonics and the three of total frequency 2/4
+    six = dct_dictionary((1, 1, 4, 4, 1), 6)
+    m6 = np.abs(six.atoms.T.astype(np.float64) @ _reference_dct_atoms((1, 1, 4, 4, 1))[0])
+    got = {tuple(_reference_dct_atoms((1, 1, 4, 4, 1))[1][i][2:4]) for i in np.argmax(m6, axis=1)}
+    assert got == {(0, 0), (0, 1), (1, 0), (0, 2), (1, 1), (2, 0)}
     over = dct_dictionary((5, 5, 4, 4, 3), 2400)
     assert over.n_atoms == 2400 and over.patch == (5, 5, 4, 4, 3)
+    np.testing.assert_allclose(np.linalg.norm(over.atoms, axis=0), 1, atol=1e-5)
 
 
-def test_evaluate_exact_with_a_complete_basis_and_dct_beaten_by_nothing_trivial():
+def _best_k_term_dct(data, p, t):
+    """Independent reference for OMP on an orthonormal DCT: per non-overlapping p x p patch, the t
+    largest scipy.fft.dctn coefficients (over V, U, P, P; then the colour basis) kept, the rest
+    zeroed, transformed back with idctn; negatives clipped as evaluate_dictionary does."""
+    from scipy.fft import dctn, idctn
+
+    colour = np.array([[1, 1, 1], [1, 0, -1], [1, -2, 1]]) / np.sqrt([[3], [2], [6]])
+    x = data.astype(np.float64)
+    out = np.zeros_like(x)
+    for y0 in range(0, x.shape[2], p):
+        for x0 in range(0, x.shape[3], p):
+            block = x[:, :, y0:y0 + p, x0:x0 + p]
+            coef = dctn(block, axes=(0, 1, 2, 3), norm="ortho") @ colour.T
+            keep = np.zeros(coef.size, bool)
+            keep[np.argsort(np.abs(coef).ravel())[::-1][:t]] = True
+            coef = np.where(keep.reshape(coef.shape), coef, 0)
+            out[:, :, y0:y0 + p, x0:x0 + p] = idctn(coef @ colour, axes=(0, 1, 2, 3), norm="ortho")
+    return np.maximum(out, 0)
+
+
+def test_evaluate_matches_an_independent_best_k_term_dct_approximation():
+    """Reference: _best_k_term_dct (scipy.fft.dctn). OMP with t atoms of an orthonormal basis keeps the
+    t largest coefficients, so evaluate_dictionary's error with the complete DCT and non-overlapping
+    patches must be the best t-term approximation's, computed without lfproc; a complete basis at
+    sparsity n reproduces the light field exactly."""
+    from lfproc.metrics import pu21_psnr
+
     lf = synthesize("layers", size=(16, 16), views=3, random_state=2)
     small = lf.data[:, :, 4:12, 4:12]
-    full = dct_dictionary((3, 3, 1, 1, 3))  # complete orthonormal basis: sparsity n reproduces exactly
+    full = dct_dictionary((3, 3, 1, 1, 3))
     r = evaluate_dictionary(full, [small], sparsity=full.n, compare_dct=False)
     assert r["relative_error"] < 1e-5
-    r10 = evaluate_dictionary(dct_dictionary((3, 3, 4, 4, 3)), [lf], sparsity=10)
-    assert 0 < r10["relative_error"] < 1
-    assert r10["dct_relative_error"] == pytest.approx(r10["relative_error"], rel=1e-6)  # same dictionary
+    d = dct_dictionary((3, 3, 4, 4, 3))  # complete: 432 atoms
+    r10 = evaluate_dictionary(d, [lf], sparsity=10, stride=4)
+    ref = _best_k_term_dct(lf.data, 4, 10)
+    truth = lf.data.astype(np.float64)
+    expected = np.linalg.norm(ref - truth) / np.linalg.norm(truth)
+    assert 0.1 < expected < 0.9  # a real approximation, neither exact nor empty (0.453)
+    assert r10["relative_error"] == pytest.approx(expected, rel=1e-4)
+    assert r10["dct_relative_error"] == pytest.approx(expected, rel=1e-4)
+    expected_pu21 = pu21_psnr(ref.astype(np.float32), lf.data, peak_luminance=1000.0, channel_axis=-1)
+    assert r10["pu21_psnr_db"] == pytest.approx(expected_pu21, abs=0.05)
+    # fewer atoms, larger error (the same reference at 3 atoms)
+    r3 = evaluate_dictionary(d, [lf], sparsity=3, stride=4, compare_dct=False)
+    expected3 = np.linalg.norm(_best_k_term_dct(lf.data, 4, 3) - truth) / np.linalg.norm(truth)
+    assert r3["relative_error"] == pytest.approx(expected3, rel=1e-4) and expected3 > expected
 
 
+@pytest.mark.slow  # two K-SVD trainings
 def test_train_tiny_dictionary_beats_nothing_and_records_provenance():
     lf = synthesize("lamps", size=(40, 40), views=5, random_state=4)
     d = train_dictionary([lf], preset="tiny", atoms=200, patches=1500, iterations=3, seed=5, command="test")
@@ -511,6 +583,7 @@ def test_cli_dictionary_errors(tmp_path, capsys, argv, match):
     assert not (tmp_path / "x.npz").exists()
 
 
+@pytest.mark.slow  # killed subprocess
 def test_cli_train_killed_then_resumed_gives_the_uninterrupted_dictionary(tmp_path, kill_when):
     base = [sys.executable, "-m", "lfproc.cli.main", "dictionary", "train", "--synthetic", "--preset", "tiny",
             "--atoms", "150", "--patches", "1500", "--iterations", "4", "--seed", "9"]
@@ -562,6 +635,7 @@ def test_shipped_default_dictionary_is_described(capsys):
     assert 0 < info["final_relative_error"] < 0.2
 
 
+@pytest.mark.slow  # real HDR photographs
 def test_shipped_default_beats_dct_on_unseen_hdr_photographs(shared_data):
     """Light fields the dictionary never saw: lfproc synth scenes textured with real HDR photographs."""
     photos = sorted((shared_data / "hdr").glob("ScanLines_*.exr"))[:2]

@@ -355,7 +355,8 @@ def test_merge_with_variances_decoded_style_inputs():
 
 # -- 8-bit brackets against OpenCV, with a known answer -------------------------------------------------
 
-@pytest.mark.parametrize("name", ["hdr/ScanLines_Desk.exr", "hdr_cc0/courtyard.exr"])
+@pytest.mark.parametrize("name", ["hdr/ScanLines_Desk.exr",
+                                  pytest.param("hdr_cc0/courtyard.exr", marks=pytest.mark.slow)])  # fast: one photo
 def test_synthetic_8bit_bracket_lower_log_error_than_opencv(shared_data, name):
     """A real HDR photograph through a camera-like response, photon and read noise, 8-bit codes and
     JPEG (lfproc.bracket.simulate_ldr_bracket); the photograph is the reference. Independent
@@ -483,6 +484,7 @@ def test_ml_8bit_frobisher_dark_deciles_agree_with_debevec_and_opencv(frobisher)
     assert np.isfinite(var).all() and (var > 0).all()
 
 
+@pytest.mark.slow  # 16-exposure bracket
 def test_ml_8bit_noisy_16_exposure_bracket_is_not_biased_dark(shared_data):
     """A real HDR photograph through a noisy sensor (200 e- full well) into a Memorial-like bracket of 16
     8-bit frames, 1/32 s to 1024 s. The ML merge weighted each sample by the variance of its own code,
@@ -548,6 +550,7 @@ def test_ml_8bit_weights_do_not_overflow():
 
 # -- issue 20 item 2: exposure list files, options without effect -------------------------------------------
 
+@pytest.mark.slow  # several CLI merges
 def test_cli_merge_exposures_file_forms(tmp_path, capsys):
     """--exposures-file reads NAME SECONDS lines, bare seconds in the inputs' order and Debevec's HDRShop
     image list (the Memorial bracket's NAME 1/t F_STOP GAIN ND lines, names of .ppm files)."""
@@ -610,6 +613,7 @@ def test_cli_merge_refuses_options_without_effect(frobisher, tmp_path, capsys):
 
 # -- issue 20 item 8: merge --response-out ----------------------------------------------------------------------
 
+@pytest.mark.slow  # response recovery through the CLI
 def test_cli_merge_response_out(frobisher, tmp_path, capsys):
     """The camera response the merge recovered, as CSV or JSON with a PNG plot; the same curve the merged
     EXR records, and the shape of OpenCV's CalibrateDebevec (its inverse response f^-1(z), per channel)."""

@@ -273,6 +273,7 @@ def test_hex_to_square_preserves_smooth_signals():
         hex_to_square(ramp[:, :, :-1], g)
 
 
+@pytest.mark.slow  # killed subprocess
 def test_decode_killed_then_rerun_leaves_no_temporaries(bench, tmp_path, run_lfproc):
     """decode killed with its output complete in the temporary (not yet renamed): the re-run as it
     was removes the dead run's temporary and writes the output (issue 13)."""

@@ -111,6 +111,7 @@ def test_extract_raw_capture_and_errors(tmp_path, capsys):
     assert not (tmp_path / "c").exists()
 
 
+@pytest.mark.slow  # real F01 videos
 def test_extract_writes_the_frames_of_f01_videos(lytro_dir, tmp_path):
     """Issue 20, item 8: the H.264 streams of an F01 focal stack are decoded into frames."""
     out = tmp_path / "stk"

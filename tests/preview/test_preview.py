@@ -240,7 +240,9 @@ def test_cli_preview(lf, tmp_path, capsys):
     assert not (tmp_path / "k.png").exists() and not (tmp_path / "n.png").exists()
 
 
-@pytest.mark.parametrize("kind", ["centre", "sheet", "epi", "histogram"])
+@pytest.mark.parametrize("kind", ["centre", "epi",  # fast: two kinds; the sheet and histogram of a real folder slow
+                                  pytest.param("sheet", marks=pytest.mark.slow),
+                                  pytest.param("histogram", marks=pytest.mark.slow)])
 def test_previews_of_real_light_field(shared_data, tmp_path, kind):
     """The command on a real folder of 8-bit views writes exactly what the renderer draws."""
     from lfproc.cli.main import main
@@ -355,12 +357,21 @@ def test_sheet_is_downscaled_to_its_pixel_budget():
     assert abs(tw / th - 625 / 434) < 0.01  # the aspect is kept
     assert sheet_tile_size(big, None) == (434, 625)
     assert sheet_tile_size(_dark_lf(3, 40, 60)) == (40, 60)  # small light fields keep full size
-    img = render_preview(big, "sheet")
-    assert img.shape[1] == 5 * tw + 4 * 2
     with pytest.raises(InputError, match="max_pixels: expected a positive integer"):
         render_preview(big, "sheet", max_pixels=0)
 
 
+@pytest.mark.slow  # renders a Lytro-size sheet
+def test_a_lytro_size_sheet_is_rendered_at_the_budgeted_tile_size():
+    from lfproc.preview import sheet_tile_size
+
+    big = LightField(data=np.zeros((5, 5, 434, 625, 1), np.float32))
+    th, tw = sheet_tile_size(big)
+    img = render_preview(big, "sheet")
+    assert img.shape[1] == 5 * tw + 4 * 2
+
+
+@pytest.mark.slow  # a full-size real light field
 def test_sheet_of_a_real_light_field_is_at_most_2_mb(shared_data, tmp_path):
     from lfproc.io import read_lightfield
 

@@ -79,6 +79,7 @@ def _plane(d: float, size=(48, 64), seed=0, level=1.0):
     return LightField(data, units="relative")
 
 
+@pytest.mark.slow  # 48 x 64 reconstruction over 5 disparities
 def test_disparity_of_a_plane_is_found():
     lf = _plane(0.5)
     capture = simulate_capture(lf, profile="paper-low", mask_period=4, shots=2, random_state=3)
@@ -88,6 +89,7 @@ def test_disparity_of_a_plane_is_found():
     assert evaluate(out, lf)["pu21_psnr_db"] > 28
 
 
+@pytest.mark.slow  # six reconstructions
 def test_noise_free_capture_scores_at_least_as_well_as_noisy_ones():
     """Means over two captures (seeds): a noise-free sensor (quantisation only) >= medium and high noise."""
     lf = _plane(-0.5, seed=4)
@@ -101,6 +103,7 @@ def test_noise_free_capture_scores_at_least_as_well_as_noisy_ones():
     assert free >= score(profile="paper-medium") and free >= score(profile="paper-high"), free
 
 
+@pytest.mark.slow  # 48 x 48 reconstruction
 def test_dark_floor_beside_a_light_12_stops_brighter():
     """A flat floor with a square light 2^12 times brighter: the floor away from the light keeps its level."""
     data = np.full((5, 5, 48, 48, 3), 1.0, np.float32)
@@ -126,6 +129,7 @@ def test_input_is_not_mutated_and_the_result_records_its_settings():
     assert rec["lfproc_version"] and out.shape == lf.shape
 
 
+@pytest.mark.slow  # several simulated captures
 @pytest.mark.filterwarnings("ignore::lfproc.errors.SaturationWarning")
 def test_bad_inputs():
     lf = _plane(0.0, size=(24, 24))
@@ -146,6 +150,7 @@ def test_bad_inputs():
         reconstruct_gmm(simulate_capture(small, profile="paper-low", mask_period=2, shots=1, random_state=0))
 
 
+@pytest.mark.slow  # trains a patch model
 def test_model_files_round_trip_and_bad_files_are_refused(tmp_path):
     rng = np.random.default_rng(0)
     images = [np.exp(rng.standard_normal((40, 50, 3))).astype(np.float32) for _ in range(2)]
@@ -166,6 +171,7 @@ def test_model_files_round_trip_and_bad_files_are_refused(tmp_path):
     assert shipped.patch == 8 and shipped.margin == 2 and "photographs" in shipped.attrs
 
 
+@pytest.mark.slow  # two simulations and a reconstruction through the CLI
 def test_cli_method_gmm(tmp_path, capsys):
     from lfproc.io import write_lightfield
 
@@ -198,6 +204,7 @@ def test_cli_method_gmm(tmp_path, capsys):
         assert not target.exists()
 
 
+@pytest.mark.slow  # four reconstructions
 def test_output_does_not_depend_on_threads_or_chunks_and_staged_search_runs():
     lf = _plane(0.25, size=(32, 40), seed=9)
     capture = simulate_capture(lf, profile="paper-low", mask_period=4, shots=2, random_state=10)
@@ -248,6 +255,13 @@ def _model_file(path, *, header=None, **arrays):
     return path
 
 
+@pytest.fixture(scope="module")
+def small_capture_file(tmp_path_factory):
+    """One small capture file shared by the damaged-model cases (the CLI refuses the model before using it)."""
+    cap = simulate_capture(_plane(0.0, size=(24, 24)), profile="paper-low", shots=1, random_state=0)
+    return cap.save(tmp_path_factory.mktemp("gmm") / "c.capture.npz")
+
+
 @pytest.mark.parametrize("case, message", [
     (dict(header={"format": "lfproc-patch-model", "patch": "eight", "margin": 2}), "field 'patch'"),
     (dict(header={"format": "lfproc-patch-model", "patch": 8, "margin": 2, "attrs": [1, 2]}), "field 'attrs'"),
@@ -262,12 +276,11 @@ def _model_file(path, *, header=None, **arrays):
     (dict(weights=np.ones(2)), "patch model"),
     (dict(header={"format": "lfproc-patch-model", "patch": 8, "margin": 3}), "array 'means'"),
 ])
-def test_damaged_model_files_are_refused_in_one_line(tmp_path, capsys, case, message):
+def test_damaged_model_files_are_refused_in_one_line(tmp_path, capsys, case, message, small_capture_file):
     bad = _model_file(tmp_path / "bad.npz", **case)
     with pytest.raises(FileFormatError, match=message):
         load_patch_model(bad)
-    cap = simulate_capture(_plane(0.0, size=(24, 24)), profile="paper-low", shots=1, random_state=0)
-    cap_path = cap.save(tmp_path / "c.capture.npz")
+    cap_path = small_capture_file
     assert main(["reconstruct", str(cap_path), "-o", str(tmp_path / "o.exr"), "--method", "gmm",
                  "--model", str(bad)]) == 2
     err = capsys.readouterr().err
