@@ -15,18 +15,22 @@ from lfproc.io._atomic import check_output
 def register(sub, common) -> None:
     p = sub.add_parser(
         "reconstruct", parents=[common], help="reconstruct the HDR light field of a coded multi-ISO capture",
-        description="Solve, for every patch of the sensor (the dictionary's patch, every --stride pixels), the "
-                    "weighted lasso argmin_a 1/2 ||W (Phi_p D a - T_p)||^2 + mu ||a||_1 over the calibrated "
-                    "observations T of every shot (weights 1/std(T), zero where saturated or black-clipped), and "
-                    "average the overlapping patch estimates D a. The output is in the units of the light field "
-                    "the capture was simulated from (e-/s for real captures), so `lfproc evaluate OUT TRUTH` "
-                    "compares directly.")
+        description="Two methods. gmm (the default for simulate's periodic masks): for every patch, try "
+                    "disparities and covariance scales of a Gaussian prior on a sheared centre-view patch, keep "
+                    "the one of largest evidence, take its linear MMSE estimate, and combine the overlapping "
+                    "patches. dictionary (the paper's): solve the weighted lasso argmin_a 1/2 ||W (Phi_p D a - "
+                    "T_p)||^2 + mu ||a||_1 per patch and average the estimates D a. Both use the calibrated "
+                    "observations T of every shot (weights 1/std(T), saturated measurements as bounds or left "
+                    "out). The output is in the units of the light field the capture was simulated from (e-/s "
+                    "for real captures), so `lfproc evaluate OUT TRUTH` compares directly.")
     p.add_argument("capture", type=Path, metavar="CAPTURE", help="capture file (lfproc simulate / capture import)")
     add_output(p, help="light field to write (OUT.exr, or a folder of EXR views)")
-    p.add_argument("--method", default="dictionary", choices=("dictionary", "gmm"),
-                   help="dictionary: the sparse code of a learned dictionary per patch (the paper's method, "
-                        "default); gmm: disparity-sheared Gaussian patch models (lfproc.recon.reconstruct_gmm; needs "
-                        "a periodic mask, simulate --mask-period)")
+    p.add_argument("--method", default="auto", choices=("auto", "gmm", "dictionary"),
+                   help="gmm: disparity-sheared Gaussian patch models (lfproc.recon.reconstruct_gmm; needs a "
+                        "periodic random mask, simulate's default); dictionary: the sparse code of a learned "
+                        "dictionary per patch (the paper's method, lfproc.recon.reconstruct); auto (default): gmm "
+                        "when the capture's mask is periodic and random and no option of the dictionary method is "
+                        "given, else dictionary")
     p.add_argument("--model", default=None, metavar="default|FILE",
                    help="with --method gmm: the patch model, the shipped 'default' or a .npz of "
                         "lfproc.recon.train_patch_model")
@@ -40,7 +44,8 @@ def register(sub, common) -> None:
                    help="dictionary: the shipped 'default' or a dictionary .npz file")
     p.add_argument("--solver", default="admm", metavar="admm|fista|omp",
                    help="admm (default; batched, one factor per operator phase), fista, or omp (fast greedy mode)")
-    p.add_argument("--stride", type=int, default=4, help="patch spacing in pixels, 1..patch size (default 4)")
+    p.add_argument("--stride", type=int, default=None,
+                   help="patch spacing in pixels, 1..patch size (default 2 with gmm, 4 with dictionary)")
     p.add_argument("--mu", type=float, default=None,
                    help="l1 weight in units of the noise level of the patch's correlations with the atoms (default "
                         "0.5); with --scale noise relative to the patch's norm; with --scale patch relative to a "
@@ -87,23 +92,29 @@ def _numbers(text: str, option: str) -> list[float]:
         raise InputError(f"{option}: expected comma-separated numbers, got {text!r}") from None
 
 
-def _run_gmm(args) -> int:
+def _dictionary_options(args) -> list[str]:
+    """The options of --method dictionary given on the command line."""
+    given = [f"--{name.replace('_', '-')}" for name in ("mu", "tol", "max_iter", "sparsity", "scale", "overlap",
+                                                         "variance", "per_shot", "workers", "scheduler")
+             if getattr(args, name) is not None]
+    given += ["--paper"] if args.paper else []
+    given += ["--dictionary"] if args.dictionary != "default" else []
+    given += ["--solver"] if args.solver != "admm" else []
+    return given
+
+
+def _run_gmm(args, capture=None) -> int:
     # lfproc.recon loads scipy.linalg: imported when the command runs, so `lfproc --help` starts fast
     from lfproc.recon import load_patch_model, reconstruct_gmm
 
-    ignored = [f"--{name.replace('_', '-')}" for name in ("mu", "tol", "max_iter", "sparsity", "scale", "overlap",
-                                                           "variance", "per_shot", "workers", "scheduler")
-               if getattr(args, name) is not None]
-    ignored += ["--paper"] if args.paper else []
-    ignored += ["--dictionary"] if args.dictionary != "default" else []
-    ignored += ["--solver"] if args.solver != "admm" else []
+    ignored = _dictionary_options(args)
     if ignored:
         raise InputError(f"{', '.join(ignored)}: options of --method dictionary; --method gmm takes --model, "
                          "--disparities, --scales, --stride and --threads")
     check_output(args.output, force=args.force)
-    capture = load_capture(args.capture)
+    capture = load_capture(args.capture) if capture is None else capture
     model = load_patch_model(args.model or "default")
-    options = {"stride": args.stride, "threads": args.threads}
+    options = {"stride": 2 if args.stride is None else args.stride, "threads": args.threads}
     if args.disparities is not None:
         options["disparities"] = _numbers(args.disparities, "--disparities")
     if args.scales is not None:
@@ -122,15 +133,24 @@ def run(args) -> int:
     # lfproc.recon loads scipy.linalg: imported when the command runs, so `lfproc --help` starts fast
     from lfproc.recon import DEFAULTS, PAPER, reconstruct, reconstruct_per_shot
 
-    if args.method == "gmm":
-        return _run_gmm(args)
+    capture, method = None, args.method
+    if method == "auto":
+        gmm_given = args.model is not None or args.disparities is not None or args.scales is not None
+        if gmm_given or not _dictionary_options(args):
+            capture = load_capture(args.capture)
+            periodic = capture.mask.kind == "random" and capture.mask.period is not None
+            method = "gmm" if periodic or gmm_given else "dictionary"
+        else:
+            method = "dictionary"
+    if method == "gmm":
+        return _run_gmm(args, capture)
     given = [o for o, v in (("--model", args.model), ("--disparities", args.disparities), ("--scales", args.scales))
              if v is not None]
     if given:
         raise InputError(f"{', '.join(given)}: options of --method gmm, not of --method dictionary")
 
     check_output(args.output, force=args.force)
-    capture = load_capture(args.capture)
+    capture = load_capture(args.capture) if capture is None else capture
     dictionary = load_dictionary(args.dictionary)
 
     base = PAPER if args.paper else DEFAULTS  # options given explicitly win
@@ -139,7 +159,7 @@ def run(args) -> int:
                "max_iter": PAPER["max_iter"] if args.paper else None}
     options.update({k: v for k, v in (("mu", args.mu), ("tol", args.tol), ("max_iter", args.max_iter)) if v is not None})
     options.update({k: getattr(args, k) or base[k] for k in ("scale", "overlap", "variance")})
-    options.update(solver=args.solver, stride=args.stride, sparsity=args.sparsity,
+    options.update(solver=args.solver, stride=4 if args.stride is None else args.stride, sparsity=args.sparsity,
                    workers=args.workers, scheduler=args.scheduler, threads=args.threads)
     if args.per_shot is not None:
         lf = reconstruct_per_shot(capture, dictionary, merges=[args.per_shot], **options)[args.per_shot]
@@ -151,6 +171,7 @@ def run(args) -> int:
     summary = {
         "output": str(args.output),
         "capture": str(args.capture),
+        "method": "dictionary",
         "dictionary": dictionary.name or dictionary.preset,
         "solver": rec["solver"],
         "patches": rec["patches"],

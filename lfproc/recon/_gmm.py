@@ -26,10 +26,19 @@ measurement whose prediction falls below its saturation level joins the data at 
 (with its photon-noise weight) and the patch is solved again (``saturation="bound"``), so
 lights are not shrunk below what the sensor saw.
 
-Overlapping patches are combined per pixel with weights ``window / (s^2 max(1, chi2))``: a
-centre-weighted window, the inverse of the patch's scale (an error relative to the level) and
-the patch's reduced chi-square (a patch that fits its data badly, an occlusion edge, counts
-less).
+Two grids. The disparity is searched on patches every ``search_stride`` pixels (default 4),
+its evidence pooled over neighbouring patches; the estimates are made every ``stride`` pixels
+(default 2) at the disparity of the nearest search patch, with the component and scale of
+largest evidence there. With a mask of period 4 a stride of 2 overlaps every pixel with
+patches of four mask phases, whose errors differ and average out; a stride equal to the period
+prints the mask's period on the result (a grid over smooth regions, measured on the tune
+scenes: detail ratio 1.23 at stride 4, 0.99 at stride 2).
+
+Overlapping patches are combined per pixel with weights ``window / (t^2 max(1, chi2))``: a
+centre-weighted window, ``t`` the larger of the patch's level and the brightest pixel of its
+centre-view estimate (an error relative to the patch's brightest part: a patch across the edge
+of a light has a low mean but the light's error), and the patch's reduced chi-square (a patch
+that fits its data badly, an occlusion edge, counts less).
 
 The mask must be periodic (``mask_period``): every patch of a phase then shares ``A_d`` and
 ``A_d Sigma A_d^T`` (computed once per phase, disparity and component).
@@ -45,6 +54,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy import sparse
 from threadpoolctl import threadpool_limits
 
 from .._shared.validation import check_choice
@@ -299,7 +309,7 @@ def train_patch_model(images, *, patch: int = 8, margin: int = 2, components: in
                              "random_state": random_state if isinstance(random_state, (int, type(None))) else "generator"})
 
 
-def _check_capture(capture, model: PatchModel, stride: int):
+def _check_capture(capture, model: PatchModel, stride: int, name: str = "stride"):
     if capture.mask.kind != "random" or capture.mask.period is None:
         raise InputError("reconstruct_gmm: needs a capture with a periodic random mask (simulate with "
                          f"{option_name('mask_period', '--mask-period')} 4, the default); this capture's mask is {capture.mask.kind!r} with period {capture.mask.period}")
@@ -307,11 +317,12 @@ def _check_capture(capture, model: PatchModel, stride: int):
     if model.patch > min(h, w):
         raise ShapeError(f"patch model: patches of {model.patch} pixels do not fit the capture's sensor of {h} x {w}")
     if not 1 <= stride <= model.patch:
-        raise InputError(f"stride: expected 1..{model.patch} (the model's patch size), got {stride}")
+        raise InputError(f"{name}: expected 1..{model.patch} (the model's patch size), got {stride}")
 
 
-def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DEFAULT_DISPARITIES,
-                    scales=DEFAULT_SCALES, pool_radius: int = 1, search: str = "joint", saturation: str = "bound",
+def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride: int | None = None,
+                    disparities=DEFAULT_DISPARITIES,
+                    scales=DEFAULT_SCALES, pool_radius: int = 1, search: str = "staged", saturation: str = "bound",
                     chunk: int = 256, threads: int | None = None, progress_bar: bool | None = None) -> LightField:
     """Reconstruct the HDR light field of a capture with a disparity-sheared Gaussian patch model.
 
@@ -322,7 +333,12 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
     model : PatchModel, ``"default"`` or path
         The patch prior (:func:`train_patch_model`); ``"default"`` is the shipped one.
     stride : int
-        Patch spacing in pixels (1 .. the model's patch).
+        Spacing of the estimated patches in pixels (1 .. the model's patch). With a mask of period
+        4, a stride of 2 overlaps every pixel with patches of four mask phases, whose errors
+        differ, so they average out instead of printing the mask's period on the result.
+    search_stride : int, optional
+        Spacing of the patches on which the disparity is searched (default: half the model's
+        patch); every estimated patch takes the disparity of the nearest one.
     disparities : sequence of float
         Disparities tried per patch (pixels per view step), within the model's margin.
     scales : sequence of float
@@ -370,7 +386,9 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
     threads = _int_option("threads", _default_threads() if threads is None else threads)
     chunk = _int_option("chunk", chunk)
     stride = _int_option("stride", stride)
+    search_stride = _int_option("search_stride", model.patch // 2 if search_stride is None else search_stride)
     _check_capture(capture, model, stride)
+    _check_capture(capture, model, search_stride, name="search_stride")
     try:
         disparities = [float(d) for d in disparities]
     except (TypeError, ValueError):
@@ -386,7 +404,8 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
     radius = _int_option("pool_radius", pool_radius, low=0)
     nv, nu = capture.views
     p, r = model.patch, model.margin
-    shears = [np.kron(shear_matrix((nv, nu), p, r, d), np.eye(3)) for d in disparities]  # (VUPP3, EE3)
+    # S_d (V U P P 3, E E 3): at most 4 non-zeros a row (bilinear), so sparse
+    shears_sparse = [sparse.csr_matrix(np.kron(shear_matrix((nv, nu), p, r, d), np.eye(3))) for d in disparities]
 
     obs = observations(capture, variance_from="local")
     T = np.asarray(obs.radiance, np.float64)
@@ -397,65 +416,69 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
     sat = np.asarray(obs.saturated) & (saturation == "bound")
     W_sat = np.where(sat, 1.0 / np.sqrt(np.maximum(np.asarray(obs.variance, np.float64), 1e-30)), 0.0)
     h, w = capture.size
+    # two grids: the disparity is searched on patches every `search_stride` pixels (a surface is larger
+    # than a patch), the estimates are made every `stride` pixels (overlaps of several mask phases)
     tops, lefts = patch_grid((h, w), p, stride)
     gt, gl = np.repeat(tops, len(lefts)), np.tile(lefts, len(tops))
-    ops = patch_operators(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern, tops=gt, lefts=gl,
-                          size=p, sensor_size=(h, w))
-    phase = ops.index  # patches of one phase share their matrix Phi_p
+    ctops, clefts = patch_grid((h, w), p, search_stride)
+    ct, cl = np.repeat(ctops, len(clefts)), np.tile(clefts, len(ctops))
+    ops = patch_operators(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern,
+                          tops=np.concatenate([gt, ct]), lefts=np.concatenate([gl, cl]), size=p, sensor_size=(h, w))
+    phase, cphase = ops.index[:len(gt)], ops.index[len(gt):]  # patches of one phase share their matrix Phi_p
     acc = np.zeros((nv, nu, h, w, 3))
     wacc = np.zeros((h, w))
     x1 = (np.arange(p) + 0.5) / p
     win = np.outer(np.sin(np.pi * x1) ** 2 + 1e-3, np.sin(np.pi * x1) ** 2 + 1e-3)
-    bar = progress(total=len(gt), desc="reconstruct (gmm)", unit="patch",
+    bar = progress(total=len(gt) + len(ct), desc="reconstruct (gmm)", unit="patch",
                    disable=None if progress_bar is None else not progress_bar)
     log_pi = np.log(model.weights)
-    n_h = len(disparities) * model.components * len(scales)
-    scores = np.full((len(gt), n_h), -np.inf)
-    phases = {ph: _phase_matrices(ops.dense(ph).astype(np.float64), shears, model)
-              for ph in np.unique(phase)}
-    # "staged": the disparity at the scale nearest the model's own (1), the others only at that disparity
-    first = [int(np.argmin(np.abs(np.log(scales))))] if search == "staged" else list(range(len(scales)))
-    jobs = [(ph, members[start:start + chunk]) for ph in phases for members in [np.flatnonzero(phase == ph)]
+    n_s, n_k = len(scales), model.components
+    scores = np.full((len(ct), len(disparities) * n_k * n_s), -np.inf)
+    # "staged": the disparity at the scale nearest the model's own (1) only
+    first = [int(np.argmin(np.abs(np.log(scales))))] if search == "staged" else list(range(n_s))
+    cjobs = [(ph, members[start:start + chunk]) for ph in np.unique(cphase) for members in [np.flatnonzero(cphase == ph)]
+             for start in range(0, len(members), chunk)]
+    jobs = [(ph, members[start:start + chunk]) for ph in np.unique(phase) for members in [np.flatnonzero(phase == ph)]
             for start in range(0, len(members), chunk)]
-
-    def evidence(job, which):
-        ph, sel = job
-        return _evidence(T, W, gt[sel], gl[sel], p, phases[ph], log_pi, scales, which)
 
     try:
         with threadpool_limits(1), ThreadPoolExecutor(max_workers=threads) as pool:
-            # pass 1: the evidence of every hypothesis (disparity, component, scale; "staged": at scale 1 only)
-            for (ph, sel), out in zip(jobs, pool.map(lambda j: evidence(j, first), jobs)):
+            keys = np.unique(ops.index)
+            phases = dict(zip(keys, pool.map(lambda ph: _phase_matrices(ops, ph, shears_sparse, model), keys)))
+            # pass 1, search grid: the evidence of every hypothesis (disparity, component, scale)
+            for (ph, sel), out in zip(cjobs, pool.map(
+                    lambda j: _evidence(T, W, ct[j[1]], cl[j[1]], p, phases[j[0]], log_pi, scales, first), cjobs)):
                 scores[sel] = out
-                bar.update(len(sel) / 3)
-            # the disparity: the evidence pooled over the neighbouring patches (surfaces are larger than a patch;
-            # one patch's evidence alone is noisy), then the component and scale of the patch at it
-            per_d = scores.reshape(len(gt), len(disparities), -1).max(axis=2)
-            pooled = _pool(per_d.reshape(len(tops), len(lefts), -1), radius)
-            chosen_d = pooled.reshape(len(gt), -1).argmax(axis=1)
-            if search == "staged":  # the other scales, at the chosen disparity only
-                rest = [i for i in range(len(scales)) if i not in first]
-                sub = [(ph, sel[chosen_d[sel] == d], d) for ph, sel in jobs for d in np.unique(chosen_d[sel])]
-                for (ph, sel, d), out in zip(sub, pool.map(
-                        lambda j: _evidence(T, W, gt[j[1]], gl[j[1]], p, phases[j[0]], log_pi, scales, rest,
-                                            disparity=j[2]), sub)):
-                    scores[sel[:, None], out[1][None, :]] = out[0]
-            bar.update(len(gt) / 3)
-            at_d = scores.reshape(len(gt), len(disparities), -1)[np.arange(len(gt)), chosen_d]
-            chosen = chosen_d * at_d.shape[1] + at_d.argmax(axis=1)
-            # pass 2: the estimates of the chosen hypotheses, added in a fixed order
-            estimates = pool.map(lambda j: _estimate(T, W, W_sat, gt[j[1]], gl[j[1]], p, phases[j[0]], chosen[j[1]],
-                                                     shears, model, (nv, nu), scales), jobs)
-            for (ph, sel), est in zip(jobs, estimates):
+                bar.update(len(sel))
+            # the disparity: the evidence pooled over the neighbouring patches (one patch's evidence alone is
+            # noisy), read at the nearest search patch of every estimate patch
+            per_d = scores.reshape(len(ct), len(disparities), -1).max(axis=2)
+            pooled = _pool(per_d.reshape(len(ctops), len(clefts), -1), radius)
+            iy, ix = _nearest(ctops, tops), _nearest(clefts, lefts)
+            chosen_d = pooled[iy[:, None], ix[None, :]].reshape(len(gt), -1).argmax(axis=1)
+            # pass 2, estimate grid: the component and scale of largest evidence at that disparity, its estimate
+            def solve(job):
+                ph, sel = job
+                chosen, alpha = _best_at_disparity(T, W, gt[sel], gl[sel], p, phases[ph], log_pi, scales, chosen_d[sel])
+                est = _estimate(T, W, W_sat, gt[sel], gl[sel], p, phases[ph], chosen, shears_sparse, model, (nv, nu), scales,
+                                alpha=alpha)
+                est["chosen"] = chosen
+                return est
+
+            # the estimates added in a fixed order (the output does not depend on the threads)
+            chosen_all = np.zeros(len(gt), np.intp)
+            for (ph, sel), est in zip(jobs, pool.map(solve, jobs)):
+                chosen_all[sel] = est["chosen"]
                 for b, i in enumerate(sel):
                     t, l = gt[i], gl[i]
-                    wb = win * est["weight"][b]
-                    acc[:, :, t:t + p, l:l + p] += est["patches"][b] * wb[None, None, :, :, None]
-                    wacc[t:t + p, l:l + p] += wb
-                bar.update(len(sel) / 3)
+                    q = win * est["weight"][b]
+                    acc[:, :, t:t + p, l:l + p] += est["patches"][b] * q[None, None, :, :, None]
+                    wacc[t:t + p, l:l + p] += q
+                bar.update(len(sel))
     finally:
         bar.close()
     data = acc / np.maximum(wacc, 1e-300)[None, None, :, :, None]
+    del acc
     negative = float((data < 0).mean())
     np.maximum(data, 0, out=data)
     if capture.radiance_scale is not None:
@@ -465,7 +488,7 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
         units = "e-/s"
     counts = np.bincount(chosen_d, minlength=len(disparities))
     record = {"lfproc_version": __version__, "method": "gmm", "model": repr(model), "model_attrs": model.attrs,
-              "stride": stride, "disparities": disparities, "scales": scales, "pool_radius": radius, "search": search,
+              "stride": stride, "search_stride": search_stride, "disparities": disparities, "scales": scales, "pool_radius": radius, "search": search,
               "saturation": saturation,
               "disparity_counts": counts.tolist(), "patches": int(len(gt)), "negative_fraction_clipped": negative,
               "radiance_scale": capture.radiance_scale, "capture_ground_truth": capture.ground_truth,
@@ -475,15 +498,23 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 4, disparities=DE
                       source="lfproc.reconstruct_gmm", attrs={"reconstruction": record})
 
 
-def _phase_matrices(phi: np.ndarray, shears, model) -> dict:
+def _phase_matrices(ops, ph, shears_sparse, model) -> dict:
     """What every patch of one phase shares: ``A`` per disparity, ``A mu``, ``A Sigma`` and ``A Sigma A^T`` per component."""
+    phi = ops.dense(ph).astype(np.float64)  # (m, V U P P 3)
     out = {"rowsum": phi.sum(axis=1), "hyp": []}
-    for di, sh in enumerate(shears):
-        a = phi @ sh  # (m, n2)
+    for di, sh in enumerate(shears_sparse):
+        a = np.ascontiguousarray((sh.T @ phi.T).T)  # (m, n2) = Phi_p S_d
         for k in range(model.components):
             a_cov = a @ model.covariances[k]
             out["hyp"].append((di, k, a, a_cov @ a.T, a @ model.means[k], a_cov))
     return out
+
+
+def _nearest(grid: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Index of the element of the sorted ``grid`` nearest to each of ``at``."""
+    i = np.searchsorted(grid, at)
+    lo, hi = np.clip(i - 1, 0, len(grid) - 1), np.clip(i, 0, len(grid) - 1)
+    return np.where(np.abs(grid[lo] - at) <= np.abs(grid[hi] - at), lo, hi)
 
 
 def _normalised(T, W, tops, lefts, p, rowsum):
@@ -529,12 +560,35 @@ def _pool(per_d: np.ndarray, radius: int) -> np.ndarray:
     return uniform_filter(np.maximum(rel, -50.0), size=(2 * radius + 1, 2 * radius + 1, 1), mode="nearest")
 
 
-def _estimate(T, W, W_sat, tops, lefts, p, phase, chosen, shears, model, views, scales) -> dict:
-    """The estimate of each patch under its chosen hypothesis, and its overlap weight."""
+def _best_at_disparity(T, W, tops, lefts, p, phase, log_pi, scales, chosen_d):
+    """The hypothesis (component, scale) of largest evidence of each patch at its disparity ``chosen_d``, and
+    its ``alpha`` (:func:`_wiener`), so :func:`_estimate` does not factorise again."""
+    yn, wn, _ = _normalised(T, W, tops, lefts, p, phase["rowsum"])
+    n_s = len(scales)
+    best = np.full(len(yn), -np.inf)
+    chosen = np.zeros(len(yn), np.intp)
+    alpha = np.zeros_like(yn)
+    for d in np.unique(chosen_d):
+        rows = np.flatnonzero(chosen_d == d)
+        for j, (di, k, a, kmat, a_mu, a_cov) in enumerate(phase["hyp"]):
+            if di != d:
+                continue
+            for si, sc in enumerate(scales):
+                score, al = _wiener(sc * kmat, a_mu, yn[rows], wn[rows], log_pi[k] - math.log(n_s))
+                better = score > best[rows]
+                best[rows[better]] = score[better]
+                chosen[rows[better]] = j * n_s + si
+                alpha[rows[better]] = al[better]
+    return chosen, alpha
+
+
+def _estimate(T, W, W_sat, tops, lefts, p, phase, chosen, shears_sparse, model, views, scales, alpha=None) -> dict:
+    """The estimate of each patch under its chosen hypothesis, and its overlap weight (``alpha``: the first
+    solution of every patch, when known)."""
     yn, wn, level = _normalised(T, W, tops, lefts, p, phase["rowsum"])
     ws = _gather(W_sat, tops, lefts, p) * level[:, None]
     b_n = len(yn)
-    patches = np.zeros((b_n, len(shears[0])))
+    patches = np.zeros((b_n, shears_sparse[0].shape[0]))
     weight = np.zeros(b_n)
     n_s = len(scales)
     for h in np.unique(chosen):
@@ -542,19 +596,23 @@ def _estimate(T, W, W_sat, tops, lefts, p, phase, chosen, shears, model, views, 
         di, k, a, kmat, a_mu, a_cov = phase["hyp"][h // n_s]
         sc = scales[h % n_s]
         wg = wn[g].copy()
-        _, alpha = _wiener(sc * kmat, a_mu, yn[g], wg, 0.0)
-        x = model.means[k][None] + sc * (wg * alpha) @ a_cov
+        al = _wiener(sc * kmat, a_mu, yn[g], wg, 0.0)[1] if alpha is None else alpha[g]
+        x = model.means[k][None] + sc * (wg * al) @ a_cov
         for _ in range(2):  # saturated measurements below their level join the data as bounds (module notes)
             low = (ws[g] > 0) & (x @ a.T < yn[g])
-            if not low.any():
+            redo = np.flatnonzero(low.any(axis=1))  # only the patches with a bound to add are solved again
+            if not len(redo):
                 break
-            wg = np.where(low, ws[g], wn[g])
-            _, alpha = _wiener(sc * kmat, a_mu, yn[g], wg, 0.0)
-            x = model.means[k][None] + sc * (wg * alpha) @ a_cov
+            wg[redo] = np.where(low[redo], ws[g[redo]], wn[g[redo]])
+            al = _wiener(sc * kmat, a_mu, yn[g[redo]], wg[redo], 0.0)[1]
+            x[redo] = model.means[k][None] + sc * (wg[redo] * al) @ a_cov
         res = (x @ a.T - yn[g]) * wg
         chi2 = (res * res).sum(axis=1) / np.maximum((wg > 0).sum(axis=1), 1)
-        patches[g] = np.maximum(x @ shears[di].T, 0.0) * level[g, None]  # radiance is not negative
-        weight[g] = 1.0 / (level[g] ** 2 * np.maximum(chi2, 1.0))
+        patches[g] = np.maximum(np.asarray((shears_sparse[di] @ x.T).T), 0.0) * level[g, None]  # radiance >= 0
+        # the error of a patch is relative to its brightest part (its mean understates it across the edge of a light)
+        centre = patches[g].reshape(len(g), views[0], views[1], p, p, 3)[:, views[0] // 2, views[1] // 2]
+        top = np.maximum(centre.mean(axis=3).max(axis=(1, 2)), level[g])
+        weight[g] = 1.0 / (top ** 2 * np.maximum(chi2, 1.0))
     return {"patches": patches.reshape(b_n, *views, p, p, 3), "weight": weight}
 
 
@@ -563,8 +621,10 @@ def _wiener(kmat, a_mu, y, w, log_prior, want_solution=True):
     import scipy.linalg as sl
 
     m = len(kmat)
-    c = w[:, :, None] * kmat[None] * w[:, None, :]
-    c[:, np.arange(m), np.arange(m)] += 1.0
+    c = np.empty((len(w), m, m))  # W K W + I, formed in place (no (B, m, m) temporaries)
+    np.multiply(kmat[None], w[:, :, None], out=c)
+    c *= w[:, None, :]
+    c.reshape(len(w), -1)[:, ::m + 1] += 1.0
     chol = np.linalg.cholesky(c)
     r = w * (y - a_mu[None])
     z = sl.solve_triangular(chol, r[..., None], lower=True)[..., 0]

@@ -109,7 +109,7 @@ def test_cli_import_then_info(simulated, files, tmp_path, capsys):
 
 @pytest.mark.slow  # import and reconstruction
 def test_dng_capture_imports_then_reconstructs(simulated, files, tmp_path, capsys):
-    """DNG -> ``lfproc capture import`` -> ``lfproc reconstruct`` (default dictionary). Reference: the
+    """DNG -> ``lfproc capture import`` -> ``lfproc reconstruct`` (both methods). Reference: the
     reconstruction of the simulated capture the DNGs were written from; the imported capture has
     no radiance scale, so its light field is in e-/s, the simulated one's times its radiance scale."""
     from lfproc.io import read_lightfield
@@ -120,9 +120,12 @@ def test_dng_capture_imports_then_reconstructs(simulated, files, tmp_path, capsy
                  "--exposures-s", "0.004,0.008", "-o", str(cap)]) == 0
     capsys.readouterr()
     real, sim = tmp_path / "real.exr", tmp_path / "sim.exr"
-    assert main(["reconstruct", str(cap), "-o", str(real), "--json"]) == 0
+    assert main(["reconstruct", str(cap), "-o", str(tmp_path / "dict.exr"), "--method", "dictionary", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["dictionary"] == "default" and summary["solver"] == "admm" and summary["patches"] > 0
+    assert main(["reconstruct", str(cap), "-o", str(real), "--json"]) == 0  # the default: gmm (periodic mask)
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["method"] == "gmm" and summary["patches"] > 0
     assert main(["reconstruct", str(files["capture"]), "-o", str(sim)]) == 0
     a, b = read_lightfield(real), read_lightfield(sim)
     assert a.units == "e-/s" and a.shape == b.shape == (5, 5, H, W, 3)

@@ -189,13 +189,20 @@ def test_cli_method_gmm(tmp_path, capsys):
     capsys.readouterr()
     bad_cases = [  # (capture, options, what the one line says)
         (cap, ["--method", "gmm", "--mu", "1"], "--mu: options of --method dictionary"),
-        (cap, ["--model", "x.npz"], "--model: options of --method gmm"),
+        (cap, ["--method", "dictionary", "--model", "x.npz"], "--model: options of --method gmm"),
+        (cap, ["--model", str(tmp_path / "none.npz")], "patch model file not found"),  # auto: --model means gmm
+        (flat, ["--scales", "1"], "--mask-period 4"),  # auto with a gmm option on a non-periodic capture
         (cap, ["--method", "gmm", "--disparities", "a,b"], "--disparities: expected comma-separated numbers"),
         (cap, ["--method", "gmm", "--model", str(tmp_path / "none.npz")], "patch model file not found"),
         (cap, ["--method", "gmm", "--scales", "0"], "scales: expected positive numbers"),
         (cap, ["--method", "gmm", "--stride", "0"], "stride: expected an integer >= 1"),
         (flat, ["--method", "gmm"], "--mask-period 4"),
     ]
+    # auto (the default): gmm for the periodic capture, dictionary for the other or with a dictionary option
+    for capture, extra, method in ((cap, [], "gmm"), (flat, [], "dictionary"), (cap, ["--mu", "0.5"], "dictionary")):
+        target = tmp_path / f"auto_{method}.exr"
+        assert main(["reconstruct", str(capture), "-o", str(target), "--json", "--force", *extra]) == 0
+        assert f'"method": "{method}"' in capsys.readouterr().out, (capture, extra)
     for capture, extra, message in bad_cases:
         target = tmp_path / "bad.exr"
         assert main(["reconstruct", str(capture), "-o", str(target), *extra]) == 2
