@@ -21,10 +21,12 @@ atoms of Vagharshakyan et al., TPAMI 2018). The systems are ``m x m`` (``m`` mea
 patch, 128 for two 8 x 8 shots), solved by batched Cholesky factorisations in the whitened
 form ``W K W + I`` (``W = diag(w)``), which keeps saturated measurements out exactly.
 
-Saturated measurements are lower bounds, not missing data: after a first estimate, a saturated
-measurement whose prediction falls below its saturation level joins the data at that level
-(with its photon-noise weight) and the patch is solved again (``saturation="bound"``), so
-lights are not shrunk below what the sensor saw.
+Saturated measurements are lower bounds, not missing data (``saturation="bound"``): one with
+unsaturated neighbours of its colour above its bound takes their level as a weak datum (on the
+bright side of an edge: :func:`_impute_saturated`); after a first estimate, the others whose
+prediction falls below their saturation level join the data at that level (with their
+photon-noise weight) and the patch is solved again, so lights are not shrunk below what the
+sensor saw.
 
 Two grids. The disparity is searched on patches every ``search_stride`` pixels (default 4),
 its evidence pooled over neighbouring patches; the estimates are made every ``stride`` pixels
@@ -415,6 +417,11 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
                          "reconstruct from")
     sat = np.asarray(obs.saturated) & (saturation == "bound")
     W_sat = np.where(sat, 1.0 / np.sqrt(np.maximum(np.asarray(obs.variance, np.float64), 1e-30)), 0.0)
+    if saturation == "bound":
+        from ..camera.projection import transmittance_map
+
+        r = transmittance_map(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern, size=capture.size)
+        T, W, W_sat = _impute_saturated(T, W, sat, W_sat, r)
     h, w = capture.size
     # two grids: the disparity is searched on patches every `search_stride` pixels (a surface is larger
     # than a patch), the estimates are made every `stride` pixels (overlaps of several mask phases)
@@ -496,6 +503,59 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
     return LightField(data=data.astype(np.float32), units=units,
                       colour_space="camera-rgb" if capture.radiance_scale is None else "linear-srgb",
                       source="lfproc.reconstruct_gmm", attrs={"reconstruction": record})
+
+
+#: Saturated measurements (:func:`_impute_saturated`): neighbourhood radius (colour-plane pixels), relative std.
+_IMPUTE_RADIUS = 2
+_IMPUTE_REL_STD = 1.0
+
+
+def _impute_saturated(T, W, sat, W_sat, r):
+    """Saturated measurements given the radiance of their unsaturated neighbours that is above their bound.
+
+    A saturated measurement says only ``L >= B`` (``B = T / r``, its saturation level over its
+    transmittance ``r``). The unsaturated measurements of the same Bayer colour within
+    ``_IMPUTE_RADIUS`` colour-plane pixels (every shot) whose ``L = T / r`` is at least ``B`` are
+    on the bright side of any edge; the midpoint of their mean and their maximum becomes the
+    measurement's value, with a relative standard deviation of ``_IMPUTE_REL_STD`` (a weak datum:
+    it keeps the patch prior from interpolating across the edge, the measurements decide the rest).
+    Where fewer than two such neighbours exist the measurement stays a bound.
+
+    Why: a light seen by a quarter of the pixels (the lowest ISO) has most of its pixels saturated;
+    a Gaussian patch prior interpolates them from both sides of the light's edge and darkens the
+    edge. Measured (tests/test_reconstruct_gmm.py's light, 16 pixels square, 12 stops above its
+    floor, medium noise): 69 % of its energy kept without, 88 % with. The statistic and the standard
+    deviation were chosen on crops of the tune scenes (mean, maximum and their midpoint; 0.25,
+    0.5, 1): the mean loses peaks, the maximum adds texture that is not there.
+    """
+    shots = T.shape[0]
+    L = np.where(r > 0, T / np.maximum(r, 1e-30), 0.0)
+    usable = W > 0
+    total, count = np.zeros_like(T), np.zeros_like(T)
+    rad = _IMPUTE_RADIUS
+    for a in (0, 1):
+        for b in (0, 1):
+            lp = np.pad(L[:, a::2, b::2], ((0, 0), (rad, rad), (rad, rad)))
+            up = np.pad(usable[:, a::2, b::2], ((0, 0), (rad, rad), (rad, rad)))
+            bound = L[:, a::2, b::2]
+            sp = sat[:, a::2, b::2]
+            h2, w2 = bound.shape[1:]
+            tot, cnt, top = np.zeros(bound.shape), np.zeros(bound.shape), np.zeros(bound.shape)
+            for dy in range(2 * rad + 1):
+                for dx in range(2 * rad + 1):
+                    for s2 in range(shots):
+                        cand = lp[s2, dy:dy + h2, dx:dx + w2]
+                        ok = up[s2, dy:dy + h2, dx:dx + w2][None] & (cand[None] >= bound) & sp
+                        top = np.maximum(top, np.where(ok, cand[None], 0.0))
+                        tot += np.where(ok, cand[None], 0.0)
+                        cnt += ok
+            mean = tot / np.maximum(cnt, 1)
+            total[:, a::2, b::2] = 0.5 * (mean + top)
+            count[:, a::2, b::2] = cnt
+    fill = sat & (count >= 2)
+    value = np.where(fill, r * total, T)
+    weight = np.where(fill, 1.0 / (_IMPUTE_REL_STD * np.maximum(value, 1e-30)), W)
+    return value, weight, np.where(fill, 0.0, W_sat)
 
 
 def _phase_matrices(ops, ph, shears_sparse, model) -> dict:

@@ -119,6 +119,10 @@ def test_dark_floor_beside_a_light_12_stops_brighter():
     # flat inside: patches across the light's edge underestimate it, and weighted by their own (low) mean they
     # printed it with a 22 % spread (measured); weighted by their brightest part, 4 %
     assert light.std() / 4096.0 < 0.08, light.std() / 4096.0
+    # the whole light, edges included: 69 % of its energy when the prior interpolated its saturated pixels across
+    # the edge, 88 % with the saturated measurements given their bright neighbours' level (measured)
+    energy = out[:, :, 16:32, 16:32].sum() / data[:, :, 16:32, 16:32].sum()
+    assert energy > 0.85, energy
 
 
 def test_input_is_not_mutated_and_the_result_records_its_settings():
@@ -318,3 +322,29 @@ def test_a_model_file_announcing_a_huge_array_is_refused_before_reading_it(tmp_p
         load_patch_model(huge)
     with pytest.raises(InputError, match="expected 'default', a path or a PatchModel"):
         load_patch_model(3)
+
+
+def test_saturated_measurement_takes_the_level_of_its_neighbours_above_its_bound():
+    """Known answer for ``_impute_saturated``: one saturated measurement (bound 10) among same-colour
+    neighbours at 4 (below its bound: the dark side of an edge, ignored), 20 and 40 (above): its value is
+    the midpoint of their mean (30) and maximum (40), 35, times its transmittance, weight 1/(1.0 * value)."""
+    from lfproc.recon._gmm import _impute_saturated
+
+    T = np.full((1, 12, 12), 4.0)
+    r = np.full((1, 12, 12), 2.0)
+    T[0, 6, 6] = 10.0 * 2.0  # saturated: its value is the bound B times r
+    T[0, 4, 6], T[0, 8, 6] = 20.0 * 2.0, 40.0 * 2.0  # same Bayer plane (even rows and columns), two plane pixels away
+    T[0, 6, 4] = 3.0 * 2.0  # below the bound: not a candidate
+    W = np.ones_like(T)
+    sat = np.zeros(T.shape, bool)
+    sat[0, 6, 6] = True
+    W[sat] = 0.0
+    W_sat = np.where(sat, 0.5, 0.0)
+    value, weight, w_sat = _impute_saturated(T, W, sat, W_sat, r)
+    assert value[0, 6, 6] == pytest.approx(35.0 * 2.0)
+    assert weight[0, 6, 6] == pytest.approx(1.0 / 70.0) and w_sat[0, 6, 6] == 0.0
+    np.testing.assert_array_equal(value[~sat], T[~sat])  # the others are untouched
+    # fewer than two candidates: it stays a bound
+    T[0, 8, 6] = 2.0
+    value, weight, w_sat = _impute_saturated(T, W, sat, W_sat, r)
+    assert value[0, 6, 6] == 20.0 and weight[0, 6, 6] == 0.0 and w_sat[0, 6, 6] == 0.5
