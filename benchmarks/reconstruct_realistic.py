@@ -29,7 +29,8 @@ pixel (the views' codes summed).
 
 Capture names: ``"<shots> <iso pattern>"`` with pattern random, row or block, optionally
 followed by a profile suffix ``none``/``low``/``medium``/``high`` (the paper's noise levels),
-e.g. ``"2 random high"``.
+e.g. ``"2 random high"``; ``"4 bracketing"`` is the paper's bracketing baseline (global ISO, 2-4
+shots at growing exposures, each reconstructed alone, merged with Debevec weights).
 """
 
 from __future__ import annotations
@@ -52,10 +53,26 @@ from reconstruct import gemm_rate  # noqa: E402
 
 def parse_capture(name: str) -> dict:
     parts = name.split()
-    if len(parts) not in (2, 3) or not parts[0].isdigit() or parts[1] not in ("random", "row", "block"):
-        raise SystemExit(f"--captures: expected names like '2 random' or '2 random high', got {name!r}")
+    if len(parts) not in (2, 3) or not parts[0].isdigit() or parts[1] not in ("random", "row", "block", "bracketing"):
+        raise SystemExit(f"--captures: expected names like '2 random', '2 random high' or '4 bracketing', got {name!r}")
     noise = parts[2] if len(parts) == 3 else "medium"
+    if parts[1] == "bracketing":  # the paper's baseline: global-ISO shots at growing exposures, each reconstructed
+        return dict(shots=int(parts[0]), baseline="bracketing", profile=f"paper-{noise}")
     return dict(shots=int(parts[0]), iso_pattern_kind=parts[1], profile=f"paper-{noise}")
+
+
+def reconstruct_capture(cap, method, options):
+    """One reconstruction; a bracketing capture's shots are reconstructed alone and merged (Debevec weights,
+    ``lfproc.bench.baselines.merge_reconstructions``, as ``lfproc.bench.reconstruct_per_shot`` does)."""
+    from lfproc.bench.baselines import merge_reconstructions, split_shots
+
+    if cap.parameters.get("baseline") is None:
+        return method(cap, **options)
+    shots = split_shots(cap)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        recs = [method(s, **options) for s in shots]
+    return merge_reconstructions(recs, shots, merge="debevec")
 
 
 def figures(result, truth, floor: float) -> dict:
@@ -109,7 +126,7 @@ def main() -> None:
         for name in names:
             cap = simulate_capture(lf, mask_period=period, random_state=seed, **parse_capture(name))
             t = time.perf_counter()
-            out = method(cap, **options)
+            out = reconstruct_capture(cap, method, options)
             seconds = time.perf_counter() - t
             f = figures(out, lf, noise_floor(cap))  # lfproc.camera.capture.noise_floor
             f["seconds"] = seconds
