@@ -69,7 +69,7 @@ from .. import _untrusted as ut
 from .._shared.patches import patch_grid
 from .._shared.random import check_random_state
 from ..camera.capture import Capture, load_capture, observations
-from ..camera.projection import patch_operators
+from ..camera.projection import patch_operators, transmittance_map
 from ..io._atomic import atomic_file
 
 __all__ = ["PatchModel", "train_patch_model", "load_patch_model", "reconstruct_gmm", "shear_matrix",
@@ -418,8 +418,6 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
     sat = np.asarray(obs.saturated) & (saturation == "bound")
     W_sat = np.where(sat, 1.0 / np.sqrt(np.maximum(np.asarray(obs.variance, np.float64), 1e-30)), 0.0)
     if saturation == "bound":
-        from ..camera.projection import transmittance_map
-
         r = transmittance_map(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern, size=capture.size)
         T, W, W_sat = _impute_saturated(T, W, sat, W_sat, r)
     h, w = capture.size
