@@ -231,7 +231,7 @@ def main(argv=None) -> int:
         size = output_shape(illum_grid(SENSOR_SIZES["full"], random_state=0))
         lf = synthesize("layers", size=size, views=5, baseline_px=0.5, random_state=args.seed)
         t = time.perf_counter()
-        make_virtual_illum(lf, cam, sensor="full", exposures_ev=[0], seed=args.seed, force=True)
+        make_virtual_illum(lf, cam, sensor="full", exposures_ev=[0], random_state=args.seed, force=True)
         report["render_s"] = time.perf_counter() - t
     info = json.loads((cam / "truth.json").read_text())
     if not (db / "whites.json").is_file():

@@ -51,7 +51,7 @@ def main():
     for norm in ("l2", "none"):
         t0 = time.perf_counter()
         d = train_dictionary(preset="default", synthetic=True, patch=patch, atoms=args.atoms, patches=args.patches,
-                             iterations=args.iterations, sparsity=args.sparsity, normalise=norm, seed=0)
+                             max_iter=args.iterations, n_nonzero_coefs=args.sparsity, normalise=norm, random_state=0)
         seconds = time.perf_counter() - t0
         r = evaluate_dictionary(d, tests)
         print(f"{norm:>9} {seconds:>8.0f} {r['pu21_psnr_db']:>10.2f} {r['relative_error']:>10.3f} "

@@ -28,7 +28,7 @@ def make_patches(path: Path, n_patches: int, seed: int) -> None:
     from lfproc.dictionary._train import synthetic_lightfields
 
     p = PRESETS["paper"]
-    lfs = list(synthetic_lightfields(p.synthetic_scenes, views=p.patch[:2], size=p.synthetic_size, seed=seed))
+    lfs = list(synthetic_lightfields(p.synthetic_scenes, views=p.patch[:2], size=p.synthetic_size, random_state=seed))
     x, _ = training_patches(lfs, patch=p.patch, n_patches=n_patches, random_state=seed)
     del lfs
     np.save(path, x)

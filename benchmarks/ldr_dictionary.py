@@ -54,11 +54,11 @@ def main() -> None:
 
     preset = get_preset("tiny")
     t0 = time.perf_counter()
-    hdr = train_dictionary(preset="tiny", synthetic=True, seed=0)
+    hdr = train_dictionary(preset="tiny", synthetic=True, random_state=0)
     t_hdr = time.perf_counter() - t0
-    scenes = list(synthetic_lightfields(preset.synthetic_scenes, size=preset.synthetic_size, seed=0))
+    scenes = list(synthetic_lightfields(preset.synthetic_scenes, size=preset.synthetic_size, random_state=0))
     t0 = time.perf_counter()
-    ldr = train_dictionary(clipped(scenes, np.random.default_rng(0)), preset="tiny", seed=0)
+    ldr = train_dictionary(clipped(scenes, np.random.default_rng(0)), preset="tiny", random_state=0)
     t_ldr = time.perf_counter() - t0
     print(f"trained: hdr {t_hdr:.0f} s, ldr {t_ldr:.0f} s (tiny preset: patch {hdr.patch}, {hdr.n_atoms} atoms)")
     tests = {"layers": synthesize("layers", size=(args.size, args.size), random_state=11),

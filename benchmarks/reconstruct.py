@@ -60,7 +60,7 @@ def dictionary_for(case: str):
             d = load_dictionary("default")
             return d, "shipped default"
         except Exception:  # noqa: BLE001 - not shipped yet: the stand-in
-            return dct_dictionary((5, 5, 8, 8, 3), 2600, sparsity=10), "DCT stand-in (n=4800, K=2600)"
+            return dct_dictionary((5, 5, 8, 8, 3), 2600, n_nonzero_coefs=10), "DCT stand-in (n=4800, K=2600)"
     rng = np.random.default_rng(0)
     patch = (5, 5, 9, 9, 3)
     n = int(np.prod(patch))

@@ -103,7 +103,7 @@ def oracle(dictionary, lf) -> dict:
     from lfproc.dictionary import approximate
     from lfproc.metrics import evaluate
 
-    approx = approximate(dictionary, lf, sparsity=10, stride=4)
+    approx = approximate(dictionary, lf, n_nonzero_coefs=10, stride=4)
     out = lfproc.LightField(np.maximum(approx, 0).astype(np.float32), units=lf.units)
     return evaluate(out, lf)
 

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from lfproc._deprecate import renamed_keywords
 from lfproc._shared.validation import check_choice
 from lfproc._shared.random import check_random_state
 from lfproc._shared.progress import progress
@@ -81,6 +82,7 @@ MAX_FRAME_SIDE = 16384
 MAX_FRAME_PIXELS = 1 << 24
 
 
+@renamed_keywords(seed="random_state")
 def simulate_frames(
     profile,
     out_dir: str | os.PathLike,
@@ -88,7 +90,7 @@ def simulate_frames(
     format: str = "manifest",
     isos=None,
     size: tuple[int, int] = (128, 128),
-    seed: int | None = 0,
+    random_state: int | None = 0,
     force: bool = False,
 ) -> Path:
     """Write the calibration frames ``profile`` predicts.
@@ -104,8 +106,9 @@ def simulate_frames(
         ``"emva"`` takes one ISO.
     size : (H, W)
         Frame size in pixels.
-    seed : int, optional
-        Seed of the temporal noise (the fixed pattern follows ``profile.fixed_pattern_seed``).
+    random_state : int, optional
+        Seed of the temporal noise (the fixed pattern follows ``profile.fixed_pattern_seed``); recorded
+        as ``"seed"``. The keyword ``seed`` is deprecated.
     force : bool
         Replace an existing ``out_dir``.
 
@@ -133,6 +136,7 @@ def simulate_frames(
             raise InputError(f"isos: an EMVA 1288 data set has one ISO; got {len(iso_list)} ({iso_list})")
     for iso in iso_list:
         profile.require(iso, "gain_dn_per_e", "read_noise_e", "full_well_e")
+    seed = random_state
     rng = check_random_state(seed)
     out_dir = Path(out_dir)
     params: dict[str, Any] = {"lfproc_version": __version__, "profile": profile.name, "format": format,

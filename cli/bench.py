@@ -46,7 +46,7 @@ def run(args) -> int:
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers: expected a positive number, got {args.workers}")
     result = run_bench(args.scenes, args.output, preset=args.preset, dictionary=args.dictionary,
-                       workers=args.workers, scheduler=args.scheduler, force=args.force, seed=args.seed)
+                       workers=args.workers, scheduler=args.scheduler, force=args.force, random_state=args.seed)
     failed = result["failed"]
     summary = {k: v for k, v in result.items() if k != "rows"}
     summary["failed"] = len(failed)

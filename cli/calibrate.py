@@ -66,7 +66,7 @@ def _simulate(args) -> int:
         raise InputError(f"{SIMULATE}: --profile is required (a shipped profile name or a profile JSON)")
     size = parse_size(args.size, option="--size") if args.size else (128, 128)
     path = simulate_frames(args.profile, args.output, format=args.format or "manifest", isos=args.iso, size=size,
-                           seed=0 if args.seed is None else args.seed, force=args.force)
+                           random_state=0 if args.seed is None else args.seed, force=args.force)
     emit({"output": str(args.output), "index": str(path), "format": args.format or "manifest",
           "size": list(size), "seed": 0 if args.seed is None else args.seed}, as_json=args.json)
     return 0

@@ -106,8 +106,8 @@ def run_train(args) -> int:
     checkpoint = args.checkpoint or args.output.with_name(args.output.name + ".ckpt")
     start = time.perf_counter()
     d = train_dictionary(lfs, preset=args.preset, synthetic=args.synthetic, patch=patch, atoms=args.atoms,
-                         sparsity=args.sparsity, iterations=args.iterations, patches=args.patches,
-                         normalise=args.normalise, seed=args.seed, checkpoint=checkpoint, scheduler=args.scheduler,
+                         n_nonzero_coefs=args.sparsity, max_iter=args.iterations, patches=args.patches,
+                         normalise=args.normalise, random_state=args.seed, checkpoint=checkpoint, scheduler=args.scheduler,
                          command=_command(args),
                          sources=[f"{f} ({lf.source})" if lf.source else str(f) for f, lf in zip(files, lfs)])
     save_dictionary(d, args.output, dtype=args.dtype, force=args.force)
@@ -145,7 +145,7 @@ def run_eval(args) -> int:
         raise InputError(f"--peak-luminance: expected a positive number, got {args.peak_luminance}")
     lfs = [read_lightfield(f, nonfinite=args.nonfinite, negative=args.negative)
            for f in collect_lightfields(args.inputs)]
-    result = evaluate_dictionary(d, lfs, sparsity=args.sparsity, stride=args.stride, compare_dct=not args.no_dct,
+    result = evaluate_dictionary(d, lfs, n_nonzero_coefs=args.sparsity, stride=args.stride, compare_dct=not args.no_dct,
                                  peak_luminance=args.peak_luminance)
     if not args.json:
         result = {k: v for k, v in result.items() if k != "lightfields"}

@@ -55,7 +55,7 @@ def register(sub, common) -> None:
 
 #: the CLI options of merge_files' parameters, for its messages
 _OPTION_NAMES = {"profile": "--profile", "exposures_s": "--exposures-s", "isos": "--isos", "white_db": "--white-db",
-                 "n_iter": "--iterations", "method": "--method"}
+                 "max_iter": "--iterations", "method": "--method"}
 
 
 def run(args) -> int:
@@ -86,7 +86,7 @@ def run(args) -> int:
     isos = parse_floats(args.isos, option="--isos") if args.isos else None
     merged, info = merge_files(args.inputs, method=args.method, profile=args.profile, exposures_s=exposures,
                                isos=isos, white_db=args.white_db,
-                               n_iter=2 if args.iterations is None else args.iterations, random_state=args.seed,
+                               max_iter=2 if args.iterations is None else args.iterations, random_state=args.seed,
                                option_names=_OPTION_NAMES, nonfinite=args.nonfinite, negative=args.negative)
     response_text = None
     if args.response_out is not None:

@@ -159,7 +159,7 @@ def run(args) -> int:
                "max_iter": PAPER["max_iter"] if args.paper else None}
     options.update({k: v for k, v in (("mu", args.mu), ("tol", args.tol), ("max_iter", args.max_iter)) if v is not None})
     options.update({k: getattr(args, k) or base[k] for k in ("scale", "overlap", "variance")})
-    options.update(solver=args.solver, stride=4 if args.stride is None else args.stride, sparsity=args.sparsity,
+    options.update(solver=args.solver, stride=4 if args.stride is None else args.stride, n_nonzero_coefs=args.sparsity,
                    workers=args.workers, scheduler=args.scheduler, threads=args.threads)
     if args.per_shot is not None:
         lf = reconstruct_per_shot(capture, dictionary, merges=[args.per_shot], **options)[args.per_shot]

@@ -37,7 +37,7 @@ def run(args) -> int:
     evs = parse_floats(args.exposures_ev, option="--exposures-ev")
     check_output(args.output, force=args.force)
     lf = read_lightfield(args.lightfield, nonfinite=args.nonfinite, negative=args.negative)
-    info = make_virtual_illum(lf, args.output, sensor=args.sensor, exposures_ev=evs, seed=args.seed,
+    info = make_virtual_illum(lf, args.output, sensor=args.sensor, exposures_ev=evs, random_state=args.seed,
                               base_exposure_s=args.exposure_s, iso=args.iso, force=args.force)
     emit({"output": str(args.output), "serial": info["serial"], "sensor_size": info["sensor_size"],
           "captures": [c["file"] for c in info["captures"]], "caldata": info["caldata"],

@@ -122,7 +122,7 @@ def stage_virtual_illum(ctx: _Context) -> dict[str, Any]:
     apart, with the camera's calibration data (white images) and the views a perfect decoder returns."""
     c = ctx.config
     info = make_virtual_illum(ctx.state["scene"], ctx.path("illum/camera"), sensor="small",
-                              exposures_ev=c.exposures_ev, seed=c.seed)
+                              exposures_ev=c.exposures_ev, random_state=c.seed)
     ctx.state["illum"] = info
     return {
         "sensor": info["sensor_size"],
@@ -292,7 +292,7 @@ def stage_calibrate(ctx: _Context) -> dict[str, Any]:
     base = load_profile(f"paper-{c.noise}")
     noisy = base.with_noise(read_noise_e=2.0, dark_current_e_per_s=50.0, name="demo-sensor-truth")
     truth = replace(noisy, isos={iso: f for iso, f in noisy.isos.items() if iso in c.isos})
-    manifest = simulate_frames(truth, ctx.path("calibration/simulated"), size=(96, 96), seed=c.seed)
+    manifest = simulate_frames(truth, ctx.path("calibration/simulated"), size=(96, 96), random_state=c.seed)
     _frames_contact_sheet(manifest, ctx.path("calibration/frames_contact_sheet.png"))
     result = calibrate(manifest, name="demo-sensor")
     profile = result.profile

@@ -828,7 +828,7 @@ def make_manifest_reader(work: Path) -> Reader:
 
     out = work / "frames"
     if not out.exists():
-        simulate_frames("paper-low", out, isos=[100], size=(8, 8), seed=0)
+        simulate_frames("paper-low", out, isos=[100], size=(8, 8), random_state=0)
     # seeds: the first rows of each kind (the frames they name are linked into each case)
     import csv as _csv
 

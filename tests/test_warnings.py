@@ -122,9 +122,9 @@ def _bracket():
 
 def test_ml_merge_warns_when_its_fixed_point_has_not_converged():
     dn = _bracket()
-    x0, _, _ = merge_ml(dn, exposures_s=TIMES, isos=100, profile="illum", n_iter=0)
+    x0, _, _ = merge_ml(dn, exposures_s=TIMES, isos=100, profile="illum", max_iter=0)
     with pytest.warns(ConvergenceWarning, match=r"ML merge: the weights did not converge in 1 fixed-point") as rec:
-        x1, v1, info1 = merge_ml(dn, exposures_s=TIMES, isos=100, profile="illum", n_iter=1)
+        x1, v1, info1 = merge_ml(dn, exposures_s=TIMES, isos=100, profile="illum", max_iter=1)
     # the count in the message, recomputed from two runs: samples the one update moved by more
     # than ML_TOLERANCE_STD of their standard deviation
     usable = info1["n_used"] > 0
@@ -136,7 +136,7 @@ def test_ml_merge_warns_when_its_fixed_point_has_not_converged():
     assert info2["converged"] is True
     step2 = np.abs(x2 - x1)[usable] / np.sqrt(v2[usable])  # what the second update moved
     assert 0.01 < step2.max() < 0.15  # well inside the tolerance (0.25 sd): 0.025 on this bracket
-    assert merge_ml(dn, exposures_s=TIMES, isos=100, profile="illum", n_iter=0)[2]["converged"] is None
+    assert merge_ml(dn, exposures_s=TIMES, isos=100, profile="illum", max_iter=0)[2]["converged"] is None
 
 
 # -- Lytro grid -----------------------------------------------------------------------------------

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from .._deprecate import renamed_keywords
 from .._shared.hashing import file_sha256
 from .._shared.progress import progress
 from .._shared.jsonable import to_jsonable
@@ -196,6 +197,77 @@ def _is_done(path: Path) -> bool:
         return False
 
 
+def _prepare_bench_dir(out: Path, *, force: bool) -> Path:
+    """The bench folder ``out`` checked (a folder lfproc made as a bench, or empty, or ``force``) and its
+    ``cells`` folder made and cleaned of killed runs' temporaries; returns the cells folder."""
+    marker = out / "bench.json"
+    if out.exists() and not out.is_dir():
+        raise OutputExistsError(f"{out}: exists and is not a folder; expected a bench folder")
+    if out.is_dir() and any(out.iterdir()) and not marker.is_file() and not force:
+        raise OutputExistsError(f"{out}: a folder that is not a bench folder (no bench.json); pass --force to use it")
+    cells_dir = out / "cells"
+    if force and cells_dir.is_dir():
+        shutil.rmtree(cells_dir)
+    cells_dir.mkdir(parents=True, exist_ok=True)
+    clean_stale(cells_dir)  # temporaries of killed runs (entries of live processes are left alone)
+    return cells_dir
+
+
+def _run_specs(specs, dictionary, *, workers, scheduler, progress_bar, failed: dict[str, str]) -> int:
+    """Compute the jobs ``specs`` in this process (``scheduler="synchronous"``) or on Dask; a failed
+    job is recorded in ``failed`` (cell label -> error) and does not stop the others. Returns the
+    number of cells computed."""
+    if not specs:
+        return 0
+    computed = 0
+    bar = progress(total=sum(len(s["cells"]) for s in specs), desc="bench", unit="cell",
+                   disable=None if progress_bar is None else not progress_bar)
+    try:
+        if scheduler == "synchronous":
+            for spec in specs:
+                try:
+                    computed += len(run_job(spec, dictionary))
+                except Exception as exc:  # noqa: BLE001 - one failed cell must not stop the others
+                    failed[spec["cells"][0].label()] = f"{type(exc).__name__}: {exc}"
+                bar.update(len(spec["cells"]))
+        else:
+            computed = _run_dask(specs, dictionary, workers, scheduler, bar, failed)
+    finally:
+        bar.close()
+    return computed
+
+
+def _publish(out: Path, rows, *, meta, report: bool) -> Path | None:
+    """Write results.csv and, with ``report``, report.md and the plots, all together or none; returns the
+    report's path (None without one)."""
+    files = ["results.csv"] + (list(REPORT_FILES) if report and rows else [])
+    # results.csv, report.md and the plots are published together: all from this run, or none
+    with atomic_outputs([out / f for f in files], force=True) as staged:
+        staged = dict(zip(files, staged))
+        with open(staged["results.csv"], "w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=list(COLUMNS), extrasaction="ignore")
+            writer.writeheader()
+            for row in rows:
+                writer.writerow({k: _csv_value(row.get(k)) for k in COLUMNS})
+        if len(files) > 1:
+            write_report(out, rows, meta=meta, paths=staged)
+            return out / "report.md"
+    return None
+
+
+def _bench_meta(preset: Preset, recon, seed: int, dictionary, dict_id, bench_scenes, scenes) -> dict[str, Any]:
+    """The content of bench.json: what every cell of the folder was computed with."""
+    return {
+        "kind": "lfproc-bench", "lfproc_version": __version__, "preset": preset.name,
+        "preset_description": preset.description, "crop": preset.crop, "mask_period": preset.mask_period,
+        "exposure_s": preset.exposure_s, "recon": recon, "seed": int(seed), "dictionary": dict_id,
+        "dictionary_patch": list(dictionary.patch), "dictionary_atoms": dictionary.n_atoms,
+        "scenes": [{"name": s.name, "path": s.path, "given": str(g), "sha256": s.sha256, "crop": s.crop,
+                    "size": list(s.size)} for s, g in zip(bench_scenes, scenes)],
+    }
+
+
+@renamed_keywords(seed="random_state")
 def run_bench(
     scenes,
     out_dir: str | os.PathLike,
@@ -205,7 +277,7 @@ def run_bench(
     workers: int | None = None,
     scheduler: str | None = None,
     force: bool = False,
-    seed: int = 0,
+    random_state: int = 0,
     recon_options: dict[str, Any] | None = None,
     report: bool = True,
     progress_bar: bool | None = None,
@@ -225,8 +297,9 @@ def run_bench(
         Processes of the local Dask cluster (default: the CPU count, at most the number of jobs).
     scheduler : str, optional
         Address of a running Dask scheduler, or ``"synchronous"`` (this process).
-    seed : int
-        Bench seed (every cell's seed derives from it; recorded per cell).
+    random_state : int
+        Bench seed (every cell's seed derives from it; recorded per cell as ``"seed"``; the keyword
+        ``seed`` is deprecated).
     recon_options : dict, optional
         Options of :func:`lfproc.recon.reconstruct` over the preset's (solver, mu, max_iter...).
     report : bool
@@ -240,10 +313,11 @@ def run_bench(
     """
     started = time.perf_counter()
     preset = get_preset(preset)
+    seed = random_state
     if workers is not None and (isinstance(workers, bool) or int(workers) != workers or workers < 1):
         raise InputError(f"workers: expected a positive integer, got {workers!r}")
     if isinstance(seed, bool) or int(seed) != seed or seed < 0:
-        raise InputError(f"seed: expected a non-negative integer, got {seed!r}")
+        raise InputError(f"random_state: expected a non-negative integer, got {seed!r}")
     scenes = list(scenes)
     if not scenes:
         raise InputError("scenes: expected at least one light field (LF...), got none")
@@ -251,16 +325,7 @@ def run_bench(
     dictionary = load_dictionary(dictionary) if not isinstance(dictionary, Dictionary) else dictionary
     bench_scenes = _scenes(scenes, preset, dictionary)
     out = Path(out_dir)
-    marker = out / "bench.json"
-    if out.exists() and not out.is_dir():
-        raise OutputExistsError(f"{out}: exists and is not a folder; expected a bench folder")
-    if out.is_dir() and any(out.iterdir()) and not marker.is_file() and not force:
-        raise OutputExistsError(f"{out}: a folder that is not a bench folder (no bench.json); pass --force to use it")
-    cells_dir = out / "cells"
-    if force and cells_dir.is_dir():
-        shutil.rmtree(cells_dir)
-    cells_dir.mkdir(parents=True, exist_ok=True)
-    clean_stale(cells_dir)  # temporaries of killed runs (entries of live processes are left alone)
+    cells_dir = _prepare_bench_dir(out, force=force)
 
     recon = {**preset.recon, **(recon_options or {})}
     # the library defaults a cell relies on: a later lfproc with other defaults recomputes the cell
@@ -281,52 +346,18 @@ def run_bench(
     todo = [Job(key=j.key, cells=missing) for j in jobs
             if (missing := [c for c in j.cells if not _is_done(_cell_path(cells_dir, ids[c]))])]
     todo.sort(key=lambda j: -j.cost)  # longest first packs the workers better
-    meta = {
-        "kind": "lfproc-bench", "lfproc_version": __version__, "preset": preset.name,
-        "preset_description": preset.description, "crop": preset.crop, "mask_period": preset.mask_period,
-        "exposure_s": preset.exposure_s, "recon": recon, "seed": int(seed), "dictionary": dict_id,
-        "dictionary_patch": list(dictionary.patch), "dictionary_atoms": dictionary.n_atoms,
-        "scenes": [{"name": s.name, "path": s.path, "given": str(g), "sha256": s.sha256, "crop": s.crop,
-                    "size": list(s.size)} for s, g in zip(bench_scenes, scenes)],
-    }
-    with atomic_file(marker, force=True) as tmp:
+    meta = _bench_meta(preset, recon, seed, dictionary, dict_id, bench_scenes, scenes)
+    with atomic_file(out / "bench.json", force=True) as tmp:
         tmp.write_text(json.dumps(to_jsonable(meta), indent=1))
 
     failed: dict[str, str] = {}
-    computed = 0
     specs = [{"scene": by_name[j.cell.scene], "preset": preset, "cells": j.cells, "ids": [ids[c] for c in j.cells],
               "seed": int(seed), "recon": recon, "cells_dir": str(cells_dir), "dictionary_id": dict_id} for j in todo]
-    if specs:
-        bar = progress(total=sum(len(s["cells"]) for s in specs), desc="bench", unit="cell",
-                       disable=None if progress_bar is None else not progress_bar)
-        try:
-            if scheduler == "synchronous":
-                for spec in specs:
-                    try:
-                        computed += len(run_job(spec, dictionary))
-                    except Exception as exc:  # noqa: BLE001 - one failed cell must not stop the others
-                        failed[spec["cells"][0].label()] = f"{type(exc).__name__}: {exc}"
-                    bar.update(len(spec["cells"]))
-            else:
-                computed = _run_dask(specs, dictionary, workers, scheduler, bar, failed)
-        finally:
-            bar.close()
-
+    computed = _run_specs(specs, dictionary, workers=workers, scheduler=scheduler, progress_bar=progress_bar,
+                          failed=failed)
     rows = read_cells([_cell_path(cells_dir, ids[c]) for c in cells])
     results = out / "results.csv"
-    report_path = None
-    files = ["results.csv"] + (list(REPORT_FILES) if report and rows else [])
-    # results.csv, report.md and the plots are published together: all from this run, or none
-    with atomic_outputs([out / f for f in files], force=True) as staged:
-        staged = dict(zip(files, staged))
-        with open(staged["results.csv"], "w", newline="") as fh:
-            writer = csv.DictWriter(fh, fieldnames=list(COLUMNS), extrasaction="ignore")
-            writer.writeheader()
-            for row in rows:
-                writer.writerow({k: _csv_value(row.get(k)) for k in COLUMNS})
-        if len(files) > 1:
-            write_report(out, rows, meta=meta, paths=staged)
-            report_path = out / "report.md"
+    report_path = _publish(out, rows, meta=meta, report=report)
     seconds = time.perf_counter() - started
     return {"bench": str(out), "preset": preset.name, "scenes": len(bench_scenes), "cells": len(cells),
             "computed": computed, "cached": len(cells) - sum(len(s["cells"]) for s in specs),

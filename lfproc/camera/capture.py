@@ -887,7 +887,7 @@ def capture_from_raw(
                               block_px=block_px, random_state=random_state)
         seed = random_state if isinstance(random_state, (int, np.integer)) else None
         iso_info = describe_iso_pattern(name, isos if name in ISO_PATTERNS else np.unique(iso_map),
-                                        block_px=block_px, seed=None if seed is None else int(seed))
+                                        block_px=block_px, random_state=None if seed is None else int(seed))
     else:
         iso_map = np.asarray(iso_layout, dtype=np.float32)
     parameters: dict[str, Any] = {

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._deprecate import renamed_keywords
 from .._shared.random import check_random_state
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 from .. import _untrusted as ut
@@ -124,12 +125,13 @@ def iso_pattern(
     return isos[index].astype(np.float32)
 
 
+@renamed_keywords(seed="random_state")
 def describe_iso_pattern(kind: str | os.PathLike, isos: Sequence[float], *, block_px: int = DEFAULT_BLOCK_PX,
-                         seed=None) -> dict:
+                         random_state=None) -> dict:
     """The record of an ISO layout a capture keeps (``iso_pattern`` of its file).
 
     ``{"kind", "isos"}`` for a named pattern (with ``block_px`` for ``block`` and, when given, the
-    ``seed`` of ``random``), ``{"kind": "file", "path", "isos"}`` for a file.
+    integer ``random_state`` of ``random``, recorded as ``"seed"``; the keyword ``seed`` is deprecated), ``{"kind": "file", "path", "isos"}`` for a file.
     """
     name = str(kind)
     values = [_num(v) for v in isos]
@@ -138,6 +140,6 @@ def describe_iso_pattern(kind: str | os.PathLike, isos: Sequence[float], *, bloc
     info: dict = {"kind": name, "isos": values}
     if name == "block":
         info["block_px"] = int(block_px)
-    if name == "random" and seed is not None:
-        info["seed"] = seed
+    if name == "random" and random_state is not None:
+        info["seed"] = random_state
     return info

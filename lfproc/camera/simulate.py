@@ -45,11 +45,13 @@ import math
 import os
 import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .._deprecate import resolve_options
 from .._shared.validation import check_choice, check_count, check_positive
 from .._shared.random import check_random_state
 from .._shared.frozen import freeze
@@ -77,6 +79,7 @@ __all__ = [
     "REFERENCE_EXPOSURE_S",
     "DEFAULT_MASK_PERIOD",
     "simulate_capture",
+    "CaptureDesign",
     "simulate_file",
     "capture_summary",
 ]
@@ -163,27 +166,139 @@ def _check_dictionary_views(dictionary, views: tuple[int, int]) -> None:
             f"{option_name('lfproc.dictionary.train_dictionary', 'lfproc dictionary train')})"), stacklevel=3)
 
 
+@dataclass(frozen=True)
+class CaptureDesign:
+    """How a capture is taken: the options of :func:`simulate_capture` besides the light field,
+    the random state and the records (see its parameters for each field). Values are validated
+    by :func:`simulate_capture`."""
+    profile: Any = "paper-low"
+    iso_pattern_kind: str | os.PathLike = "random"
+    isos: Sequence[float] = DEFAULT_ISOS
+    shots: int = 1
+    exposure_s: float = 0.004
+    gamma: float | None = None
+    mask: str = "random"
+    mask_period: int | None | str = "default"
+    mask_shift: int = 1
+    block_px: int = DEFAULT_BLOCK_PX
+    baseline: str | None = None
+    relative_exposures: Sequence[float] | None = None
+    radiance_scale: float | None = None
+    reference_exposure_s: float = REFERENCE_EXPOSURE_S
+    noise: bool = True
+
+
+def _light_field_data(lf) -> np.ndarray:
+    """The radiance of ``lf`` (a LightField or an array ``(V, U, H, W, 3)``), checked: 3 colours, finite, >= 0."""
+    if isinstance(lf, LightField):
+        data = lf.data
+    else:
+        data = np.asarray(lf, dtype=np.float32)
+        if data.ndim != 5:
+            raise ShapeError(f"light field: expected shape (V, U, H, W, C), got {data.shape}")
+        data, _ = clean_nonfinite(data, policy="raise", negative="raise", name="light field")
+    if data.shape[-1] != 3:
+        raise ShapeError(f"light field: a Bayer sensor needs 3 colour channels, this one has {data.shape[-1]}")
+    if (data < 0).any() or not np.isfinite(data).all():
+        raise InputError("light field: expected finite, non-negative radiance")
+    return data
+
+
+def _checked_design(design: CaptureDesign, profile, shape) -> CaptureDesign:
+    """``design`` validated against the profile and the light field's ``shape`` (V, U, H, W, C): exposure,
+    gamma, mask and baseline names, the shot count (and the memory it needs), the ISO set."""
+    nv, nu, h, w, _ = shape
+    exposure_s = check_positive("exposure_s", design.exposure_s)
+    gamma = design.gamma
+    if gamma is not None:
+        gamma = check_positive("gamma", gamma)
+        if gamma < 1:
+            raise InputError(f"gamma: expected a value >= 1, got {gamma}")
+    check_choice("mask", design.mask, MASK_KINDS)
+    if design.baseline is not None:
+        check_choice("baseline", design.baseline, BASELINES)
+    shots, relative_exposures = design.shots, design.relative_exposures
+    if isinstance(shots, bool) or not isinstance(shots, (int, np.integer, float)) or not np.isfinite(shots) \
+            or int(shots) != shots or int(shots) < 1:
+        raise InputError(f"shots: expected an integer >= 1, got {shots!r}")
+    shots = check_count("shots", shots, high=MAX_SHOTS)
+    if relative_exposures is not None:
+        check_count("relative exposures (one per shot)", len(list(relative_exposures)), high=MAX_SHOTS)
+    _check_memory(max(shots, len(relative_exposures or ())), nv, nu, h, w)
+    return replace(design, profile=profile, exposure_s=exposure_s, gamma=gamma, shots=shots,
+                   isos=_check_isos(profile, design.isos))
+
+
+def _seeded(random_state) -> tuple[np.random.Generator, Any]:
+    """The generator of ``random_state`` and the seed recorded for it (None draws one; a Generator: "generator")."""
+    if random_state is None:
+        seed: Any = int(np.random.SeedSequence().entropy % (2**63))
+        return check_random_state(seed), seed
+    rng = check_random_state(random_state)
+    return rng, int(random_state) if isinstance(random_state, (int, np.integer)) else "generator"
+
+
+def _shot_plan(design: CaptureDesign, size: tuple[int, int], rng) -> tuple[np.ndarray, dict, list[float]]:
+    """Per-shot ISO maps ``(S, H, W)``, the ISO layout's record and the relative exposures, for the
+    design's baseline or ISO pattern (module documentation)."""
+    h, w = size
+    isos, shots, relative_exposures = design.isos, design.shots, design.relative_exposures
+    if design.baseline == "individual-iso":
+        shots = len(isos)
+        iso_maps = np.stack([np.full((h, w), v, dtype=np.float32) for v in isos])
+        iso_info = {"kind": "global", "baseline": design.baseline, "isos": [_num(v) for v in isos]}
+        rel = [1.0] * shots if relative_exposures is None else [float(r) for r in relative_exposures]
+    elif design.baseline == "bracketing":
+        if relative_exposures is None:
+            if shots not in BRACKETING_EXPOSURES:
+                raise InputError(f"shots: the bracketing baseline takes 2, 3 or 4 shots, got {shots}")
+            rel = list(BRACKETING_EXPOSURES[shots])
+        else:
+            rel = [float(r) for r in relative_exposures]
+            shots = len(rel)
+        iso0 = min(isos)
+        iso_maps = np.full((shots, h, w), iso0, dtype=np.float32)
+        iso_info = {"kind": "global", "baseline": design.baseline, "isos": [_num(iso0)]}
+    else:
+        one = iso_pattern(design.iso_pattern_kind, size=(h, w), isos=isos, block_px=design.block_px,
+                          random_state=rng)
+        used = np.unique(one)
+        _check_isos(design.profile, used)
+        iso_maps = np.broadcast_to(one, (shots, h, w)).copy()
+        iso_info = describe_iso_pattern(design.iso_pattern_kind, used, block_px=design.block_px)
+        rel = [1.0] * shots if relative_exposures is None else [float(r) for r in relative_exposures]
+    if len(rel) != shots:
+        raise InputError(f"relative exposures: expected {shots} values (one per shot), got {len(rel)}")
+    return iso_maps, iso_info, rel
+
+
+def _scale_of(design: CaptureDesign, data: np.ndarray, iso_min: float) -> tuple[float, str, float]:
+    """The radiance scale (e-/s per light-field unit), its rule, and the checked reference exposure."""
+    reference_exposure_s = check_positive("reference_exposure_s", design.reference_exposure_s)
+    if design.radiance_scale is None:
+        scale = auto_radiance_scale(data, profile=design.profile, iso=iso_min, exposure_s=reference_exposure_s)
+        return scale, ("auto: brightest expected signal (mean transmittance 0.5) saturates the lowest ISO at "
+                       "reference_exposure_s"), reference_exposure_s
+    return check_positive("radiance_scale", design.radiance_scale), "given", reference_exposure_s
+
+
+def _mask_period(design: CaptureDesign) -> int | None:
+    mask_period = design.mask_period
+    if isinstance(mask_period, str):
+        if mask_period != "default":
+            raise InputError(f"mask_period: expected a period in pixels, None or 'default', got {mask_period!r}")
+        mask_period = DEFAULT_MASK_PERIOD if design.mask == "random" else None
+    return mask_period
+
+
 def simulate_capture(
     lf: LightField | np.ndarray,
     *,
-    profile="paper-low",
-    iso_pattern_kind: str | os.PathLike = "random",
-    isos: Sequence[float] = DEFAULT_ISOS,
-    shots: int = 1,
-    exposure_s: float = 0.004,
-    gamma: float | None = None,
-    mask: str = "random",
-    mask_period: int | None | str = "default",
-    mask_shift: int = 1,
-    block_px: int = DEFAULT_BLOCK_PX,
-    baseline: str | None = None,
-    relative_exposures: Sequence[float] | None = None,
-    radiance_scale: float | None = None,
-    reference_exposure_s: float = REFERENCE_EXPOSURE_S,
-    noise: bool = True,
+    design: CaptureDesign | None = None,
     random_state=None,
     ground_truth: dict | None = None,
     dictionary=None,
+    **design_options,
 ) -> Capture:
     """Simulate a capture of a light field (see the module documentation).
 
@@ -192,6 +307,9 @@ def simulate_capture(
     lf : LightField or ndarray of shape (V, U, H, W, 3)
         Linear HDR radiance (relative units unless ``radiance_scale`` says otherwise);
         finite and non-negative.
+    design : CaptureDesign, optional
+        The capture's design: every parameter below from ``profile`` to ``noise``. Give either
+        ``design`` or its fields as keywords (``**design_options``), not both.
     profile : CameraProfile, shipped name or path
         Camera profile (``paper-none|low|medium|high`` for the paper's noise levels).
     iso_pattern_kind : {"random", "row", "block", "dual"} or path
@@ -240,6 +358,11 @@ def simulate_capture(
     -------
     Capture
 
+    Raises
+    ------
+    TypeError
+        ``design`` together with field keywords, or an unknown keyword.
+
     Warns
     -----
     ViewCountWarning
@@ -248,91 +371,27 @@ def simulate_capture(
         More than :data:`lfproc.errors.SATURATION_WARNING_FRACTION` of the least sensitive pixels
         are saturated.
     """
-    profile = load_profile(profile)
-    if isinstance(lf, LightField):
-        data = lf.data
-    else:
-        data = np.asarray(lf, dtype=np.float32)
-        if data.ndim != 5:
-            raise ShapeError(f"light field: expected shape (V, U, H, W, C), got {data.shape}")
-        data, _ = clean_nonfinite(data, policy="raise", negative="raise", name="light field")
-    if data.shape[-1] != 3:
-        raise ShapeError(f"light field: a Bayer sensor needs 3 colour channels, this one has {data.shape[-1]}")
-    if (data < 0).any() or not np.isfinite(data).all():
-        raise InputError("light field: expected finite, non-negative radiance")
+    design = resolve_options(CaptureDesign, design, design_options, func_name="simulate_capture", argument="design")
+    profile = load_profile(design.profile)
+    data = _light_field_data(lf)
     nv, nu, h, w, _ = data.shape
-    exposure_s = check_positive("exposure_s", exposure_s)
-    if gamma is not None:
-        gamma = check_positive("gamma", gamma)
-        if gamma < 1:
-            raise InputError(f"gamma: expected a value >= 1, got {gamma}")
-    check_choice("mask", mask, MASK_KINDS)
-    if baseline is not None:
-        check_choice("baseline", baseline, BASELINES)
-    if isinstance(shots, bool) or not isinstance(shots, (int, np.integer, float)) or not np.isfinite(shots) \
-            or int(shots) != shots or int(shots) < 1:
-        raise InputError(f"shots: expected an integer >= 1, got {shots!r}")
-    shots = check_count("shots", shots, high=MAX_SHOTS)
-    if relative_exposures is not None:
-        check_count("relative exposures (one per shot)", len(list(relative_exposures)), high=MAX_SHOTS)
-    _check_memory(max(shots, len(relative_exposures or ())), nv, nu, h, w)
-    isos = _check_isos(profile, isos)
-    if random_state is None:
-        seed: Any = int(np.random.SeedSequence().entropy % (2**63))
-        rng = check_random_state(seed)
-    else:
-        rng = check_random_state(random_state)
-        seed = int(random_state) if isinstance(random_state, (int, np.integer)) else "generator"
-
-    # -- per-shot ISO maps and exposures ---------------------------------------------------
-    if baseline == "individual-iso":
-        shots = len(isos)
-        iso_maps = np.stack([np.full((h, w), v, dtype=np.float32) for v in isos])
-        iso_info = {"kind": "global", "baseline": baseline, "isos": [_num(v) for v in isos]}
-        rel = [1.0] * shots if relative_exposures is None else [float(r) for r in relative_exposures]
-    elif baseline == "bracketing":
-        if relative_exposures is None:
-            if shots not in BRACKETING_EXPOSURES:
-                raise InputError(f"shots: the bracketing baseline takes 2, 3 or 4 shots, got {shots}")
-            rel = list(BRACKETING_EXPOSURES[shots])
-        else:
-            rel = [float(r) for r in relative_exposures]
-            shots = len(rel)
-        iso0 = min(isos)
-        iso_maps = np.full((shots, h, w), iso0, dtype=np.float32)
-        iso_info = {"kind": "global", "baseline": baseline, "isos": [_num(iso0)]}
-    else:
-        one = iso_pattern(iso_pattern_kind, size=(h, w), isos=isos, block_px=block_px, random_state=rng)
-        used = np.unique(one)
-        _check_isos(profile, used)
-        iso_maps = np.broadcast_to(one, (shots, h, w)).copy()
-        iso_info = describe_iso_pattern(iso_pattern_kind, used, block_px=block_px)
-        rel = [1.0] * shots if relative_exposures is None else [float(r) for r in relative_exposures]
-    if len(rel) != shots:
-        raise InputError(f"relative exposures: expected {shots} values (one per shot), got {len(rel)}")
-    exposures = [check_positive("exposure_s", exposure_s * r) for r in rel]
+    design = _checked_design(design, profile, data.shape)
+    rng, seed = _seeded(random_state)
+    iso_maps, iso_info, rel = _shot_plan(design, (h, w), rng)
+    shots = len(rel)
+    exposures = [check_positive("exposure_s", design.exposure_s * r) for r in rel]
 
     # -- radiance scale, mask, projection, exposure -------------------------------------------
-    reference_exposure_s = check_positive("reference_exposure_s", reference_exposure_s)
-    if radiance_scale is None:
-        scale = auto_radiance_scale(data, profile=profile, iso=float(iso_maps.min()), exposure_s=reference_exposure_s)
-        scale_rule = ("auto: brightest expected signal (mean transmittance 0.5) saturates the lowest ISO at "
-                      "reference_exposure_s")
-    else:
-        scale = check_positive("radiance_scale", radiance_scale)
-        scale_rule = "given"
-    if isinstance(mask_period, str):
-        if mask_period != "default":
-            raise InputError(f"mask_period: expected a period in pixels, None or 'default', got {mask_period!r}")
-        mask_period = DEFAULT_MASK_PERIOD if mask == "random" else None
-    code = make_mask(mask, shots=shots, views=(nv, nu), size=(h, w), period=mask_period, shift=mask_shift,
-                     random_state=rng)
+    scale, scale_rule, reference_exposure_s = _scale_of(design, data, float(iso_maps.min()))
+    mask_period = _mask_period(design)
+    code = make_mask(design.mask, shots=shots, views=(nv, nu), size=(h, w), period=mask_period,
+                     shift=design.mask_shift, random_state=rng)
     cfa = profile.cfa_pattern
     op = build_operator(code, views=(nv, nu), size=(h, w), cfa_pattern=cfa)
     irradiance = op.forward(data) * np.float32(scale)  # (S, H, W) e-/s
     dn = np.stack([
         expose(irradiance[s].astype(np.float64), exposure_s=exposures[s], iso=iso_maps[s], profile=profile,
-               gamma=gamma, noise=noise, random_state=rng)
+               gamma=design.gamma, noise=design.noise, random_state=rng)
         for s in range(shots)
     ])
     parameters = {
@@ -341,35 +400,24 @@ def simulate_capture(
         "seed": seed,
         "profile": profile.name,
         "iso_pattern": iso_info["kind"],
-        "isos_requested": [_num(v) for v in isos],
+        "isos_requested": [_num(v) for v in design.isos],
         "shots": shots,
-        "exposure_s": exposure_s,
+        "exposure_s": design.exposure_s,
         "relative_exposures": rel,
-        "gamma": gamma,
-        "mask": mask,
+        "gamma": design.gamma,
+        "mask": design.mask,
         "mask_period": mask_period,
-        "mask_shift": int(mask_shift),
-        "baseline": baseline,
-        "noise": bool(noise),
+        "mask_shift": int(design.mask_shift),
+        "baseline": design.baseline,
+        "noise": bool(design.noise),
         "radiance_scale_rule": scale_rule,
-        "reference_exposure_s": reference_exposure_s if radiance_scale is None else None,
+        "reference_exposure_s": reference_exposure_s if design.radiance_scale is None else None,
         "light_field_source": lf.source if isinstance(lf, LightField) else None,
         "light_field_units": lf.units if isinstance(lf, LightField) else None,
     }
-    capture = Capture(
-        dn=freeze(dn),
-        iso=freeze(iso_maps),
-        exposures_s=exposures,
-        mask=code,
-        profile=profile,
-        views=(nv, nu),
-        cfa_pattern=cfa,
-        gamma=gamma,
-        radiance_scale=scale,
-        ground_truth=ground_truth,
-        iso_pattern=iso_info,
-        parameters=parameters,
-    )
+    capture = Capture(dn=freeze(dn), iso=freeze(iso_maps), exposures_s=exposures, mask=code, profile=profile,
+                      views=(nv, nu), cfa_pattern=cfa, gamma=design.gamma, radiance_scale=scale,
+                      ground_truth=ground_truth, iso_pattern=iso_info, parameters=parameters)
     _warn_saturation(capture, stacklevel=4)
     if dictionary is not None:  # last: a capture that cannot be made is refused first
         _check_dictionary_views(dictionary, (nv, nu))

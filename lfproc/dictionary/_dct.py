@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from .._deprecate import renamed_keywords
 from ..errors import InputError
 from ._files import Dictionary
 
@@ -24,7 +25,9 @@ def _dct_1d(size: int, atoms: int) -> np.ndarray:
     return basis / np.linalg.norm(basis, axis=0, keepdims=True)
 
 
-def dct_dictionary(patch: tuple[int, int, int, int, int], n_atoms: int | None = None, *, sparsity: int = 10) -> Dictionary:
+@renamed_keywords(sparsity="n_nonzero_coefs")
+def dct_dictionary(patch: tuple[int, int, int, int, int], n_atoms: int | None = None, *,
+                   n_nonzero_coefs: int = 10) -> Dictionary:
     """A separable DCT dictionary over views, pixels and colours with ``n_atoms`` atoms.
 
     Each of the four axes ``(V, U, P, P)`` gets ``a_i = ceil(size_i * r)`` cosines (``r`` the
@@ -39,8 +42,9 @@ def dct_dictionary(patch: tuple[int, int, int, int, int], n_atoms: int | None = 
         Patch shape (C is 1 or 3).
     n_atoms : int, optional
         Number of atoms (default ``n``).
-    sparsity : int
-        Recorded sparsity (used by :func:`lfproc.dictionary.evaluate_dictionary`).
+    n_nonzero_coefs : int
+        Recorded sparsity (used by :func:`lfproc.dictionary.evaluate_dictionary`; the keyword
+        ``sparsity`` is deprecated).
 
     Returns
     -------
@@ -77,6 +81,6 @@ def dct_dictionary(patch: tuple[int, int, int, int, int], n_atoms: int | None = 
         atoms = atoms * values.reshape(shape)
     atoms = atoms.reshape(k, n).T
     atoms /= np.linalg.norm(atoms, axis=0, keepdims=True)
-    return Dictionary(atoms=atoms.astype(np.float32), patch=patch, sparsity=min(sparsity, k, n), preset="dct",
+    return Dictionary(atoms=atoms.astype(np.float32), patch=patch, sparsity=min(n_nonzero_coefs, k, n), preset="dct",
                       normalisation={"kind": "l2"}, provenance={"kind": "separable 4-D DCT", "counts": counts},
                       name=f"dct{list(patch)}x{k}")

@@ -52,6 +52,7 @@ from typing import Any
 
 import numpy as np
 
+from .._deprecate import renamed_keywords
 from .._shared.deps import require
 from .._shared.random import check_random_state
 from .._shared.progress import progress
@@ -340,11 +341,12 @@ def _load_checkpoint(path: Path, params, rng):
     return atoms_t, iteration, errors, replaced
 
 
+@renamed_keywords(sparsity="n_nonzero_coefs", n_iter="max_iter")
 def ksvd(
     signals,
     n_atoms: int,
-    sparsity: int,
-    n_iter: int,
+    n_nonzero_coefs: int,
+    max_iter: int,
     *,
     random_state=None,
     checkpoint: str | os.PathLike | None = None,
@@ -362,10 +364,10 @@ def ksvd(
         Training signals as rows (float32).
     n_atoms : int
         Number of atoms ``K`` (at most ``N``).
-    sparsity : int
-        Atoms per signal in the sparse-coding step.
-    n_iter : int
-        Iterations.
+    n_nonzero_coefs : int
+        Atoms per signal in the sparse-coding step (the keyword ``sparsity`` is deprecated).
+    max_iter : int
+        Iterations (all are run; the keyword ``n_iter`` is deprecated).
     random_state : int, Generator or None
         Seeds the initial atoms (``K`` distinct training signals) and the order of the atom
         updates (the replacement of atoms is deterministic: the worst-represented signals).
@@ -385,14 +387,15 @@ def ksvd(
     """
     signals = TrainingSignals(signals)
     n_sig, n = signals.shape
-    for name, value, low in (("n_atoms", n_atoms, 1), ("sparsity", sparsity, 1), ("n_iter", n_iter, 0),
+    sparsity, n_iter = n_nonzero_coefs, max_iter
+    for name, value, low in (("n_atoms", n_atoms, 1), ("n_nonzero_coefs", sparsity, 1), ("max_iter", n_iter, 0),
                              ("chunk_size", chunk_size, 1)):
         if isinstance(value, bool) or int(value) != value or int(value) < low:
             raise InputError(f"{name}: expected an integer >= {low}, got {value!r}")
     if n_atoms > n_sig:
         raise InputError(f"n_atoms: {n_atoms} atoms need at least as many training signals; got {n_sig}")
     if sparsity > min(n, n_atoms):
-        raise InputError(f"sparsity: expected at most {min(n, n_atoms)} for {n_atoms} atoms of length {n}, got {sparsity}")
+        raise InputError(f"n_nonzero_coefs: expected at most {min(n, n_atoms)} for {n_atoms} atoms of length {n}, got {sparsity}")
     seed_ok = random_state is None or isinstance(random_state, (int, np.integer))
     if checkpoint is not None and (random_state is None or not seed_ok):
         raise InputError("checkpoint: a resumable run needs an integer seed (random_state)")

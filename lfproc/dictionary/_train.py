@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from .._deprecate import renamed_keywords
 from .._shared.validation import check_choice
 from .._shared.progress import progress
 from .._version import __version__
@@ -77,23 +78,25 @@ def get_preset(name: str) -> Preset:
     return PRESETS[name]
 
 
+@renamed_keywords(seed="random_state")
 def synthetic_lightfields(n_scenes: int, *, views: tuple[int, int] = (5, 5), size: tuple[int, int] = (128, 128),
-                          seed: int = 0) -> Iterable[LightField]:
-    """``n_scenes`` procedural HDR light fields: every scene kind in turn, seeds ``seed * 1000 + i``,
-    baselines cycled from :data:`SYNTHETIC_BASELINES`."""
+                          random_state: int = 0) -> Iterable[LightField]:
+    """``n_scenes`` procedural HDR light fields: every scene kind in turn, seeds ``random_state * 1000 + i``,
+    baselines cycled from :data:`SYNTHETIC_BASELINES` (the keyword ``seed`` is deprecated)."""
     kinds = sorted(SCENES)
     if views[0] != views[1]:
         raise InputError(f"synthetic light fields: expected square views, got {views}")
     for i in range(int(n_scenes)):
         yield synthesize(kinds[i % len(kinds)], size=size, views=views[0],
                          baseline_px=SYNTHETIC_BASELINES[(i // len(kinds)) % len(SYNTHETIC_BASELINES)],
-                         random_state=int(seed) * 1000 + i)
+                         random_state=int(random_state) * 1000 + i)
 
 
 def _describe_sources(lightfields: Sequence[Any]) -> list[str]:
     return [getattr(lf, "source", None) or f"array {i}" for i, lf in enumerate(lightfields)]
 
 
+@renamed_keywords(seed="random_state", sparsity="n_nonzero_coefs", iterations="max_iter")
 def train_dictionary(
     lightfields: Sequence[Any] | None = None,
     *,
@@ -101,11 +104,11 @@ def train_dictionary(
     synthetic: bool = False,
     patch=None,
     atoms: int | None = None,
-    sparsity: int | None = None,
-    iterations: int | None = None,
+    n_nonzero_coefs: int | None = None,
+    max_iter: int | None = None,
     patches: int | None = None,
     normalise: str = "l2",
-    seed: int = 0,
+    random_state: int = 0,
     checkpoint=None,
     scheduler: str | None = None,
     command: str | None = None,
@@ -121,11 +124,15 @@ def train_dictionary(
         Sizes; the keyword arguments below override them.
     synthetic : bool
         Add the preset's synthetic training set (:func:`synthetic_lightfields`).
-    patch, atoms, sparsity, iterations, patches : overrides of the preset.
+    patch, atoms, n_nonzero_coefs, max_iter, patches : overrides of the preset.
+        ``n_nonzero_coefs``: atoms per training patch (the preset's ``sparsity``); ``max_iter``: K-SVD
+        iterations (all are run; the preset's ``iterations``). The keywords ``sparsity`` and
+        ``iterations`` are deprecated.
     normalise : {"l2", "none"}
         Patch normalisation (:mod:`lfproc.dictionary._patches`).
-    seed : int
-        Seeds the synthetic scenes, the patch draw and K-SVD.
+    random_state : int
+        Seeds the synthetic scenes, the patch draw and K-SVD (recorded as ``"seed"``; the keyword
+        ``seed`` is deprecated).
     checkpoint : folder, optional
         K-SVD checkpoints (a killed run resumes there).
     scheduler : str, optional
@@ -142,18 +149,19 @@ def train_dictionary(
     p = get_preset(preset)
     patch = tuple(int(x) for x in (patch or p.patch))
     atoms = int(atoms or p.atoms)
-    sparsity = int(sparsity or p.sparsity)
-    iterations = int(p.iterations if iterations is None else iterations)
+    sparsity = int(n_nonzero_coefs or p.sparsity)
+    iterations = int(p.iterations if max_iter is None else max_iter)
     n_patches = int(patches or p.patches)
+    seed = random_state
     if isinstance(seed, bool) or int(seed) != seed or seed < 0:
-        raise InputError(f"seed: expected a non-negative integer, got {seed!r}")
+        raise InputError(f"random_state: expected a non-negative integer, got {seed!r}")
     lfs = list(lightfields or [])
     if sources is not None and len(sources) != len(lfs):
         raise InputError(f"sources: expected one name per light field ({len(lfs)}), got {len(sources)}")
     data_desc: dict[str, Any] = {"files": list(map(str, sources)) if sources is not None else _describe_sources(lfs)}
     if synthetic:
         lfs += list(progress(synthetic_lightfields(p.synthetic_scenes, views=patch[:2], size=p.synthetic_size,
-                                                   seed=seed), total=p.synthetic_scenes, desc="synthetic scenes"))
+                                                   random_state=seed), total=p.synthetic_scenes, desc="synthetic scenes"))
         data_desc["synthetic"] = {"scenes": p.synthetic_scenes, "size": list(p.synthetic_size), "seed": int(seed),
                                   "baselines_px": list(SYNTHETIC_BASELINES), "lfproc_version": __version__}
     if not lfs:
@@ -177,14 +185,17 @@ def train_dictionary(
                       normalisation={"kind": normalise}, provenance=provenance, usage=result.usage, name="trained")
 
 
-def approximate(dictionary: Dictionary, lf, *, sparsity: int | None = None, stride: int | None = None) -> np.ndarray:
+@renamed_keywords(sparsity="n_nonzero_coefs")
+def approximate(dictionary: Dictionary, lf, *, n_nonzero_coefs: int | None = None,
+                stride: int | None = None) -> np.ndarray:
     """The sparse approximation of a light field: every patch on a grid (``stride``, default
-    half the patch) normalised, coded with ``sparsity`` atoms, rescaled; overlaps averaged.
+    half the patch) normalised, coded with ``n_nonzero_coefs`` atoms (default: the dictionary's
+    sparsity; the keyword ``sparsity`` is deprecated), rescaled; overlaps averaged.
 
     Returns an array of the central ``V x U`` views, ``(V, U, H, W, C)`` float32.
     """
     d = load_dictionary(dictionary)
-    t = int(sparsity or d.sparsity)
+    t = int(n_nonzero_coefs or d.sparsity)
     v, u, p, _, c = d.patch
     data = lf.data if isinstance(lf, LightField) else np.asarray(lf)
 
@@ -218,7 +229,8 @@ def approximate(dictionary: Dictionary, lf, *, sparsity: int | None = None, stri
     return (acc / count[None, None, :, :, None]).astype(np.float32)
 
 
-def evaluate_dictionary(dictionary, lightfields: Sequence[Any], *, sparsity: int | None = None,
+@renamed_keywords(sparsity="n_nonzero_coefs")
+def evaluate_dictionary(dictionary, lightfields: Sequence[Any], *, n_nonzero_coefs: int | None = None,
                         stride: int | None = None, compare_dct: bool = True,
                         peak_luminance: float = 1000.0) -> dict[str, Any]:
     """Sparse-approximation quality of light fields with a dictionary, beside a DCT of the same size.
@@ -227,7 +239,8 @@ def evaluate_dictionary(dictionary, lightfields: Sequence[Any], *, sparsity: int
     ----------
     dictionary : Dictionary, name or path
     lightfields : sequence of LightField
-    sparsity : int, optional (default: the dictionary's)
+    n_nonzero_coefs : int, optional
+        Atoms per patch (default: the dictionary's sparsity; the keyword ``sparsity`` is deprecated).
     stride : int, optional (default: half the patch)
     compare_dct : bool
         Also score a separable 4-D DCT dictionary with the same number of atoms.
@@ -244,10 +257,10 @@ def evaluate_dictionary(dictionary, lightfields: Sequence[Any], *, sparsity: int
     d = load_dictionary(dictionary)
     if not lightfields:
         raise InputError("evaluate: expected at least one light field")
-    t = int(sparsity or d.sparsity)
+    t = int(n_nonzero_coefs or d.sparsity)
     if not 1 <= t <= min(d.n, d.n_atoms):
-        raise InputError(f"sparsity: expected 1..{min(d.n, d.n_atoms)}, got {sparsity}")
-    dct = dct_dictionary(d.patch, d.n_atoms, sparsity=t) if compare_dct else None
+        raise InputError(f"n_nonzero_coefs: expected 1..{min(d.n, d.n_atoms)}, got {n_nonzero_coefs}")
+    dct = dct_dictionary(d.patch, d.n_atoms, n_nonzero_coefs=t) if compare_dct else None
     rows = []
     start = time.perf_counter()
     for i, lf in enumerate(lightfields):
@@ -256,7 +269,7 @@ def evaluate_dictionary(dictionary, lightfields: Sequence[Any], *, sparsity: int
         for prefix, dic in (("", d), ("dct_", dct)):
             if dic is None:
                 continue
-            approx = np.maximum(approximate(dic, ref, sparsity=t, stride=stride), 0)
+            approx = np.maximum(approximate(dic, ref, n_nonzero_coefs=t, stride=stride), 0)
             err = float(np.linalg.norm((approx - ref).astype(np.float64)) / max(np.linalg.norm(ref.astype(np.float64)),
                                                                                   1e-300))
             row[f"{prefix}relative_error"] = err

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from .._deprecate import renamed_keywords
 from .._shared.frozen import freeze
 from ..errors import FileFormatError, InputError, MissingFileError, option_name
 from ..lytro.decode import decode_capture
@@ -265,6 +266,7 @@ def read_bracket(
     return lfs
 
 
+@renamed_keywords(n_iter="max_iter")
 def merge_files(
     paths: Sequence[str | os.PathLike],
     *,
@@ -273,7 +275,7 @@ def merge_files(
     exposures_s: Sequence[float] | None = None,
     isos: Sequence[float] | float | None = None,
     white_db: str | os.PathLike | None = None,
-    n_iter: int = 2,
+    max_iter: int = 2,
     random_state=0,
     n_threads: int | None = None,
     option_names: dict[str, str] | None = None,
@@ -291,6 +293,7 @@ def merge_files(
     methods) and ``white_db`` without a Lytro capture. ``option_names`` maps parameter names to
     the names used in messages (the CLI passes its options, e.g. ``{"profile": "--profile"}``).
     ``nonfinite`` and ``negative`` are the value policies of light-field inputs (:func:`read_bracket`).
+    ``max_iter`` is the ML merge's fixed-point updates (the keyword ``n_iter`` is deprecated).
 
     Returns the merged light field (``attrs["sources"]`` are the file paths) and the merge
     information (see :func:`lfproc.merge.merge_lightfields`), plus ``method``.
@@ -323,7 +326,7 @@ def merge_files(
     if method == "ml" and not own_variance and not codes8 and isos is None and any(lf.iso is None for lf in lfs):
         bad = next(p for p, lf in zip(paths, lfs) if lf.iso is None)
         raise InputError(f"{bad}: no ISO in its metadata; method ml needs one (give {option_name('isos=', '--isos')})")
-    merged, info = merge_lightfields(lfs, method=method, profile=profile, n_iter=n_iter, random_state=random_state,
+    merged, info = merge_lightfields(lfs, method=method, profile=profile, max_iter=max_iter, random_state=random_state,
                                      n_threads=n_threads)
     merged = merged.replace(attrs=dict(merged.attrs) | {"sources": [str(p) for p in paths]})
     info["method"] = method

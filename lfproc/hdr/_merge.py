@@ -10,7 +10,7 @@ the bracket's exposures) and processed in chunks to bound memory:
   quantisation in ``var_i(0)``, photon noise ``x / t_i``; :func:`lfproc.camera.sensor.calibrated_observation`
   with ``variance_from="estimate"``). The estimate is the inverse-variance weighted mean
   ``x = sum_i w_i T_i / sum_i w_i`` with ``w_i = 1 / var_i(x)`` evaluated at the current
-  estimate: first at ``x = 0`` (read-noise weights), then ``n_iter`` fixed-point updates;
+  estimate: first at ``x = 0`` (read-noise weights), then ``max_iter`` fixed-point updates;
   :class:`lfproc.errors.ConvergenceWarning` when the last update still moved a sample by more
   than :data:`ML_TOLERANCE_STD` of its standard deviation.
   Saturated and black-clipped samples get weight 0, and so does every longer exposure of a
@@ -54,6 +54,7 @@ from typing import Any
 
 import numpy as np
 
+from .._deprecate import renamed_keywords
 from .._shared.validation import check_choice
 from .._shared.random import check_random_state
 from .._shared.frozen import freeze
@@ -79,9 +80,9 @@ __all__ = [
 MERGE_METHODS = ("ml", "debevec")
 #: Convergence test of the ML merge's fixed-point updates: the last update must move every
 #: sample by at most this fraction of its standard deviation, else :class:`ConvergenceWarning`.
-#: Measured with merge_ml at n_iter = 0..5 on the simulated brackets of tests/hdr/test_merge.py and
+#: Measured with merge_ml at max_iter = 0..5 on the simulated brackets of tests/hdr/test_merge.py and
 #: tests/test_warnings.py: each update shrinks the change 6-15x; the second update (default
-#: n_iter=2) moves samples by at most 0.03-0.12 sd, the first by up to 1.8 sd.
+#: max_iter=2) moves samples by at most 0.03-0.12 sd, the first by up to 1.8 sd.
 ML_TOLERANCE_STD = 0.25
 _DEFAULT_CHUNK = 1 << 16
 #: merge_ml_codes8 measures its code variance on a regular subsample of at most this many pixels
@@ -158,6 +159,7 @@ def _summary(mask_sat: np.ndarray, mask_dark: np.ndarray) -> dict[str, Any]:
 
 # -- the ML estimator ---------------------------------------------------------------------
 
+@renamed_keywords(n_iter="max_iter")
 def merge_ml(
     dn_stack,
     *,
@@ -166,7 +168,7 @@ def merge_ml(
     profile,
     gamma: float | None = None,
     bias_dn: float | np.ndarray | None = None,
-    n_iter: int = 2,
+    max_iter: int = 2,
     saturation_margin_dn: float = 0.5,
     chunk_size: int = _DEFAULT_CHUNK,
     n_threads: int | None = None,
@@ -190,9 +192,10 @@ def merge_ml(
     bias_dn : float or ndarray broadcastable to the sample shape, optional
         Bias frame (default: black level plus mean dark signal, see
         :func:`lfproc.camera.sensor.calibrated_observation`).
-    n_iter : int
-        Fixed-point updates of the weights after the read-noise start (>= 0; 0 keeps the
-        read-noise weights and is not iterative, so it is never warned about).
+    max_iter : int
+        Fixed-point updates of the weights after the read-noise start (>= 0, all are run; 0 keeps the
+        read-noise weights and is not iterative, so it is never warned about). The keyword
+        ``n_iter`` is deprecated.
     saturation_margin_dn : float
         Codes at or above saturation minus this margin get weight 0.
     chunk_size : int
@@ -210,7 +213,7 @@ def merge_ml(
     info : dict
         ``saturated_everywhere`` / ``dark_everywhere`` masks, their counts and the
         saturated fraction, ``n_used`` (usable exposures per sample, uint8), ``fill_radiance``
-        (value given to saturated-everywhere samples), ``converged`` (None for ``n_iter=0``),
+        (value given to saturated-everywhere samples), ``converged`` (None for ``max_iter=0``),
         method parameters.
 
     Warns
@@ -227,8 +230,9 @@ def merge_ml(
     n = stack.shape[0]
     t = _per_exposure("exposures_s", exposures_s, n)
     iso = _per_exposure("isos", isos, n)
+    n_iter = max_iter
     if int(n_iter) != n_iter or n_iter < 0 or n_iter > 100:
-        raise InputError(f"n_iter: expected an integer from 0 to 100, got {n_iter}")
+        raise InputError(f"max_iter: expected an integer from 0 to 100, got {n_iter}")
     n_threads = _n_threads(n_threads)
     sample_shape = stack.shape[1:]
     total = math.prod(sample_shape)
@@ -330,7 +334,7 @@ def merge_ml(
         warn_convergence(
             f"ML merge: the weights did not converge in {int(n_iter)} fixed-point update(s): the last update moved "
             f"{n_moved} sample(s) ({100 * n_moved / total:.2g} %) by more than {ML_TOLERANCE_STD:g} of their "
-            f"standard deviation; use more iterations ({option_name('n_iter', '--iterations')})"
+            f"standard deviation; use more iterations ({option_name('max_iter', '--iterations')})"
         )
     info = _summary(sat_all.reshape(sample_shape), dark_all.reshape(sample_shape))
     info.update({
@@ -772,12 +776,13 @@ def _response_lut(stack: np.ndarray, t: np.ndarray, response, n_samples, smoothn
     return g
 
 
+@renamed_keywords(n_iter="max_iter")
 def merge_ml_codes8(
     images,
     *,
     exposures_s: Sequence[float],
     response: np.ndarray | str | None = None,
-    n_iter: int = 2,
+    max_iter: int = 2,
     n_samples: int = 4000,
     smoothness: float = 10.0,
     saturation_code: int = 254,
@@ -803,8 +808,8 @@ def merge_ml_codes8(
        the recovered response; it is never below the quantisation ``(dx/dz)^2 / 12``;
     4. the estimate is the inverse-variance mean ``E = sum_i w_i X_i / sum_i w_i`` with
        ``w_i = t_i^2 / V(t_i E)``: like :func:`merge_ml`, the variance is evaluated at the
-       current *estimate*, never at the sample's own code: starting from ``E0``, ``n_iter``
-       fixed-point updates (at least one; the error changed by under 10 % between 1 and 4
+       current *estimate*, never at the sample's own code: starting from ``E0``, ``max_iter``
+       fixed-point updates (all are run; the keyword ``n_iter`` is deprecated) (at least one; the error changed by under 10 % between 1 and 4
        updates on the brackets of ``benchmarks/merge_8bit.py``). Weights taken at the observed
        code, ``t_i^2 / V(z_i)``, favour the samples that noise pushed down, since ``V`` grows
        with ``x``: on a noisy 16-exposure bracket of a real photograph (``tests/hdr/test_merge.py``)
@@ -825,7 +830,7 @@ def merge_ml_codes8(
         ``1 / sum_i w_i`` (the noise measured on the bracket, propagated).
     info : dict
         As :func:`merge_debevec`, plus ``code_variance`` (the measured ``V`` at each code's
-        exposure ``exp(g(z))``, shape (256, C)) and ``n_iter``.
+        exposure ``exp(g(z))``, shape (256, C)) and ``n_iter`` (the updates run).
     """
     stack = _as_stack(images, "images")
     _check_codes8(stack, "images")
@@ -833,8 +838,9 @@ def merge_ml_codes8(
     t = _per_exposure("exposures_s", exposures_s, n)
     if not 1 <= int(saturation_code) <= 255:
         raise InputError(f"saturation_code: expected an 8-bit code in 1..255, got {saturation_code}")
+    n_iter = max_iter
     if int(n_iter) < 0:
-        raise InputError(f"n_iter: expected a non-negative integer, got {n_iter}")
+        raise InputError(f"max_iter: expected a non-negative integer, got {n_iter}")
     sample_shape = stack.shape[1:]
     g = _response_lut(stack, t, response, n_samples, smoothness, random_state)
     channels = g.shape[1]
@@ -1063,6 +1069,7 @@ def check_exposure_order(
             )
 
 
+@renamed_keywords(n_iter="max_iter")
 def merge_lightfields(
     lfs: Sequence[LightField],
     *,
@@ -1071,7 +1078,7 @@ def merge_lightfields(
     exposures_s: Sequence[float] | None = None,
     isos: Sequence[float] | float | None = None,
     response: np.ndarray | str | None = None,
-    n_iter: int = 2,
+    max_iter: int = 2,
     random_state=None,
     n_threads: int | None = None,
     chunk_size: int = _DEFAULT_CHUNK,
@@ -1103,7 +1110,8 @@ def merge_lightfields(
     exposures_s, isos : optional
         Override the inputs' ``exposure_s`` / ``iso`` metadata (one value per input).
     response : see :func:`merge_debevec`.
-    n_iter, random_state, n_threads, chunk_size : see :func:`merge_ml` / :func:`recover_response`.
+    max_iter, random_state, n_threads, chunk_size : see :func:`merge_ml` / :func:`recover_response`
+        (the keyword ``n_iter`` is deprecated).
 
     Returns
     -------
@@ -1116,6 +1124,7 @@ def merge_lightfields(
         As returned by the estimator, plus ``dynamic_range_stops``, ``negative_clipped``.
     """
     check_choice("method", method, MERGE_METHODS)
+    n_iter = max_iter
     lfs = list(lfs)
     if len(lfs) < 2:
         raise InputError(f"a bracket needs at least two exposures, got {len(lfs)} input")
@@ -1156,7 +1165,7 @@ def merge_lightfields(
             # non-linear 8-bit camera images: recovered response, noise measured on the bracket
             stack = np.clip(np.round(data * 255), 0, 255).astype(np.uint8)
             del data
-            radiance, variance, info = merge_ml_codes8(stack, exposures_s=t, response=response, n_iter=n_iter,
+            radiance, variance, info = merge_ml_codes8(stack, exposures_s=t, response=response, max_iter=n_iter,
                                                        random_state=random_state, n_threads=n_threads,
                                                        chunk_size=chunk_size)
             return _finish(lfs, names, method, t, iso, prof, "codes8", radiance, variance, info, "relative", n_iter,
@@ -1191,7 +1200,7 @@ def merge_lightfields(
         else:
             dn = data
         del data
-        radiance, variance, info = merge_ml(dn, exposures_s=t, isos=iso, profile=prof, n_iter=n_iter,
+        radiance, variance, info = merge_ml(dn, exposures_s=t, isos=iso, profile=prof, max_iter=n_iter,
                                             n_threads=n_threads, chunk_size=chunk_size)
         out_units = "e-/s"
     else:

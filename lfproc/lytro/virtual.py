@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from .._deprecate import renamed_keywords
 from .._shared.validation import check_positive
 from .._shared.random import check_random_state
 from .._shared.progress import progress
@@ -340,7 +341,97 @@ def _fit_views(lf_data: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     return np.maximum(out, 0.0)
 
 
-def make_virtual_illum(lf, out_dir, *, sensor: str = "small", exposures_ev=(-2, -1, 0, 1, 2), seed: int = 0,
+@dataclass(frozen=True)
+class _Camera:
+    """What every frame of one virtual Illum shares: sensor size, ISO, serial, hot pixels, white balance
+    responses, optics, the white images' exposure and scale, and the noise generator."""
+    shape: tuple[int, int]
+    iso: float
+    serial: str
+    hot: Any
+    nr: dict
+    optics: Optics
+    white_exposure_s: float
+    white_scale: float
+    rng: Any
+
+
+def _write_calibration(tmp, cam: _Camera, grids) -> tuple[str, bytes, list[dict]]:
+    """The camera's calibration data in ``tmp``: a white image at every :data:`WHITE_STEPS` plus a dark frame,
+    in ``caldata-<serial>.tar``. Returns the tar's name, the capture white's geometry correction and the white
+    images' records."""
+    from types import SimpleNamespace
+
+    shape, iso, hot = cam.shape, cam.iso, cam.hot
+    frames = []
+    white_info = []
+    for k, ((z, f), g) in enumerate(progress(list(zip(WHITE_STEPS, grids)), desc="virtual Illum: white images")):
+        irr = white_irradiance(g, scale_e_per_s=cam.white_scale, optics=cam.optics)
+        raw = expose_chunked(irr, exposure_s=cam.white_exposure_s, iso=iso, hot_pixels=hot, random_state=cam.rng)
+        del irr
+        meta = white_metadata(height=shape[0], width=shape[1], zoom_step=z, focus_step=f,
+                              exposure_s=cam.white_exposure_s, iso=iso, mla_rotation_rad=g.rotation_rad,
+                              extra={"devices": {"sensor": {"normalizedResponses": [cam.nr]}}})
+        name = f"MOD_{k:04d}"
+        frames.append(SimpleNamespace(raw=raw, metadata=meta, name=name, is_dark=False))
+        white_info.append({"name": name, "zoom_step": z, "focus_step": f, "grid": g.to_dict(),
+                           "geometry_hash": sha1_ref(geometry_correction_bytes(meta, name))})
+    dark_meta = white_metadata(height=shape[0], width=shape[1], zoom_step=0, focus_step=0,
+                               exposure_s=cam.white_exposure_s, iso=iso,
+                               mla_rotation_rad=grids[CAPTURE_WHITE].rotation_rad)
+    dark = expose_chunked(np.zeros(shape, np.float32), exposure_s=cam.white_exposure_s, iso=iso, hot_pixels=hot,
+                          random_state=cam.rng)
+    frames.append(SimpleNamespace(raw=dark, metadata=dark_meta, name=f"MOD_{len(WHITE_STEPS):04d}",
+                                  is_dark=True))
+    tar_name = f"caldata-{cam.serial}.tar"
+    write_caldata_tar(tmp / tar_name, frames, serial=cam.serial, hot_pixels=hot)
+    cap_white = frames[CAPTURE_WHITE]
+    return tar_name, geometry_correction_bytes(cap_white.metadata, cap_white.name), white_info
+
+
+def _write_captures(tmp, cam: _Camera, views, cap_grid, evs, *, scale: float, base_exposure_s: float,
+                    gct: bytes, white_level: float) -> list[dict]:
+    """One ``IMG_000n.LFR`` per exposure offset in ``evs`` (EV) in ``tmp``; returns their records."""
+    irr0 = render_irradiance(views, cap_grid, scale_e_per_s=scale, optics=cam.optics)
+    captures = []
+    z, f = WHITE_STEPS[CAPTURE_WHITE]
+    for n, ev in enumerate(progress(evs, desc="virtual Illum: captures")):
+        t = base_exposure_s * 2.0 ** ev
+        raw = expose_chunked(irr0, exposure_s=t, iso=cam.iso, hot_pixels=cam.hot, random_state=cam.rng)
+        meta = illum_metadata(height=cam.shape[0], width=cam.shape[1], zoom_step=z, focus_step=f, exposure_s=t,
+                              iso=cam.iso, modulation_exposure_bias_ev=ILLUM_MODULATION_BIAS_EV,
+                              white_balance=ILLUM_WB, ccm=ILLUM_CCM, mla_rotation_rad=cap_grid.rotation_rad,
+                              extra={"devices": {"sensor": {"normalizedResponses": [cam.nr]}},
+                                     "settings": {"exposure": {"compensation": ev}}})
+        fname = f"IMG_{n + 1:04d}.LFR"
+        write_lfr(tmp / fname, raw=raw, metadata=meta, serial=cam.serial, geometry_correction=gct,
+                  hot_pixels=cam.hot)
+        captures.append({"file": fname, "exposure_ev": ev, "exposure_s": t, "iso": cam.iso,
+                         "saturated_fraction": float((raw >= white_level).mean()),
+                         "truth_factor": scale * t / (cam.white_scale * cam.white_exposure_s)})
+        del raw
+    return captures
+
+
+def _check_virtual_inputs(lf, sensor, exposures_ev, random_state, base_exposure_s) -> list[float]:
+    """Validate :func:`make_virtual_illum`'s arguments; returns the exposure offsets (EV)."""
+    if not isinstance(lf, LightField):
+        raise InputError(f"virtual camera: expected a LightField, got {type(lf).__name__}")
+    if lf.channels != 3:
+        raise ShapeError(f"virtual camera: expected an RGB light field (3 channels), got {lf.channels}")
+    if sensor not in SENSOR_SIZES:
+        raise InputError(f"sensor: expected one of {', '.join(SENSOR_SIZES)}; got {sensor!r}")
+    evs = [float(e) for e in exposures_ev]
+    if not evs or not all(math.isfinite(e) and abs(e) <= 10 for e in evs):
+        raise InputError(f"exposures-ev: expected one or more values within +-10 EV, got {exposures_ev}")
+    if not isinstance(random_state, (int, np.integer)) or random_state < 0:
+        raise InputError(f"random_state: expected a non-negative integer, got {random_state!r}")
+    check_positive("base_exposure_s", base_exposure_s)
+    return evs
+
+
+@renamed_keywords(seed="random_state")
+def make_virtual_illum(lf, out_dir, *, sensor: str = "small", exposures_ev=(-2, -1, 0, 1, 2), random_state: int = 0,
                        base_exposure_s: float = 0.01, iso: float = 100, force: bool = False) -> dict[str, Any]:
     """Render a light field with the virtual Illum into ``out_dir``.
 
@@ -360,8 +451,9 @@ def make_virtual_illum(lf, out_dir, *, sensor: str = "small", exposures_ev=(-2, 
         7728 x 5368 (the real sensor) or a 800 x 600 crop.
     exposures_ev : sequence of float
         Exposure offsets in EV from ``base_exposure_s``.
-    seed : int
-        Fixes the camera (serial, grid, hot pixels) and the noise.
+    random_state : int
+        Fixes the camera (serial, grid, hot pixels) and the noise (recorded as ``"seed"``; the
+        keyword ``seed`` is deprecated).
     base_exposure_s, iso : float
         Exposure of the 0 EV capture and the ISO of all captures.
     force : bool
@@ -372,20 +464,9 @@ def make_virtual_illum(lf, out_dir, *, sensor: str = "small", exposures_ev=(-2, 
     dict : the content of ``truth.json``.
     """
     import json
-    from types import SimpleNamespace
 
-    if not isinstance(lf, LightField):
-        raise InputError(f"virtual camera: expected a LightField, got {type(lf).__name__}")
-    if lf.channels != 3:
-        raise ShapeError(f"virtual camera: expected an RGB light field (3 channels), got {lf.channels}")
-    if sensor not in SENSOR_SIZES:
-        raise InputError(f"sensor: expected one of {', '.join(SENSOR_SIZES)}; got {sensor!r}")
-    evs = [float(e) for e in exposures_ev]
-    if not evs or not all(math.isfinite(e) and abs(e) <= 10 for e in evs):
-        raise InputError(f"exposures-ev: expected one or more values within +-10 EV, got {exposures_ev}")
-    if not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise InputError(f"seed: expected a non-negative integer, got {seed!r}")
-    check_positive("base_exposure_s", base_exposure_s)
+    evs = _check_virtual_inputs(lf, sensor, exposures_ev, random_state, base_exposure_s)
+    seed = random_state
     profile = load_profile("illum")
     iso_figs = profile.iso_figures(iso)  # validates the ISO
     full_well = float(profile.full_well_e)
@@ -393,11 +474,11 @@ def make_virtual_illum(lf, out_dir, *, sensor: str = "small", exposures_ev=(-2, 
     rng = np.random.default_rng(seed)
     serial = f"B51{int(rng.integers(10 ** 7, 10 ** 8)):08d}"
     grid_seed = int(rng.integers(2 ** 31))
-    hot = hot_pixel_list(shape, serial)
-    nr = {"r": NORMALIZED_RESPONSES[0], "gr": 1.0, "gb": 1.0, "b": NORMALIZED_RESPONSES[2], "cct": 5100}
-    optics = Optics()
     white_exposure_s = 0.008
-    white_scale = 0.85 * full_well / white_exposure_s
+    cam = _Camera(shape=shape, iso=iso, serial=serial, hot=hot_pixel_list(shape, serial),
+                  nr={"r": NORMALIZED_RESPONSES[0], "gr": 1.0, "gb": 1.0, "b": NORMALIZED_RESPONSES[2], "cct": 5100},
+                  optics=Optics(), white_exposure_s=white_exposure_s,
+                  white_scale=0.85 * full_well / white_exposure_s, rng=rng)
 
     grids = [illum_grid(shape, zoom_step=z, focus_step=f, random_state=grid_seed) for z, f in WHITE_STEPS]
     cap_grid = grids[CAPTURE_WHITE]
@@ -407,49 +488,9 @@ def make_virtual_illum(lf, out_dir, *, sensor: str = "small", exposures_ev=(-2, 
     scale = 0.7 * full_well / (base_exposure_s * p_hi)
 
     with atomic_dir(out_dir, force=force) as tmp:
-        frames = []
-        white_info = []
-        for k, ((z, f), g) in enumerate(progress(list(zip(WHITE_STEPS, grids)), desc="virtual Illum: white images")):
-            irr = white_irradiance(g, scale_e_per_s=white_scale, optics=optics)
-            raw = expose_chunked(irr, exposure_s=white_exposure_s, iso=iso, hot_pixels=hot, random_state=rng)
-            del irr
-            meta = white_metadata(height=shape[0], width=shape[1], zoom_step=z, focus_step=f,
-                                  exposure_s=white_exposure_s, iso=iso, mla_rotation_rad=g.rotation_rad,
-                                  extra={"devices": {"sensor": {"normalizedResponses": [nr]}}})
-            name = f"MOD_{k:04d}"
-            frames.append(SimpleNamespace(raw=raw, metadata=meta, name=name, is_dark=False))
-            white_info.append({"name": name, "zoom_step": z, "focus_step": f, "grid": g.to_dict(),
-                               "geometry_hash": sha1_ref(geometry_correction_bytes(meta, name))})
-        dark_meta = white_metadata(height=shape[0], width=shape[1], zoom_step=0, focus_step=0,
-                                   exposure_s=white_exposure_s, iso=iso, mla_rotation_rad=cap_grid.rotation_rad)
-        dark = expose_chunked(np.zeros(shape, np.float32), exposure_s=white_exposure_s, iso=iso, hot_pixels=hot,
-                              random_state=rng)
-        frames.append(SimpleNamespace(raw=dark, metadata=dark_meta, name=f"MOD_{len(WHITE_STEPS):04d}",
-                                      is_dark=True))
-        tar_name = f"caldata-{serial}.tar"
-        write_caldata_tar(tmp / tar_name, frames, serial=serial, hot_pixels=hot)
-        cap_white = frames[CAPTURE_WHITE]
-        gct = geometry_correction_bytes(cap_white.metadata, cap_white.name)
-        del frames
-
-        irr0 = render_irradiance(views, cap_grid, scale_e_per_s=scale, optics=optics)
-        captures = []
-        z, f = WHITE_STEPS[CAPTURE_WHITE]
-        for n, ev in enumerate(progress(evs, desc="virtual Illum: captures")):
-            t = base_exposure_s * 2.0 ** ev
-            raw = expose_chunked(irr0, exposure_s=t, iso=iso, hot_pixels=hot, random_state=rng)
-            meta = illum_metadata(height=shape[0], width=shape[1], zoom_step=z, focus_step=f, exposure_s=t, iso=iso,
-                                  modulation_exposure_bias_ev=ILLUM_MODULATION_BIAS_EV, white_balance=ILLUM_WB,
-                                  ccm=ILLUM_CCM, mla_rotation_rad=cap_grid.rotation_rad,
-                                  extra={"devices": {"sensor": {"normalizedResponses": [nr]}},
-                                         "settings": {"exposure": {"compensation": ev}}})
-            fname = f"IMG_{n + 1:04d}.LFR"
-            write_lfr(tmp / fname, raw=raw, metadata=meta, serial=serial, geometry_correction=gct, hot_pixels=hot)
-            captures.append({"file": fname, "exposure_ev": ev, "exposure_s": t, "iso": iso,
-                             "saturated_fraction": float((raw >= profile.white_level_dn).mean()),
-                             "truth_factor": scale * t / (white_scale * white_exposure_s)})
-            del raw
-        del irr0
+        tar_name, gct, white_info = _write_calibration(tmp, cam, grids)
+        captures = _write_captures(tmp, cam, views, cap_grid, evs, scale=scale, base_exposure_s=base_exposure_s,
+                                   gct=gct, white_level=profile.white_level_dn)
         ref = min(range(len(evs)), key=lambda i: abs(evs[i]))
         nv, nu = views.shape[:2]
         n_keep = min(5, nv, nu)
@@ -460,9 +501,9 @@ def make_virtual_illum(lf, out_dir, *, sensor: str = "small", exposures_ev=(-2, 
             "sensor_size": list(shape), "serial": serial, "caldata": tar_name, "captures": captures,
             "truth_capture": captures[ref]["file"], "truth_views": n_keep,
             "grid": cap_grid.to_dict(), "white_images": white_info, "capture_white": white_info[CAPTURE_WHITE]["name"],
-            "optics": optics.to_dict(), "view_step_px": cap_grid.spacing_x_px / VIEW_STEP_DIVISOR,
-            "irradiance_scale_e_per_s": scale, "white_scale_e_per_s": white_scale,
-            "white_exposure_s": white_exposure_s, "hot_pixels": int(len(hot)), "source": lf.source,
+            "optics": cam.optics.to_dict(), "view_step_px": cap_grid.spacing_x_px / VIEW_STEP_DIVISOR,
+            "irradiance_scale_e_per_s": scale, "white_scale_e_per_s": cam.white_scale,
+            "white_exposure_s": white_exposure_s, "hot_pixels": int(len(cam.hot)), "source": lf.source,
             "gain_dn_per_e": iso_figs.gain_dn_per_e,
         }
         truth = LightField(data=truth_views, units="relative", colour_space="camera-rgb",

@@ -215,7 +215,7 @@ def merge_reconstructions(
         # more fixed-point updates than merge_ml's default 2: reconstructions put samples right at
         # the edges of the shots' ranges, where the weights take a few more updates to settle
         radiance, _, info = merge_ml(stack, exposures_s=t, isos=iso, profile=prof, gamma=float(shots[0].gamma),
-                                     n_iter=_ML_UPDATES, n_threads=1)
+                                     max_iter=_ML_UPDATES, n_threads=1)
         data = radiance / scale
     else:
         if float(shots[0].gamma) != 1.0:

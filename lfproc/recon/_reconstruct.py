@@ -67,11 +67,12 @@ import math
 import os
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
+from .._deprecate import resolve_options
 from .._shared.validation import check_choice
 from .._shared.progress import progress
 from .._shared.parallel import realign
@@ -87,7 +88,7 @@ from ..camera.projection import patch_operators, PatchOperators
 from ..dictionary import Dictionary, load_dictionary
 from .._shared.deps import require
 
-__all__ = ["reconstruct", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "VARIANCES", "patch_count"]
+__all__ = ["reconstruct", "ReconstructionSettings", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "VARIANCES", "patch_count"]
 
 SCALES = ("patch", "global", "noise", "universal")
 OVERLAPS = ("mean", "scale", "window", "scale-window", "scale-window-fit")
@@ -378,25 +379,249 @@ def _load_inputs(capture, dictionary):
     return capture, dictionary
 
 
+@dataclass(frozen=True)
+class ReconstructionSettings:
+    """The options of :func:`reconstruct` that decide its result (see its parameters).
+
+    ``max_iter`` and ``tol`` None: the solver's defaults (:data:`DEFAULTS`); ``n_nonzero_coefs``
+    None: the dictionary's training sparsity. Values are validated by :func:`reconstruct`.
+    """
+    solver: str = "admm"
+    stride: int = DEFAULTS["stride"]
+    mu: float = DEFAULTS["mu"]
+    max_iter: int | None = None
+    tol: float | None = None
+    n_nonzero_coefs: int | None = None
+    scale: str = DEFAULTS["scale"]
+    block_patches: int = DEFAULTS["block_patches"]
+    overlap: str = DEFAULTS["overlap"]
+    debias: int = 0
+    variance: str = DEFAULTS["variance"]
+
+
+def _checked_settings(settings: ReconstructionSettings) -> ReconstructionSettings:
+    """``settings`` validated, with ``tol``, ``mu`` as floats and ``max_iter`` filled in from the solver's
+    defaults (``n_nonzero_coefs`` and the stride's range need the dictionary: :func:`_check_fit`)."""
+    solver = settings.solver
+    check_choice("solver", solver, SOLVERS)
+    check_choice("scale", settings.scale, SCALES)
+    check_choice("variance", settings.variance, VARIANCES)
+    check_choice("overlap", settings.overlap, OVERLAPS)
+    stride = settings.stride
+    if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)):
+        raise InputError(f"stride: expected a positive integer, got {stride!r}")
+    mu, tol = settings.mu, settings.tol
+    if tol is None:
+        tol = DEFAULTS["tol"][solver] or 0.0
+    try:
+        mu = float(mu)
+        tol = float(tol)
+    except (TypeError, ValueError):
+        raise InputError(f"mu and tol: expected numbers, got {mu!r} and {tol!r}") from None
+    if not (math.isfinite(mu) and mu >= 0):
+        raise InputError(f"mu: expected a non-negative number, got {mu}")
+    if not (math.isfinite(tol) and tol >= 0):
+        raise InputError(f"tol: expected a non-negative number, got {tol}")
+    max_iter = settings.max_iter
+    if max_iter is None:
+        max_iter = DEFAULTS["max_iter"][solver] or 1
+    return replace(settings, mu=mu, tol=tol, max_iter=_int_option("max_iter", max_iter),
+                   block_patches=_int_option("block_patches", settings.block_patches))
+
+
+def _check_fit(capture, dictionary, settings: ReconstructionSettings) -> ReconstructionSettings:
+    """Refuse a dictionary whose patch does not fit the capture; the stride checked against the patch and
+    ``n_nonzero_coefs`` filled in from the dictionary."""
+    v_n, u_n, size, _, c_n = dictionary.patch
+    if (v_n, u_n) != tuple(capture.views) or c_n != 3:
+        raise ShapeError(
+            f"dictionary {dictionary.name or dictionary.preset!r} has {v_n} x {u_n} views and {c_n} colours "
+            f"(patch {list(dictionary.patch)}); the capture has {capture.views[0]} x {capture.views[1]} views and "
+            f"3 colours: use a dictionary trained for {capture.views[0]} x {capture.views[1]} views")
+    h, w = capture.size
+    if size > min(h, w):
+        raise ShapeError(f"dictionary patch of {size} x {size} pixels does not fit the capture's sensor of {h} x {w}")
+    stride = int(settings.stride)
+    if not 1 <= stride <= size:
+        raise InputError(f"stride: expected 1..{size} (the dictionary's patch size), got {stride}")
+    sparsity = settings.n_nonzero_coefs
+    if sparsity is None:
+        sparsity = dictionary.sparsity
+    return replace(settings, stride=stride, n_nonzero_coefs=_int_option("n_nonzero_coefs", sparsity))
+
+
+def _solver_settings(capture, dictionary, settings: ReconstructionSettings, T: np.ndarray, W: np.ndarray) -> _Settings:
+    """The per-patch solver's settings, with the capture's global scales (module notes)."""
+    usable = W > 0
+    v_n, u_n = dictionary.patch[:2]
+    n = dictionary.n
+    mean_rowsum = float(np.mean(capture.mask.codes)) * v_n * u_n
+    c_global = math.sqrt(n) * float(np.percentile(np.abs(T[usable]), 99.9)) / max(mean_rowsum, 1e-12)
+    w_global = float(np.sqrt(np.mean(W[usable].astype(np.float64) ** 2)))
+    # the constant the overlap weights' patch scales are divided by (the same in every block); from the
+    # non-zero measurements: on a noise-free sensor most of a dark scene's measurements are exactly 0, and a
+    # zero median made every 1 / c_p^2 weight underflow to 0 and the output black
+    lit = np.abs(T[usable & (T != 0)])
+    c_median = math.sqrt(n) * (float(np.median(lit)) if lit.size else 1.0) / max(mean_rowsum, 1e-12)
+    return _Settings(solver=settings.solver, mu=settings.mu, max_iter=settings.max_iter, tol=settings.tol,
+                     sparsity=settings.n_nonzero_coefs, scale=settings.scale, overlap=settings.overlap,
+                     c_global=max(c_global, 1e-30), w_global=max(w_global, 1e-30),
+                     c_median=max(c_median, 1e-30), debias=_int_option("debias", settings.debias, low=0))
+
+
+@dataclass
+class _Plan:
+    """The blocks of one reconstruction: what every block shares, the blocks, and how to attach a block's
+    patch operators (non-periodic masks: made per block, when it is submitted)."""
+    shared: dict[str, Any]
+    tasks: list[dict]
+    attach_operators: Any
+    n_patches: int
+    n_operators: int | None
+
+
+def _plan(capture, dictionary, solver_settings: _Settings, T, W, *, stride: int, block_patches: int) -> _Plan:
+    """Patches on the grid of ``stride``, cut into blocks of whole patch rows (module notes)."""
+    v_n, u_n, size, _, c_n = dictionary.patch
+    h, w = capture.size
+    tops, lefts = patch_grid((h, w), size, stride)
+    rows_per_block = max(1, block_patches // len(lefts))
+    atoms = realign(np.ascontiguousarray(dictionary.atoms, dtype=np.float32))  # a dictionary a Dask worker received (bench)
+    shared: dict[str, Any] = {"atoms": atoms, "patch": dictionary.patch, "settings": solver_settings,
+                              "periodic": capture.mask.period is not None}
+    if not shared["periodic"]:  # D's rows grouped by patch pixel and colour, for _operator_times
+        shared["atoms_by_pixel"] = np.ascontiguousarray(
+            atoms.reshape(v_n * u_n, size * size * c_n, -1).transpose(1, 0, 2))
+    grid_t = np.repeat(tops, len(lefts))
+    grid_l = np.tile(lefts, len(tops))
+    op_args = dict(views=capture.views, cfa_pattern=capture.cfa_pattern, size=size, sensor_size=(h, w))
+    phase = None
+    n_operators = None
+    if shared["periodic"]:
+        ops = patch_operators(capture.mask, tops=grid_t, lefts=grid_l, **op_args)
+        phase = ops.index
+        A = ops.times(atoms)  # (G, m, K): the distinct patch matrices times D
+        shared["A"] = A
+        shared["gram"] = [a.astype(np.float64) @ a.T.astype(np.float64) for a in A]
+        with threadpool_limits(1):  # the ADMM factor of every phase, once per reconstruction (small LAPACK calls)
+            shared["factor"] = ([_Factor.build(g) for g in shared["gram"]] if solver_settings.solver == "admm"
+                                else None)
+        shared["rowsum"] = ops.row_sums()
+        n_operators = ops.n_operators
+    tasks = []
+    for i in range(0, len(tops), rows_per_block):
+        bt = tops[i:i + rows_per_block]
+        sel = slice(i * len(lefts), (i + len(bt)) * len(lefts))
+        row0, row1 = int(bt[0]), int(bt[-1] + size)
+        task = {"row0": row0, "tops": grid_t[sel], "lefts": grid_l[sel], "width": w,
+                "T": T[:, row0:row1], "W": W[:, row0:row1]}
+        if phase is not None:
+            task["phase"] = phase[sel]
+        tasks.append(task)
+
+    def attach_operators(task):
+        if not shared["periodic"] and "operators" not in task:
+            ops = patch_operators(capture.mask, tops=task["tops"], lefts=task["lefts"], **op_args)
+            task["operators"] = {f: getattr(ops, f) for f in ("cols", "vals", "index", "positions", "size", "views",
+                                                             "shots", "channels", "periodic")}
+        return task
+
+    return _Plan(shared=shared, tasks=tasks, attach_operators=attach_operators, n_patches=int(len(grid_t)),
+                 n_operators=n_operators)
+
+
+def _solve_plan(plan: _Plan, shape, *, workers, scheduler, threads: int, progress_bar) -> dict[str, Any]:
+    """Solve every block (threads in this process, or Dask) and add their accumulators in block order.
+
+    Returns ``acc`` (the weighted sums), ``wsum`` (their weights per pixel), ``empty`` (patches without
+    a usable measurement), ``iterations`` (per patch) and ``scheduler`` (a label).
+    """
+    v_n, u_n, h, w, c_n = shape
+    acc = np.zeros((v_n, u_n, h, w, c_n), dtype=np.float32)
+    wsum = np.zeros((h, w), dtype=np.float32)  # with "mean": the number of non-empty patches over each pixel
+    empty = 0
+    iterations: list[np.ndarray] = []
+    bar = progress(total=plan.n_patches, desc="reconstruct", unit="patch",
+                   disable=None if progress_bar is None else not progress_bar)
+
+    def add(result):
+        nonlocal empty
+        r0 = result["row0"]
+        part = result["acc"]
+        acc[:, :, r0:r0 + part.shape[2]] += part
+        wsum[r0:r0 + part.shape[2]] += result["weight"]
+        empty += result["empty"]
+        iterations.append(result["iterations"])
+
+    use_dask = workers is not None or (scheduler is not None and scheduler != "synchronous")
+    try:
+        if not use_dask:
+            with threadpool_limits(1):  # once around the pool, never per block (_solve_block)
+                _run_threads(plan.tasks, plan.shared, plan.attach_operators, add, bar, threads=threads)
+        else:
+            _run_dask(plan.tasks, plan.shared, plan.attach_operators, add, bar, workers=workers, scheduler=scheduler)
+    finally:
+        bar.close()
+    return {"acc": acc, "wsum": wsum, "empty": empty,
+            "iterations": np.concatenate(iterations) if iterations else np.zeros(0),
+            "scheduler": f"in-process:{threads} threads" if not use_dask else (scheduler or f"local:{workers}")}
+
+
+#: What ``mu`` means for each ``scale`` (recorded with the reconstruction).
+_MU_MEANING = {"patch": "1/(2m)||W(Phi D b - T)||^2 + mu||b||_1 per patch, T scaled to a unit-l2 patch, W to "
+                        "mean square one",
+               "noise": "1/(2m)||W(Phi D a - T)||^2 + (mu/c_p)||a||_1 per patch, W = 1/std(T) (chi-square), "
+                        "c_p the patch's l2 norm",
+               "universal": "1/2||W(Phi D a - T)||^2 + mu sqrt(2 ln K) s_p ||a||_1 per patch, W = 1/std(T), "
+                            "s_p = rms_j ||W Phi D_j|| (the noise level of Phi D^T W^2 T)",
+               "global": "as 'patch' but with one scale for the whole capture"}
+
+
+def _record(settings: ReconstructionSettings, dictionary, capture, plan: _Plan, solved: dict[str, Any], *,
+            negative: float, seconds: float) -> dict[str, Any]:
+    """``attrs["reconstruction"]`` of the output: the lfproc version, every parameter and figures."""
+    solver = settings.solver
+    its = solved["iterations"]
+    return {
+        "lfproc_version": __version__,
+        "solver": solver,
+        "dictionary": {"name": dictionary.name, "preset": dictionary.preset, "patch": list(dictionary.patch),
+                       "atoms": dictionary.n_atoms, "sparsity": dictionary.sparsity},
+        "stride": settings.stride,
+        "mu": settings.mu,
+        "mu_meaning": _MU_MEANING[settings.scale],
+        "tol": settings.tol,
+        "max_iter": settings.max_iter if solver != "omp" else None,
+        "sparsity": settings.n_nonzero_coefs if solver == "omp" else None,
+        "scale": settings.scale,
+        "overlap": settings.overlap,
+        "variance": settings.variance,
+        "debias": int(settings.debias),
+        "block_patches": settings.block_patches,
+        "patches": plan.n_patches,
+        "operators": plan.n_operators if plan.n_operators is not None else plan.n_patches,
+        "periodic_operator": bool(plan.shared["periodic"]),
+        "empty_patches": int(solved["empty"]),
+        "negative_fraction_clipped": negative,
+        "iterations_mean": float(its.mean()) if its.size else 0.0,
+        "iterations_max": int(its.max()) if its.size else 0,
+        "radiance_scale": capture.radiance_scale,
+        "capture_ground_truth": capture.ground_truth,
+        "seconds": seconds,
+        "scheduler": solved["scheduler"],
+    }
+
+
 def reconstruct(
     capture,
     dictionary="default",
     *,
-    solver: str = "admm",
-    stride: int = DEFAULTS["stride"],
-    mu: float = DEFAULTS["mu"],
-    max_iter: int | None = None,
-    tol: float | None = None,
-    sparsity: int | None = None,
-    scale: str = DEFAULTS["scale"],
-    block_patches: int = DEFAULTS["block_patches"],
+    settings: ReconstructionSettings | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
     progress_bar: bool | None = None,
     threads: int | None = None,
-    overlap: str = DEFAULTS["overlap"],
-    debias: int = 0,
-    variance: str = DEFAULTS["variance"],
+    **options,
 ) -> LightField:
     """Reconstruct the HDR light field of a coded multi-ISO capture (method.md section 4).
 
@@ -414,9 +639,13 @@ def reconstruct(
     ----------
     capture : Capture or path of a capture file
     dictionary : Dictionary, ``"default"`` (the shipped one) or path of a dictionary file
+    settings : ReconstructionSettings, optional
+        Every option that decides the result (the fields below from ``solver`` to ``variance``,
+        except the execution options ``workers``, ``scheduler``, ``progress_bar`` and
+        ``threads``). Give either ``settings`` or its fields as keywords (``**options``), not both.
     solver : {"admm", "fista", "omp"}
         ``admm`` (default; Woodbury solve, one ``m x m`` system per patch), ``fista`` (step
-        ``1/L``), ``omp`` (greedy, ``sparsity`` atoms: the fast mode).
+        ``1/L``), ``omp`` (greedy, ``n_nonzero_coefs`` atoms: the fast mode).
     stride : int
         Patch spacing in pixels (1 .. patch size; 4 as the paper). Any stride works with the
         Bayer CFA: patch operators carry their CFA phase.
@@ -432,8 +661,9 @@ def reconstruct(
     tol : float, optional
         Stop a patch when the relative change of its code (and, for ADMM, its primal residual)
         is at most ``tol`` (default 1e-3 for ADMM, 2^-15 for FISTA; the paper's: 2^-15).
-    sparsity : int, optional
-        Atoms per patch for ``omp`` (default: the dictionary's training sparsity).
+    n_nonzero_coefs : int, optional
+        Atoms per patch for ``omp`` (default: the dictionary's training sparsity). The keyword
+        ``sparsity`` is deprecated.
     scale : {"universal", "noise", "patch", "global"}
         How HDR scale is handled (module notes): the chi-square data term with the l1 weight at
         its noise level (``"universal"``, default), the chi-square data term with the l1 weight
@@ -474,6 +704,8 @@ def reconstruct(
     ------
     ShapeError
         The dictionary's patch does not fit the capture (views, colours, sensor size).
+    TypeError
+        ``settings`` together with field keywords, or an unknown keyword.
     InputError
         Unknown solver or scale, a stride outside 1..patch size, bad numbers, a capture
         whose measurements all have weight zero.
@@ -481,138 +713,31 @@ def reconstruct(
         Unreadable capture or dictionary files.
     """
     started = time.perf_counter()
-    check_choice("solver", solver, SOLVERS)
-    check_choice("scale", scale, SCALES)
-    check_choice("variance", variance, VARIANCES)
-    check_choice("overlap", overlap, OVERLAPS)
-    if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)):
-        raise InputError(f"stride: expected a positive integer, got {stride!r}")
-    if tol is None:
-        tol = DEFAULTS["tol"][solver] or 0.0
-    try:
-        mu = float(mu)
-        tol = float(tol)
-    except (TypeError, ValueError):
-        raise InputError(f"mu and tol: expected numbers, got {mu!r} and {tol!r}") from None
-    if not (math.isfinite(mu) and mu >= 0):
-        raise InputError(f"mu: expected a non-negative number, got {mu}")
-    if not (math.isfinite(tol) and tol >= 0):
-        raise InputError(f"tol: expected a non-negative number, got {tol}")
-    if max_iter is None:
-        max_iter = DEFAULTS["max_iter"][solver] or 1
-    max_iter = _int_option("max_iter", max_iter)
-    block_patches = _int_option("block_patches", block_patches)
+    settings = resolve_options(ReconstructionSettings, settings, options, func_name="reconstruct",
+                               argument="settings", renames={"sparsity": "n_nonzero_coefs"})
+    settings = _checked_settings(settings)
     if workers is not None:
         workers = _int_option("workers", workers)
     if threads is None:
         threads = _default_threads()
     threads = _int_option("threads", threads)
     capture, dictionary = _load_inputs(capture, dictionary)
-    v_n, u_n, size, _, c_n = dictionary.patch
-    if (v_n, u_n) != tuple(capture.views) or c_n != 3:
-        raise ShapeError(
-            f"dictionary {dictionary.name or dictionary.preset!r} has {v_n} x {u_n} views and {c_n} colours "
-            f"(patch {list(dictionary.patch)}); the capture has {capture.views[0]} x {capture.views[1]} views and "
-            f"3 colours: use a dictionary trained for {capture.views[0]} x {capture.views[1]} views")
-    h, w = capture.size
-    if size > min(h, w):
-        raise ShapeError(f"dictionary patch of {size} x {size} pixels does not fit the capture's sensor of {h} x {w}")
-    stride = int(stride)
-    if not 1 <= stride <= size:
-        raise InputError(f"stride: expected 1..{size} (the dictionary's patch size), got {stride}")
-    if sparsity is None:
-        sparsity = dictionary.sparsity
-    sparsity = _int_option("sparsity", sparsity)
+    settings = _check_fit(capture, dictionary, settings)
 
-    obs = observations(capture, variance_from=variance)
+    obs = observations(capture, variance_from=settings.variance)
     T = np.ascontiguousarray(obs.radiance, dtype=np.float32)
     W = np.ascontiguousarray(obs.weight, dtype=np.float32)
-    usable = W > 0
-    if not usable.any():
+    if not (W > 0).any():
         raise InputError("capture: every measurement has weight zero (all saturated or black-clipped); nothing to "
                          "reconstruct from")
-    n = dictionary.n
-    mean_rowsum = float(np.mean(capture.mask.codes)) * v_n * u_n
-    c_global = math.sqrt(n) * float(np.percentile(np.abs(T[usable]), 99.9)) / max(mean_rowsum, 1e-12)
-    w_global = float(np.sqrt(np.mean(W[usable].astype(np.float64) ** 2)))
-    # the constant the overlap weights' patch scales are divided by (the same in every block); from the
-    # non-zero measurements: on a noise-free sensor most of a dark scene's measurements are exactly 0, and a
-    # zero median made every 1 / c_p^2 weight underflow to 0 and the output black
-    lit = np.abs(T[usable & (T != 0)])
-    c_median = math.sqrt(n) * (float(np.median(lit)) if lit.size else 1.0) / max(mean_rowsum, 1e-12)
-    settings = _Settings(solver=solver, mu=mu, max_iter=max_iter, tol=tol, sparsity=sparsity, scale=scale, overlap=overlap,
-                         c_global=max(c_global, 1e-30), w_global=max(w_global, 1e-30),
-                         c_median=max(c_median, 1e-30), debias=_int_option("debias", debias, low=0))
+    plan = _plan(capture, dictionary, _solver_settings(capture, dictionary, settings, T, W), T, W,
+                 stride=settings.stride, block_patches=settings.block_patches)
+    v_n, u_n, _, _, c_n = dictionary.patch
+    solved = _solve_plan(plan, (v_n, u_n, *capture.size, c_n), workers=workers, scheduler=scheduler,
+                         threads=threads, progress_bar=progress_bar)
 
-    tops, lefts = patch_grid((h, w), size, stride)
-    rows_per_block = max(1, block_patches // len(lefts))
-    atoms = realign(np.ascontiguousarray(dictionary.atoms, dtype=np.float32))  # a dictionary a Dask worker received (bench)
-    shared: dict[str, Any] = {"atoms": atoms, "patch": dictionary.patch, "settings": settings,
-                              "periodic": capture.mask.period is not None}
-    if not shared["periodic"]:  # D's rows grouped by patch pixel and colour, for _operator_times
-        shared["atoms_by_pixel"] = np.ascontiguousarray(
-            atoms.reshape(v_n * u_n, size * size * c_n, -1).transpose(1, 0, 2))
-    grid_t = np.repeat(tops, len(lefts))
-    grid_l = np.tile(lefts, len(tops))
-    op_args = dict(views=capture.views, cfa_pattern=capture.cfa_pattern, size=size, sensor_size=(h, w))
-    phase = None
-    n_operators = None
-    if shared["periodic"]:
-        ops = patch_operators(capture.mask, tops=grid_t, lefts=grid_l, **op_args)
-        phase = ops.index
-        A = ops.times(atoms)  # (G, m, K): the distinct patch matrices times D
-        shared["A"] = A
-        shared["gram"] = [a.astype(np.float64) @ a.T.astype(np.float64) for a in A]
-        with threadpool_limits(1):  # the ADMM factor of every phase, once per reconstruction (small LAPACK calls)
-            shared["factor"] = [_Factor.build(g) for g in shared["gram"]] if solver == "admm" else None
-        shared["rowsum"] = ops.row_sums()
-        n_operators = ops.n_operators
-    tasks = []
-    for i in range(0, len(tops), rows_per_block):
-        bt = tops[i:i + rows_per_block]
-        sel = slice(i * len(lefts), (i + len(bt)) * len(lefts))
-        row0, row1 = int(bt[0]), int(bt[-1] + size)
-        task = {"row0": row0, "tops": grid_t[sel], "lefts": grid_l[sel], "width": w,
-                "T": T[:, row0:row1], "W": W[:, row0:row1]}
-        if phase is not None:
-            task["phase"] = phase[sel]
-        tasks.append(task)
-
-    def attach_operators(task):
-        if not shared["periodic"] and "operators" not in task:
-            ops = patch_operators(capture.mask, tops=task["tops"], lefts=task["lefts"], **op_args)
-            task["operators"] = {f: getattr(ops, f) for f in ("cols", "vals", "index", "positions", "size", "views",
-                                                             "shots", "channels", "periodic")}
-        return task
-
-    acc = np.zeros((v_n, u_n, h, w, c_n), dtype=np.float32)
-    wsum = np.zeros((h, w), dtype=np.float32)  # with "mean": the number of non-empty patches over each pixel
-    empty = 0
-    iterations: list[np.ndarray] = []
-    bar = progress(total=len(grid_t), desc="reconstruct", unit="patch",
-                   disable=None if progress_bar is None else not progress_bar)
-
-    def add(result):
-        nonlocal empty
-        r0 = result["row0"]
-        part = result["acc"]
-        acc[:, :, r0:r0 + part.shape[2]] += part
-        wsum[r0:r0 + part.shape[2]] += result["weight"]
-        empty += result["empty"]
-        iterations.append(result["iterations"])
-
-    use_dask = workers is not None or (scheduler is not None and scheduler != "synchronous")
-    try:
-        if not use_dask:
-            with threadpool_limits(1):  # once around the pool, never per block (_solve_block)
-                _run_threads(tasks, shared, attach_operators, add, bar, threads=threads)
-        else:
-            _run_dask(tasks, shared, attach_operators, add, bar, workers=workers, scheduler=scheduler)
-    finally:
-        bar.close()
-
-    count = np.maximum(wsum, np.float32(1e-30))  # a pixel of empty patches only: 0 (nothing was measured)
-    data = acc / count[None, None, :, :, None]
+    count = np.maximum(solved["wsum"], np.float32(1e-30))  # a pixel of empty patches only: 0 (nothing was measured)
+    data = solved["acc"] / count[None, None, :, :, None]
     negative = float((data < 0).mean())
     np.maximum(data, 0, out=data)
     radiance_scale = capture.radiance_scale
@@ -621,42 +746,8 @@ def reconstruct(
         units = capture.parameters.get("light_field_units") or "relative"
     else:
         units = "e-/s"
-    its = np.concatenate(iterations) if iterations else np.zeros(0)
-    seconds = time.perf_counter() - started
-    record = {
-        "lfproc_version": __version__,
-        "solver": solver,
-        "dictionary": {"name": dictionary.name, "preset": dictionary.preset, "patch": list(dictionary.patch),
-                       "atoms": dictionary.n_atoms, "sparsity": dictionary.sparsity},
-        "stride": stride,
-        "mu": mu,
-        "mu_meaning": {"patch": "1/(2m)||W(Phi D b - T)||^2 + mu||b||_1 per patch, T scaled to a unit-l2 patch, W to "
-                                "mean square one",
-                       "noise": "1/(2m)||W(Phi D a - T)||^2 + (mu/c_p)||a||_1 per patch, W = 1/std(T) (chi-square), "
-                                "c_p the patch's l2 norm",
-                       "universal": "1/2||W(Phi D a - T)||^2 + mu sqrt(2 ln K) s_p ||a||_1 per patch, W = 1/std(T), "
-                                    "s_p = rms_j ||W Phi D_j|| (the noise level of Phi D^T W^2 T)",
-                       "global": "as 'patch' but with one scale for the whole capture"}[scale],
-        "tol": tol,
-        "max_iter": max_iter if solver != "omp" else None,
-        "sparsity": sparsity if solver == "omp" else None,
-        "scale": scale,
-        "overlap": overlap,
-        "variance": variance,
-        "debias": int(debias),
-        "block_patches": block_patches,
-        "patches": int(len(grid_t)),
-        "operators": n_operators if n_operators is not None else int(len(grid_t)),
-        "periodic_operator": bool(shared["periodic"]),
-        "empty_patches": int(empty),
-        "negative_fraction_clipped": negative,
-        "iterations_mean": float(its.mean()) if its.size else 0.0,
-        "iterations_max": int(its.max()) if its.size else 0,
-        "radiance_scale": radiance_scale,
-        "capture_ground_truth": capture.ground_truth,
-        "seconds": seconds,
-        "scheduler": f"in-process:{threads} threads" if not use_dask else (scheduler or f"local:{workers}"),
-    }
+    record = _record(settings, dictionary, capture, plan, solved, negative=negative,
+                     seconds=time.perf_counter() - started)
     return LightField(data=data, units=units, colour_space="camera-rgb" if radiance_scale is None else "linear-srgb",
                       source="lfproc.reconstruct", attrs={"reconstruction": record})
 

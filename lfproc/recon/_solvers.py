@@ -474,12 +474,12 @@ def fista(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float,
     return act.out, act.iters
 
 
-def omp(op, w: np.ndarray, y: np.ndarray, sparsity: int) -> tuple[np.ndarray, np.ndarray]:
+def omp(op, w: np.ndarray, y: np.ndarray, n_nonzero_coefs: int) -> tuple[np.ndarray, np.ndarray]:
     """Orthogonal matching pursuit on the weighted problem ``B = W A``, columns normalised for the selection.
 
     Each step picks the atom whose normalised column of ``B`` correlates most with the
     weighted residual, then refits all chosen atoms by weighted least squares (float64
-    normal equations with a tiny ridge). A patch stops after ``sparsity`` atoms, or earlier
+    normal equations with a tiny ridge). A patch stops after ``n_nonzero_coefs`` atoms, or earlier
     when no atom correlates with its residual any more (an exact fit). There is no
     residual (chi-square) stop.
 
@@ -492,7 +492,7 @@ def omp(op, w: np.ndarray, y: np.ndarray, sparsity: int) -> tuple[np.ndarray, np
     y = np.asarray(y, dtype=np.float32)
     b_n, m = w.shape
     k_n = op.shape[1]
-    t_n = int(min(sparsity, k_n, m))
+    t_n = int(min(n_nonzero_coefs, k_n, m))
     norms = np.sqrt(op.colnorm2(w * w))
     inv_norm = np.where(norms > 0, 1.0 / np.maximum(norms, _TINY), 0.0).astype(np.float32)
     c = (w * y).astype(np.float64)

@@ -47,7 +47,7 @@ def ramp():
 
 @pytest.fixture(scope="module")
 def dct8():
-    return dct_dictionary((5, 5, 8, 8, 3), 200, sparsity=6)
+    return dct_dictionary((5, 5, 8, 8, 3), 200, n_nonzero_coefs=6)
 
 
 def _alone(shot, dictionary):
@@ -239,7 +239,7 @@ def tiny_inputs(tmp_path_factory):
         lfproc.write_lightfield(lf, path)
         scenes.append(path)
     dictionary = root / "dct4.npz"
-    save_dictionary(dct_dictionary((5, 5, 4, 4, 3), 100, sparsity=4), dictionary)
+    save_dictionary(dct_dictionary((5, 5, 4, 4, 3), 100, n_nonzero_coefs=4), dictionary)
     return root, scenes, dictionary
 
 

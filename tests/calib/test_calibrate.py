@@ -39,7 +39,7 @@ def profile():
 @pytest.fixture(scope="module")
 def frames(tmp_path_factory, profile):
     out = tmp_path_factory.mktemp("calib") / "frames"
-    return simulate_frames(profile, out, size=(128, 128), seed=7)
+    return simulate_frames(profile, out, size=(128, 128), random_state=7)
 
 
 @pytest.fixture(scope="module")
@@ -315,7 +315,7 @@ def test_no_overexposed_flats(frames, tmp_path):
 
 
 def test_hot_pixels_are_found_and_masked(tmp_path, profile):
-    out = simulate_frames(profile, tmp_path / "f", size=(64, 64), seed=3, isos=[400])
+    out = simulate_frames(profile, tmp_path / "f", size=(64, 64), random_state=3, isos=[400])
     rows = _rows(out)
     hot = [(5, 7), (40, 33), (20, 60)]
     for r in rows:

@@ -20,7 +20,7 @@ from lfproc.errors import CalibrationError, FileFormatError, InputError, OutputE
 @pytest.fixture(scope="module")
 def emva_set(tmp_path_factory):
     out = tmp_path_factory.mktemp("emva") / "set"
-    return simulate_frames("paper-high", out, format="emva", size=(96, 96), seed=11)
+    return simulate_frames("paper-high", out, format="emva", size=(96, 96), random_state=11)
 
 
 def test_descriptor_parse(tmp_path):
@@ -103,7 +103,7 @@ def test_emva_spatial_figures(tmp_path):
     from dataclasses import replace
 
     prof = replace(load_profile("paper-high"), prnu=0.01, dsnu_e=1.5, fixed_pattern_seed=2)
-    path = simulate_frames(prof, tmp_path / "s", format="emva", size=(64, 64), seed=1)
+    path = simulate_frames(prof, tmp_path / "s", format="emva", size=(64, 64), random_state=1)
     _, _, fig, unknown = evaluate_descriptor(path)
     assert fig["DSNU1288"] == pytest.approx(1.5, rel=0.1)
     assert fig["PRNU1288"] == pytest.approx(1.0, rel=0.1)  # percent
@@ -340,7 +340,7 @@ def test_emva_data_give_per_pixel_bias_and_flat_maps(tmp_path):
     from lfproc.sensor import fixed_pattern
 
     prof = replace(load_profile("paper-high"), prnu=0.01, dsnu_e=1.5, fixed_pattern_seed=2)
-    res = calibrate(simulate_frames(prof, tmp_path / "s", format="emva", size=(64, 64), seed=1))
+    res = calibrate(simulate_frames(prof, tmp_path / "s", format="emva", size=(64, 64), random_state=1))
     p = res.profile
     gain, offset = fixed_pattern(prof, (64, 64))
     assert p.flat_field.shape == (64, 64) and p.flat_field.mean() == pytest.approx(1.0, abs=1e-6)

@@ -285,7 +285,7 @@ def test_ksvd_bad_input():
     x = np.ones((10, 4), dtype=np.float32)
     with pytest.raises(InputError, match="n_atoms"):
         ksvd(x, 11, 2, 1)
-    with pytest.raises(InputError, match="sparsity"):
+    with pytest.raises(InputError, match="n_nonzero_coefs"):
         ksvd(x, 5, 6, 1)
     with pytest.raises(InputError, match="integer seed"):
         ksvd(x, 5, 2, 1, checkpoint="ck")
@@ -473,10 +473,10 @@ def test_evaluate_matches_an_independent_best_k_term_dct_approximation():
     lf = synthesize("layers", size=(16, 16), views=3, random_state=2)
     small = lf.data[:, :, 4:12, 4:12]
     full = dct_dictionary((3, 3, 1, 1, 3))
-    r = evaluate_dictionary(full, [small], sparsity=full.n, compare_dct=False)
+    r = evaluate_dictionary(full, [small], n_nonzero_coefs=full.n, compare_dct=False)
     assert r["relative_error"] < 1e-5
     d = dct_dictionary((3, 3, 4, 4, 3))  # complete: 432 atoms
-    r10 = evaluate_dictionary(d, [lf], sparsity=10, stride=4)
+    r10 = evaluate_dictionary(d, [lf], n_nonzero_coefs=10, stride=4)
     ref = _best_k_term_dct(lf.data, 4, 10)
     truth = lf.data.astype(np.float64)
     expected = np.linalg.norm(ref - truth) / np.linalg.norm(truth)
@@ -486,7 +486,7 @@ def test_evaluate_matches_an_independent_best_k_term_dct_approximation():
     expected_pu21 = pu21_psnr(ref.astype(np.float32), lf.data, peak_luminance=1000.0, channel_axis=-1)
     assert r10["pu21_psnr_db"] == pytest.approx(expected_pu21, abs=0.05)
     # fewer atoms, larger error (the same reference at 3 atoms)
-    r3 = evaluate_dictionary(d, [lf], sparsity=3, stride=4, compare_dct=False)
+    r3 = evaluate_dictionary(d, [lf], n_nonzero_coefs=3, stride=4, compare_dct=False)
     expected3 = np.linalg.norm(_best_k_term_dct(lf.data, 4, 3) - truth) / np.linalg.norm(truth)
     assert r3["relative_error"] == pytest.approx(expected3, rel=1e-4) and expected3 > expected
 
@@ -494,8 +494,8 @@ def test_evaluate_matches_an_independent_best_k_term_dct_approximation():
 @pytest.mark.slow  # two K-SVD trainings
 def test_train_tiny_dictionary_beats_nothing_and_records_provenance():
     lf = synthesize("lamps", size=(40, 40), views=5, random_state=4)
-    d = train_dictionary([lf], preset="tiny", atoms=200, patches=1500, iterations=3, seed=5, command="test")
-    again = train_dictionary([lf], preset="tiny", atoms=200, patches=1500, iterations=3, seed=5, command="test")
+    d = train_dictionary([lf], preset="tiny", atoms=200, patches=1500, max_iter=3, random_state=5, command="test")
+    again = train_dictionary([lf], preset="tiny", atoms=200, patches=1500, max_iter=3, random_state=5, command="test")
     np.testing.assert_array_equal(d.atoms, again.atoms)  # seeded end to end
     assert d.patch == (5, 5, 4, 4, 3) and d.n_atoms == 200 and d.preset == "tiny"
     prov = d.provenance
@@ -643,6 +643,6 @@ def test_shipped_default_beats_dct_on_unseen_hdr_photographs(shared_data):
         pytest.skip("no ScanLines_*.exr HDR photographs in the shared data")
     lfs = [synthesize(kind, size=(64, 64), views=5, baseline_px=1.0, textures=[p], random_state=9100 + i)
            for i, (kind, p) in enumerate(zip(("window", "layers"), photos))]
-    r = evaluate_dictionary("default", lfs, sparsity=10)
+    r = evaluate_dictionary("default", lfs, n_nonzero_coefs=10)
     assert r["pu21_psnr_db"] >= r["dct_pu21_psnr_db"] + 1.0, r
     assert r["relative_error"] < r["dct_relative_error"]

@@ -87,7 +87,7 @@ def test_ml_single_exposure_weights_match_sensor_model():
     # one usable exposure per pixel: the merge returns that exposure's calibrated value and variance
     dn = np.array([[500, 1023], [1023, 1023]], dtype=np.uint16)[:, None, :]  # (2 exposures, 1, 2)
     with pytest.warns(SaturationWarning, match="50.0 %"):  # one of the two samples
-        x, var, info = merge_ml(dn, exposures_s=[0.01, 0.02], isos=100, profile="illum", n_iter=3)
+        x, var, info = merge_ml(dn, exposures_s=[0.01, 0.02], isos=100, profile="illum", max_iter=3)
     obs = calibrated_observation(np.array([[500.0]]), exposure_s=0.01, iso=100, profile="illum",
                                  variance_from="estimate", radiance_estimate=np.array([[x[0, 0]]]))
     assert x[0, 0] == pytest.approx(float(obs.radiance[0, 0]), rel=1e-5)

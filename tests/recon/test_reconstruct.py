@@ -207,7 +207,7 @@ def _smooth_lf(size=(20, 22)):
 
 @pytest.fixture(scope="module")
 def small_dictionary():
-    return dct_dictionary((5, 5, 8, 8, 3), 200, sparsity=6)
+    return dct_dictionary((5, 5, 8, 8, 3), 200, n_nonzero_coefs=6)
 
 
 @pytest.fixture(scope="module")
@@ -658,7 +658,7 @@ def test_patches_without_a_usable_measurement_are_left_out_of_the_plain_mean(sma
         cap = simulate_capture(lfproc.LightField(data, units="relative"), profile="paper-none", noise=False,
                                shots=2, mask_period=4, random_state=4, radiance_scale=SMOOTH_SCALE)
     with pytest.warns(SaturationWarning, match=expected) as solved:
-        out = reconstruct(cap, small_dictionary, solver="omp", sparsity=1, overlap="mean", scale="patch").data
+        out = reconstruct(cap, small_dictionary, solver="omp", n_nonzero_coefs=1, overlap="mean", scale="patch").data
     assert len(made) == len(solved) == 1
     rec_empty = np.zeros((32, 32), bool)
     rec_empty[12:20, 12:20] = True  # covered by the empty patches (tops and lefts 8, 12, 16) only
