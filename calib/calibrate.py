@@ -237,252 +237,323 @@ def _hot_mask(master: np.ndarray, sigma: float) -> tuple[np.ndarray, float]:
 
 
 # -- per-ISO calibration ----------------------------------------------------------------------
-def _calibrate_iso(iso_key: str, records: list[FrameRecord], *, cfa: str | None, hot_pixel_sigma: float,
-                   unknown: dict[str, str]) -> tuple[dict[str, Any], dict[str, Any], np.ndarray | None,
-                                                     np.ndarray | None, FrameChecker, tuple | None]:
-    def unk(name: str, why: str) -> None:
-        unknown[f"isos.{iso_key}.{name}"] = why
+@dataclass
+class _IsoCalibration:
+    """The state of one ISO's calibration while its steps (module notes) fill it in order.
 
-    notes: list[str] = []
-    checker = FrameChecker(f"ISO {iso_key}")
+    The steps read what the previous ones measured; a figure the frames cannot give is ``None``
+    with its reason in ``unknown`` (in the order the steps find them: the report lists them so).
+    """
+    key: str
+    unknown: dict[str, str]
+    checker: FrameChecker
+    notes: list[str] = field(default_factory=list)
+    bias_keys: list = field(default_factory=list)
+    dark_keys: list = field(default_factory=list)
+    flat_keys: list = field(default_factory=list)
+    stats: dict = field(default_factory=dict)
+    views: list[str] = field(default_factory=list)
+    fig: dict[str, Any] = field(default_factory=dict)
+    mask: np.ndarray | None = None
+    bias_master: np.ndarray | None = None
+    t_bias: float | None = None
+    bias_pairs: int = 0
+    points: list = field(default_factory=list)  # dark points: (t, mean per view, pair var per view or None, n)
+    var_points: list = field(default_factory=list)
+    times: list = field(default_factory=list)
+    var_times: list = field(default_factory=list)
+    mean_slope: dict = field(default_factory=dict)
+    var_slope: dict = field(default_factory=dict)
+    read_var: dict[str, float] | None = None
+    black: dict[str, float] | None = None
+    flat_stats: list = field(default_factory=list)
+    saturation_dn: float | None = None
+    ptc: list = field(default_factory=list)  # (signal, variance per view, clipped fraction, set)
+    gain: dict[str, float] | None = None
+    s2_dark: float | None = None
+    flat: np.ndarray | None = None
+    flat_relvar: float | None = None
+
+    @property
+    def K(self) -> float | None:
+        return self.gain["all"] if self.gain else None
+
+    def unk(self, name: str, why: str) -> None:
+        self.unknown[f"isos.{self.key}.{name}"] = why
+
+    def dark_mean(self, t, v):
+        return self.black[v] + (self.mean_slope[v] or 0.0) * t
+
+    def dark_var(self, t, v):
+        return self.read_var[v] + max(self.var_slope[v] or 0.0, 0.0) * t
+
+
+def _iso_reduce(st: _IsoCalibration, records: list[FrameRecord], *, cfa: str | None, hot_pixel_sigma: float) -> None:
+    """Group the frames into sets, find the hot pixels (step 7) in the longest dark set, reduce every set."""
     sets: dict[tuple, list[FrameRecord]] = {}
     for r in records:
         sets.setdefault((r.kind, r.exposure_s, r.group), []).append(r)
-    bias_keys = [k for k in sets if k[0] == "bias"]
-    dark_keys = sorted((k for k in sets if k[0] == "dark"), key=lambda k: k[1])
-    flat_keys = sorted((k for k in sets if k[0] == "flat"), key=lambda k: (k[1], k[2]))
+    st.bias_keys = [k for k in sets if k[0] == "bias"]
+    st.dark_keys = sorted((k for k in sets if k[0] == "dark"), key=lambda k: k[1])
+    st.flat_keys = sorted((k for k in sets if k[0] == "flat"), key=lambda k: (k[1], k[2]))
     # hot pixels from the longest dark set
-    mask = None
     hot_count = None
-    if dark_keys:
-        longest = _reduce_set(sets[dark_keys[-1]], checker, None, cfa)
+    if st.dark_keys:
+        longest = _reduce_set(sets[st.dark_keys[-1]], st.checker, None, cfa)
         hot, threshold = _hot_mask(longest.master, hot_pixel_sigma)
-        mask = ~hot
+        st.mask = ~hot
         hot_count = int(hot.sum())
-        if mask.sum() < 0.5 * mask.size:
-            raise CalibrationError(f"ISO {iso_key}: more than half the pixels of the dark frames are hot; "
+        if st.mask.sum() < 0.5 * st.mask.size:
+            raise CalibrationError(f"ISO {st.key}: more than half the pixels of the dark frames are hot; "
                                    f"check {longest.paths[0]}")
     else:
-        unk("hot_pixels", "no dark frames")
-    stats = {k: _reduce_set(sets[k], checker, mask, cfa) for k in progress(bias_keys + dark_keys + flat_keys,
-                                                                          desc=f"ISO {iso_key}")}
-    first = checker.first
-    shape = first.shape
-    views = list(_views(shape))
-    fig: dict[str, Any] = {"n_bias": sum(stats[k].n for k in bias_keys), "n_dark": sum(stats[k].n for k in dark_keys),
-                           "n_flat": sum(stats[k].n for k in flat_keys), "hot_pixels": hot_count,
-                           "hot_pixel_fraction": None if hot_count is None else hot_count / float(np.prod(shape))}
-    temps = [stats[k].temperature_c for k in bias_keys + dark_keys if stats[k].temperature_c is not None]
-    fig["temperature_c"] = float(np.mean(temps)) if temps else None
-    # bias
-    bias_master = None
-    t_bias = None
-    bias_pairs = 0
+        st.unk("hot_pixels", "no dark frames")
+    keys = st.bias_keys + st.dark_keys + st.flat_keys
+    st.stats = {k: _reduce_set(sets[k], st.checker, st.mask, cfa) for k in progress(keys, desc=f"ISO {st.key}")}
+    stats = st.stats
+    shape = st.checker.first.shape
+    st.views = list(_views(shape))
+    st.fig = {"n_bias": sum(stats[k].n for k in st.bias_keys), "n_dark": sum(stats[k].n for k in st.dark_keys),
+              "n_flat": sum(stats[k].n for k in st.flat_keys), "hot_pixels": hot_count,
+              "hot_pixel_fraction": None if hot_count is None else hot_count / float(np.prod(shape))}
+    temps = [stats[k].temperature_c for k in st.bias_keys + st.dark_keys if stats[k].temperature_c is not None]
+    st.fig["temperature_c"] = float(np.mean(temps)) if temps else None
+
+
+def _iso_bias_and_dark(st: _IsoCalibration) -> None:
+    """The master bias (step 1) and the dark level and variance against exposure time (step 6)."""
+    stats, bias_keys = st.stats, st.bias_keys
     if bias_keys:
         n = sum(stats[k].n for k in bias_keys)
-        bias_master = sum(stats[k].master * stats[k].n for k in bias_keys) / n
-        t_bias = float(sum(stats[k].exposure_s * stats[k].n for k in bias_keys) / n)
-        bias_pairs = sum(stats[k].n_pairs for k in bias_keys)
+        st.bias_master = sum(stats[k].master * stats[k].n for k in bias_keys) / n
+        st.t_bias = float(sum(stats[k].exposure_s * stats[k].n for k in bias_keys) / n)
+        st.bias_pairs = sum(stats[k].n_pairs for k in bias_keys)
         if max(stats[k].zero_fraction for k in bias_keys) > _BLACK_CLIP_FRACTION:
-            notes.append("bias frames have many 0 DN pixels: the black level clips the read noise, which is "
-                         "then underestimated")
-    # dark points: (t, mean per view, pair var per view or None)
-    points = [(stats[k].exposure_s, stats[k].mean, stats[k].pair_var or None, stats[k].n) for k in bias_keys + dark_keys]
-    times = sorted({p[0] for p in points})
-    var_points = [p for p in points if p[2]]
-    var_times = sorted({p[0] for p in var_points})
-    mean_slope = {v: None for v in views}
-    var_slope = {v: None for v in views}
-    if len(times) >= 3:
-        for v in views:
-            mean_slope[v], _ = _fit_line([p[0] for p in points], [p[1][v] for p in points])
+            st.notes.append("bias frames have many 0 DN pixels: the black level clips the read noise, which is "
+                            "then underestimated")
+    st.points = [(stats[k].exposure_s, stats[k].mean, stats[k].pair_var or None, stats[k].n)
+                 for k in bias_keys + st.dark_keys]
+    st.times = sorted({p[0] for p in st.points})
+    st.var_points = [p for p in st.points if p[2]]
+    st.var_times = sorted({p[0] for p in st.var_points})
+    st.mean_slope = {v: None for v in st.views}
+    st.var_slope = {v: None for v in st.views}
+    if len(st.times) >= 3:
+        for v in st.views:
+            st.mean_slope[v], _ = _fit_line([p[0] for p in st.points], [p[1][v] for p in st.points])
     else:
-        why = f"bias/dark frames at {len(times)} exposure time(s); the dark current needs at least 3"
-        unk("dark_current_e_per_s", why)
-    if len(var_times) >= 3:
-        for v in views:
-            var_slope[v], _ = _fit_line([p[0] for p in var_points], [p[2][v] for p in var_points])
+        why = f"bias/dark frames at {len(st.times)} exposure time(s); the dark current needs at least 3"
+        st.unk("dark_current_e_per_s", why)
+    if len(st.var_times) >= 3:
+        for v in st.views:
+            st.var_slope[v], _ = _fit_line([p[0] for p in st.var_points], [p[2][v] for p in st.var_points])
     else:
-        unk("dark_current_var_e_per_s",
-            f"bias/dark pairs at {len(var_times)} exposure time(s); the variance method needs at least 3")
-    # read variance (incl. quantisation) per view
-    read_var: dict[str, float] | None = None
-    if bias_pairs:
-        read_var = {}
+        st.unk("dark_current_var_e_per_s",
+               f"bias/dark pairs at {len(st.var_times)} exposure time(s); the variance method needs at least 3")
+
+
+def _iso_read_variance(st: _IsoCalibration) -> None:
+    """Step 2: the read variance (quantisation included) per view, from bias pairs or the dark pairs' intercept."""
+    stats, views = st.stats, st.views
+    if st.bias_pairs:
+        st.read_var = {}
         for v in views:
-            val = sum(stats[k].pair_var[v] * stats[k].n_pairs for k in bias_keys if stats[k].n_pairs) / bias_pairs
-            if var_slope[v] is not None and var_slope[v] > 0:
-                val -= var_slope[v] * t_bias
-            read_var[v] = val
-        fig["read_noise_method"] = f"{bias_pairs} bias pair(s)"
-    elif len(var_times) >= 2:
-        read_var = {v: _fit_line([p[0] for p in var_points], [p[2][v] for p in var_points])[1] for v in views}
-        fig["read_noise_method"] = "intercept of the dark pair variance against exposure time"
+            val = sum(stats[k].pair_var[v] * stats[k].n_pairs for k in st.bias_keys if stats[k].n_pairs) / st.bias_pairs
+            if st.var_slope[v] is not None and st.var_slope[v] > 0:
+                val -= st.var_slope[v] * st.t_bias
+            st.read_var[v] = val
+        st.fig["read_noise_method"] = f"{st.bias_pairs} bias pair(s)"
+    elif len(st.var_times) >= 2:
+        st.read_var = {v: _fit_line([p[0] for p in st.var_points], [p[2][v] for p in st.var_points])[1]
+                       for v in views}
+        st.fig["read_noise_method"] = "intercept of the dark pair variance against exposure time"
     else:
-        n_bias = fig["n_bias"]
-        why = (f"the read noise needs a pair of bias frames; ISO {iso_key} has {n_bias} bias frame(s)"
-               + (" and no dark pairs at two exposure times" if dark_keys else ""))
+        n_bias = st.fig["n_bias"]
+        why = (f"the read noise needs a pair of bias frames; ISO {st.key} has {n_bias} bias frame(s)"
+               + (" and no dark pairs at two exposure times" if st.dark_keys else ""))
         for name in ("read_noise_dn", "read_noise_e", "dsnu_dn"):
-            unk(name, why)
-    # black level per view
-    black: dict[str, float] | None = None
-    if bias_keys:
-        black = {v: float(np.average([stats[k].mean[v] for k in bias_keys], weights=[stats[k].n for k in bias_keys]))
-                 for v in views}
-        if mean_slope["all"] is not None:
-            black = {v: black[v] - mean_slope[v] * t_bias for v in views}
-    elif len(times) >= 2:
-        black = {v: _fit_line([p[0] for p in points], [p[1][v] for p in points])[1] for v in views}
-        notes.append("no bias frames: black level from the intercept of the dark level against exposure time")
+            st.unk(name, why)
+
+
+def _iso_black_level(st: _IsoCalibration) -> None:
+    """Step 1: the black level per view (the bias level less its dark signal, or the dark levels' intercept)."""
+    stats, views = st.stats, st.views
+    if st.bias_keys:
+        st.black = {v: float(np.average([stats[k].mean[v] for k in st.bias_keys],
+                                        weights=[stats[k].n for k in st.bias_keys])) for v in views}
+        if st.mean_slope["all"] is not None:
+            st.black = {v: st.black[v] - st.mean_slope[v] * st.t_bias for v in views}
+    elif len(st.times) >= 2:
+        st.black = {v: _fit_line([p[0] for p in st.points], [p[1][v] for p in st.points])[1] for v in views}
+        st.notes.append("no bias frames: black level from the intercept of the dark level against exposure time")
     else:
-        unk("black_level_dn", "no bias frames and dark frames at fewer than two exposure times")
+        st.unk("black_level_dn", "no bias frames and dark frames at fewer than two exposure times")
 
-    def dark_mean(t, v):
-        return black[v] + (mean_slope[v] or 0.0) * t
 
-    def dark_var(t, v):
-        return read_var[v] + max(var_slope[v] or 0.0, 0.0) * t
-
-    # flats
-    flat_stats = [stats[k] for k in flat_keys]
-    singles = [s for s in flat_stats if s.n_pairs == 0]
+def _iso_saturation_code(st: _IsoCalibration) -> None:
+    """Step 5, first part: the code where over-exposed flats pile up."""
+    st.flat_stats = [st.stats[k] for k in st.flat_keys]
+    singles = [s for s in st.flat_stats if s.n_pairs == 0]
     if singles:
-        notes.append(f"{len(singles)} flat level(s) with a single frame (no pair): " + ", ".join(
+        st.notes.append(f"{len(singles)} flat level(s) with a single frame (no pair): " + ", ".join(
             str(s.paths[0].name) for s in singles[:3]) + (" ..." if len(singles) > 3 else ""))
-    sat_candidates = [s.max_code for s in flat_stats if s.frac_at_max >= _CLIP_PILE_FRACTION]
-    saturation_dn = float(max(sat_candidates)) if sat_candidates else None
-    if saturation_dn is None:
-        unk("saturation_dn", "no flat frame reaches saturation (no pile-up at a top code)" if flat_stats
-            else "no flat frames")
-    ptc = []  # (signal, variance per view, clipped fraction, exposure, set)
-    gain: dict[str, float] | None = None
-    if not flat_stats:
-        unk("gain_dn_per_e", "no flat frames")
-    elif black is None or read_var is None:
-        unk("gain_dn_per_e", "the photon transfer needs the black level and the read noise (bias pairs)")
+    sat_candidates = [s.max_code for s in st.flat_stats if s.frac_at_max >= _CLIP_PILE_FRACTION]
+    st.saturation_dn = float(max(sat_candidates)) if sat_candidates else None
+    if st.saturation_dn is None:
+        st.unk("saturation_dn", "no flat frame reaches saturation (no pile-up at a top code)" if st.flat_stats
+               else "no flat frames")
+
+
+def _iso_photon_transfer(st: _IsoCalibration) -> None:
+    """Step 4: the photon transfer curve of the flat pairs and the gain, its slope through the origin below
+    70 % of the variance maximum (the EMVA saturation level, step 5, is found on the way)."""
+    if not st.flat_stats:
+        st.unk("gain_dn_per_e", "no flat frames")
+        return
+    if st.black is None or st.read_var is None:
+        st.unk("gain_dn_per_e", "the photon transfer needs the black level and the read noise (bias pairs)")
+        return
+    saturation_dn, views = st.saturation_dn, st.views
+    for s in st.flat_stats:
+        if not s.n_pairs:
+            continue
+        clipped = s.frac_at_max if (saturation_dn is not None and s.max_code >= saturation_dn) else 0.0
+        sig = {v: s.mean[v] - st.dark_mean(s.exposure_s, v) for v in views}
+        var = {v: s.pair_var[v] - st.dark_var(s.exposure_s, v) for v in views}
+        st.ptc.append((sig, var, clipped, s))
+    ptc = st.ptc
+    ptc.sort(key=lambda p: p[0]["all"])
+    usable = [p for p in ptc if p[2] <= _CLIPPED_PAIR_FRACTION and p[0]["all"] > 0]
+    if not ptc:
+        st.unk("gain_dn_per_e", f"the {len(st.flat_stats)} flat level(s) at ISO {st.key} have no frame pairs; the "
+               "photon transfer needs pairs")
+        return
+    if not usable:
+        st.unk("gain_dn_per_e", f"all {st.fig['n_flat']} flat frames at ISO {st.key} are saturated "
+               f"(clipped at {saturation_dn:g} DN)" if saturation_dn is not None else
+               f"no flat pair at ISO {st.key} has a signal above the dark level")
+        return
+    variances = np.array([p[1]["all"] for p in ptc])
+    imax = int(np.argmax(variances))
+    saturated = saturation_dn is not None and imax < len(ptc) - 1
+    if saturated:
+        limit = 0.7 * ptc[imax][0]["all"]
+        fit = [p for p in usable if p[0]["all"] <= limit]
+        st.fig["saturation_mean_dn"] = ptc[imax][0]["all"] + st.dark_mean(ptc[imax][3].exposure_s, "all")
     else:
-        for s in flat_stats:
-            if not s.n_pairs:
-                continue
-            clipped = s.frac_at_max if (saturation_dn is not None and s.max_code >= saturation_dn) else 0.0
-            sig = {v: s.mean[v] - dark_mean(s.exposure_s, v) for v in views}
-            var = {v: s.pair_var[v] - dark_var(s.exposure_s, v) for v in views}
-            ptc.append((sig, var, clipped, s))
-        ptc.sort(key=lambda p: p[0]["all"])
-        usable = [p for p in ptc if p[2] <= _CLIPPED_PAIR_FRACTION and p[0]["all"] > 0]
-        if not ptc:
-            unk("gain_dn_per_e", f"the {len(flat_stats)} flat level(s) at ISO {iso_key} have no frame pairs; the "
-                "photon transfer needs pairs")
-        elif not usable:
-            unk("gain_dn_per_e", f"all {fig['n_flat']} flat frames at ISO {iso_key} are saturated "
-                f"(clipped at {saturation_dn:g} DN)" if saturation_dn is not None else
-                f"no flat pair at ISO {iso_key} has a signal above the dark level")
-        else:
-            variances = np.array([p[1]["all"] for p in ptc])
-            imax = int(np.argmax(variances))
-            saturated = saturation_dn is not None and imax < len(ptc) - 1
-            if saturated:
-                limit = 0.7 * ptc[imax][0]["all"]
-                fit = [p for p in usable if p[0]["all"] <= limit]
-                fig["saturation_mean_dn"] = ptc[imax][0]["all"] + dark_mean(ptc[imax][3].exposure_s, "all")
-            else:
-                fit = usable
-                fig["saturation_mean_dn"] = None
-                unk("saturation_mean_dn", "the flat variance never falls after its maximum")
-            if len(fit) < 2:
-                unk("gain_dn_per_e", f"only {len(fit)} unclipped flat pair(s) below 70 % of saturation at ISO "
-                    f"{iso_key}; the photon transfer slope needs at least 2")
-            else:
-                gain = {}
-                for v in views:
-                    x = np.array([p[0][v] for p in fit])
-                    y = np.array([p[1][v] for p in fit])
-                    gain[v] = float(np.dot(x, y) / np.dot(x, x))
-                if not gain["all"] > 0:
-                    unk("gain_dn_per_e", f"the photon transfer slope is not positive ({gain['all']:g})")
-                    gain = None
-                else:
-                    fig["gain_fit_points"] = len(fit)
-    K = gain["all"] if gain else None
-    # figures
+        fit = usable
+        st.fig["saturation_mean_dn"] = None
+        st.unk("saturation_mean_dn", "the flat variance never falls after its maximum")
+    if len(fit) < 2:
+        st.unk("gain_dn_per_e", f"only {len(fit)} unclipped flat pair(s) below 70 % of saturation at ISO "
+               f"{st.key}; the photon transfer slope needs at least 2")
+        return
+    gain = {}
+    for v in views:
+        x = np.array([p[0][v] for p in fit])
+        y = np.array([p[1][v] for p in fit])
+        gain[v] = float(np.dot(x, y) / np.dot(x, x))
+    if not gain["all"] > 0:
+        st.unk("gain_dn_per_e", f"the photon transfer slope is not positive ({gain['all']:g})")
+    else:
+        st.gain = gain
+        st.fig["gain_fit_points"] = len(fit)
+
+
+def _iso_noise_figures(st: _IsoCalibration) -> None:
+    """The figures of steps 1, 2 and 6 in electrons: black level, read noise, dark current (both methods)."""
+    fig, black, read_var, K = st.fig, st.black, st.read_var, st.K
     fig["gain_dn_per_e"] = K
     fig["black_level_dn"] = _pooled(black) if black else None
     fig["black_level_per_channel_dn"] = [black[p] for p in _POS] if black and "p00" in black else None
     fig["read_noise_var_dn2"] = read_var["all"] if read_var else None
     rn_dn = math.sqrt(max(_pooled(read_var) - SIGMA2_Q, 0.0)) if read_var else None
     if read_var and _pooled(read_var) < SIGMA2_Q:
-        notes.append("read variance below the quantisation noise (1/12 DN^2): read noise recorded as 0")
+        st.notes.append("read variance below the quantisation noise (1/12 DN^2): read noise recorded as 0")
     fig["read_noise_dn"] = rn_dn
     fig["read_noise_e"] = rn_dn / K if (rn_dn is not None and K) else None
     if rn_dn is not None and not K:
-        unk("read_noise_e", "the gain is unknown")
+        st.unk("read_noise_e", "the gain is unknown")
     fig["temporal_dark_noise_dn"] = math.sqrt(max(_pooled(read_var), 0.0)) if read_var else None
     # dark current
-    for name, slope, scale in (("dark_current_e_per_s", mean_slope["all"], 1),
-                               ("dark_current_var_e_per_s", var_slope["all"], 2)):
+    for name, slope, scale in (("dark_current_e_per_s", st.mean_slope["all"], 1),
+                               ("dark_current_var_e_per_s", st.var_slope["all"], 2)):
         if slope is None:
             fig[name] = None
         elif not K:
             fig[name] = None
-            unk(name, "the gain is unknown")
+            st.unk(name, "the gain is unknown")
         else:
             value = slope / K**scale
             if value < 0:
-                notes.append(f"{name}: measured slope is negative ({value:.4g} e-/s); recorded as 0")
+                st.notes.append(f"{name}: measured slope is negative ({value:.4g} e-/s); recorded as 0")
                 value = 0.0
             fig[name] = value
-    # DSNU
-    if bias_master is not None and read_var is not None:
+
+
+def _iso_dsnu_and_saturation(st: _IsoCalibration) -> None:
+    """Step 3 (DSNU from the master bias) and step 5's figures (full well, EMVA saturation capacity)."""
+    fig, K = st.fig, st.K
+    if st.bias_master is not None and st.read_var is not None:
         n_bias = fig["n_bias"]
-        s2 = {v: stats_var - read_var[v] / n_bias for v, stats_var in _spatial(bias_master, mask).items()}
+        s2 = {v: stats_var - st.read_var[v] / n_bias for v, stats_var in _spatial(st.bias_master, st.mask).items()}
         dsnu = math.sqrt(max(_pooled(s2), 0.0))
         fig["dsnu_dn"] = dsnu
         fig["dsnu_e"] = dsnu / K if K else None
-        s2_dark = max(_pooled(s2), 0.0)
+        st.s2_dark = max(_pooled(s2), 0.0)
     else:
         fig["dsnu_dn"] = fig["dsnu_e"] = None
-        s2_dark = None
-        unk("dsnu_dn", "needs bias frames with a pair")
+        st.s2_dark = None
+        st.unk("dsnu_dn", "needs bias frames with a pair")
     # saturation / full well
+    saturation_dn = st.saturation_dn
     fig["saturation_dn"] = saturation_dn
-    if saturation_dn is not None and K and black:
+    if saturation_dn is not None and K and st.black:
         fig["full_well_e"] = (saturation_dn - fig["black_level_dn"]) / K
     else:
         fig["full_well_e"] = None
         if saturation_dn is not None:
-            unk("full_well_e", "the gain or the black level is unknown")
+            st.unk("full_well_e", "the gain or the black level is unknown")
         else:
-            unk("full_well_e", unknown[f"isos.{iso_key}.saturation_dn"])
+            st.unk("full_well_e", st.unknown[f"isos.{st.key}.saturation_dn"])
     if K and fig.get("saturation_mean_dn") is not None:
         fig["saturation_capacity_emva_e"] = (fig["saturation_mean_dn"] - fig["black_level_dn"]) / K
     else:
         fig["saturation_capacity_emva_e"] = None
-        unk("saturation_capacity_emva_e", "needs the gain and flats beyond the variance maximum")
-    # PRNU from the level nearest half saturation
+        st.unk("saturation_capacity_emva_e", "needs the gain and flats beyond the variance maximum")
+
+
+def _iso_prnu_and_flat_field(st: _IsoCalibration) -> None:
+    """Step 8: the PRNU from the flat level nearest half saturation, the flat field and the master bias's noise."""
+    fig, K, ptc, views = st.fig, st.K, st.ptc, st.views
     fig["prnu"] = None
-    if K and s2_dark is not None and ptc and (gain is not None):
+    if K and st.s2_dark is not None and ptc and (st.gain is not None):
         top = fig["full_well_e"] * K if fig["full_well_e"] else max(p[0]["all"] for p in ptc)
         candidates = [p for p in ptc if p[2] <= _CLIPPED_PAIR_FRACTION and p[0]["all"] > 0]
         if candidates:
             sig, var, _, s = min(candidates, key=lambda p: abs(p[0]["all"] - 0.5 * top))
             temporal = {v: s.pair_var[v] for v in views}
-            s2 = {v: sv - temporal[v] / s.n - s2_dark for v, sv in _spatial(s.master, mask).items()}
+            s2 = {v: sv - temporal[v] / s.n - st.s2_dark for v, sv in _spatial(s.master, st.mask).items()}
             fig["prnu"] = math.sqrt(max(_pooled(s2), 0.0)) / sig["all"]
     if fig["prnu"] is None:
-        unk("prnu", "needs the gain, the DSNU and an unclipped flat pair")
-    # flat field (per-pixel PRNU map) and the noise of the master bias
-    flat, flat_relvar, why = _flat_field(flat_stats, bias_master, n_bias=fig["n_bias"],
-                                         read_var=read_var["all"] if read_var else None, t_bias=t_bias,
-                                         dark_slope=mean_slope["all"], saturation_dn=saturation_dn, gain=K, mask=mask)
-    fig["flat_field_std"] = math.sqrt(flat_relvar) if flat_relvar is not None else None
+        st.unk("prnu", "needs the gain, the DSNU and an unclipped flat pair")
+    read_var = st.read_var
+    st.flat, st.flat_relvar, why = _flat_field(
+        st.flat_stats, st.bias_master, n_bias=fig["n_bias"], read_var=read_var["all"] if read_var else None,
+        t_bias=st.t_bias, dark_slope=st.mean_slope["all"], saturation_dn=st.saturation_dn, gain=K, mask=st.mask)
+    fig["flat_field_std"] = math.sqrt(st.flat_relvar) if st.flat_relvar is not None else None
     if why:
-        unk("flat_field", why)
+        st.unk("flat_field", why)
     fig["bias_frame_std_dn"] = (math.sqrt(max(read_var["all"], 0.0) / fig["n_bias"])
-                                if (bias_master is not None and read_var) else None)
-    # EMVA dynamic range and SNR
+                                if (st.bias_master is not None and read_var) else None)
+
+
+def _iso_dynamic_range(st: _IsoCalibration) -> None:
+    """Step 10: EMVA dynamic range and SNR, and full well over read noise in stops."""
+    fig = st.fig
     if fig["saturation_capacity_emva_e"] and fig["temporal_dark_noise_dn"] is not None:
         s_dark = math.sqrt(max(fig["temporal_dark_noise_dn"] ** 2, 0.24))
-        threshold = s_dark / K + 0.5
+        threshold = s_dark / st.K + 0.5
         fig["absolute_sensitivity_threshold_e"] = threshold
         fig["dynamic_range_emva"] = fig["saturation_capacity_emva_e"] / threshold
         fig["dynamic_range_emva_db"] = 20 * math.log10(fig["dynamic_range_emva"])
@@ -492,49 +563,78 @@ def _calibrate_iso(iso_key: str, records: list[FrameRecord], *, cfa: str | None,
         for k in ("absolute_sensitivity_threshold_e", "dynamic_range_emva", "dynamic_range_emva_db", "snr_max",
                   "snr_max_db"):
             fig[k] = None
-        unk("dynamic_range_emva", "needs the EMVA saturation capacity and the dark noise")
+        st.unk("dynamic_range_emva", "needs the EMVA saturation capacity and the dark noise")
     if fig["full_well_e"] and fig["read_noise_e"]:
         fig["dynamic_range_stops"] = math.log2(fig["full_well_e"] / fig["read_noise_e"])
     else:
         fig["dynamic_range_stops"] = None
     fig["quantum_efficiency"] = None  # no photon counts: see calibrate()
-    # per CFA channel
-    if "p00" in views:
-        names = _channel_names(checker.cfa)
-        channels = {}
-        for p, name in zip(_POS, names):
-            ch = {"black_level_dn": black[p] if black else None,
-                  "read_noise_dn": math.sqrt(max(read_var[p] - SIGMA2_Q, 0.0)) if read_var else None,
-                  "gain_dn_per_e": gain[p] if gain else None}
-            ch["read_noise_e"] = ch["read_noise_dn"] / ch["gain_dn_per_e"] if (ch["read_noise_dn"] is not None
-                                                                                and ch["gain_dn_per_e"]) else None
-            channels[name] = ch
-        fig["channels"] = channels
-        differ = []
-        if gain and max(abs(gain[p] / K - 1) for p in _POS) > 0.05:
-            differ.append("gain")
-        if black and max(black[p] for p in _POS) - min(black[p] for p in _POS) > 1.0:
-            differ.append("black level")
-        fig["channels_differ"] = differ
-    fig["notes"] = notes
-    curves = {
+
+
+def _iso_channels(st: _IsoCalibration) -> None:
+    """Black level, read noise and gain per CFA channel, and which of them differ between channels."""
+    if "p00" not in st.views:
+        return
+    black, read_var, gain, K = st.black, st.read_var, st.gain, st.K
+    channels = {}
+    for p, name in zip(_POS, _channel_names(st.checker.cfa)):
+        ch = {"black_level_dn": black[p] if black else None,
+              "read_noise_dn": math.sqrt(max(read_var[p] - SIGMA2_Q, 0.0)) if read_var else None,
+              "gain_dn_per_e": gain[p] if gain else None}
+        ch["read_noise_e"] = ch["read_noise_dn"] / ch["gain_dn_per_e"] if (ch["read_noise_dn"] is not None
+                                                                            and ch["gain_dn_per_e"]) else None
+        channels[name] = ch
+    st.fig["channels"] = channels
+    differ = []
+    if gain and max(abs(gain[p] / K - 1) for p in _POS) > 0.05:
+        differ.append("gain")
+    if black and max(black[p] for p in _POS) - min(black[p] for p in _POS) > 1.0:
+        differ.append("black level")
+    st.fig["channels_differ"] = differ
+
+
+def _iso_curves(st: _IsoCalibration) -> dict[str, Any]:
+    """The dark and photon-transfer curves the report plots."""
+    points, var_points, ptc = st.points, st.var_points, st.ptc
+    return {
         "dark_exposure_s": [p[0] for p in points],
         "dark_mean_dn": [p[1]["all"] for p in points],
         "dark_var_exposure_s": [p[0] for p in var_points],
         "dark_var_dn2": [p[2]["all"] for p in var_points],
-        "dark_mean_slope_dn_per_s": mean_slope["all"],
-        "dark_var_slope_dn2_per_s": var_slope["all"],
-        "black_level_dn": fig["black_level_dn"],
-        "read_var_dn2": fig["read_noise_var_dn2"],
+        "dark_mean_slope_dn_per_s": st.mean_slope["all"],
+        "dark_var_slope_dn2_per_s": st.var_slope["all"],
+        "black_level_dn": st.fig["black_level_dn"],
+        "read_var_dn2": st.fig["read_noise_var_dn2"],
         "flat_signal_dn": [p[0]["all"] for p in ptc],
         "flat_var_dn2": [p[1]["all"] for p in ptc],
         "flat_clipped_fraction": [p[2] for p in ptc],
         "flat_exposure_s": [p[3].exposure_s for p in ptc],
-        "gain_dn_per_e": K,
-        "read_noise_e": fig.get("read_noise_e"),
+        "gain_dn_per_e": st.K,
+        "read_noise_e": st.fig.get("read_noise_e"),
     }
-    hot = None if mask is None else ~mask
-    return fig, curves, bias_master, hot, checker, (None if flat is None else (flat, flat_relvar))
+
+
+def _calibrate_iso(iso_key: str, records: list[FrameRecord], *, cfa: str | None, hot_pixel_sigma: float,
+                   unknown: dict[str, str]) -> tuple[dict[str, Any], dict[str, Any], np.ndarray | None,
+                                                     np.ndarray | None, FrameChecker, tuple | None]:
+    """The figures of one ISO, in the order of the module notes' steps (their numbers in the helpers' notes)."""
+    st = _IsoCalibration(key=iso_key, unknown=unknown, checker=FrameChecker(f"ISO {iso_key}"))
+    _iso_reduce(st, records, cfa=cfa, hot_pixel_sigma=hot_pixel_sigma)
+    _iso_bias_and_dark(st)
+    _iso_read_variance(st)
+    _iso_black_level(st)
+    _iso_saturation_code(st)
+    _iso_photon_transfer(st)
+    _iso_noise_figures(st)
+    _iso_dsnu_and_saturation(st)
+    _iso_prnu_and_flat_field(st)
+    _iso_dynamic_range(st)
+    _iso_channels(st)
+    st.fig["notes"] = st.notes
+    curves = _iso_curves(st)
+    hot = None if st.mask is None else ~st.mask
+    flat = None if st.flat is None else (st.flat, st.flat_relvar)
+    return st.fig, curves, st.bias_master, hot, st.checker, flat
 
 
 def _flat_field(flat_stats: list, bias_master: np.ndarray | None, *, n_bias: int, read_var: float | None,
