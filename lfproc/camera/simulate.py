@@ -291,6 +291,32 @@ def _mask_period(design: CaptureDesign) -> int | None:
     return mask_period
 
 
+def _parameters(design: CaptureDesign, lf, *, seed, profile, iso_info, rel, mask_period, scale_rule,
+                reference_exposure_s) -> dict[str, Any]:
+    """The simulation's record in the capture (``parameters`` of its file)."""
+    return {
+        "source": "simulate",
+        "lfproc_version": __version__,
+        "seed": seed,
+        "profile": profile.name,
+        "iso_pattern": iso_info["kind"],
+        "isos_requested": [_num(v) for v in design.isos],
+        "shots": len(rel),
+        "exposure_s": design.exposure_s,
+        "relative_exposures": rel,
+        "gamma": design.gamma,
+        "mask": design.mask,
+        "mask_period": mask_period,
+        "mask_shift": int(design.mask_shift),
+        "baseline": design.baseline,
+        "noise": bool(design.noise),
+        "radiance_scale_rule": scale_rule,
+        "reference_exposure_s": reference_exposure_s if design.radiance_scale is None else None,
+        "light_field_source": lf.source if isinstance(lf, LightField) else None,
+        "light_field_units": lf.units if isinstance(lf, LightField) else None,
+    }
+
+
 def simulate_capture(
     lf: LightField | np.ndarray,
     *,
@@ -394,27 +420,9 @@ def simulate_capture(
                gamma=design.gamma, noise=design.noise, random_state=rng)
         for s in range(shots)
     ])
-    parameters = {
-        "source": "simulate",
-        "lfproc_version": __version__,
-        "seed": seed,
-        "profile": profile.name,
-        "iso_pattern": iso_info["kind"],
-        "isos_requested": [_num(v) for v in design.isos],
-        "shots": shots,
-        "exposure_s": design.exposure_s,
-        "relative_exposures": rel,
-        "gamma": design.gamma,
-        "mask": design.mask,
-        "mask_period": mask_period,
-        "mask_shift": int(design.mask_shift),
-        "baseline": design.baseline,
-        "noise": bool(design.noise),
-        "radiance_scale_rule": scale_rule,
-        "reference_exposure_s": reference_exposure_s if design.radiance_scale is None else None,
-        "light_field_source": lf.source if isinstance(lf, LightField) else None,
-        "light_field_units": lf.units if isinstance(lf, LightField) else None,
-    }
+    parameters = _parameters(design, lf, seed=seed, profile=profile, iso_info=iso_info, rel=rel,
+                             mask_period=mask_period, scale_rule=scale_rule,
+                             reference_exposure_s=reference_exposure_s)
     capture = Capture(dn=freeze(dn), iso=freeze(iso_maps), exposures_s=exposures, mask=code, profile=profile,
                       views=(nv, nu), cfa_pattern=cfa, gamma=design.gamma, radiance_scale=scale,
                       ground_truth=ground_truth, iso_pattern=iso_info, parameters=parameters)

@@ -46,10 +46,12 @@ A study of performance bounds", SIAM J. Imaging Sci. 7(1), 2014, doi:10.1137/120
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -142,11 +144,13 @@ def _run_chunks(func, total: int, chunk_size: int, n_threads: int) -> None:
             pass
 
 
-def _summary(mask_sat: np.ndarray, mask_dark: np.ndarray) -> dict[str, Any]:
+def _summary(mask_sat: np.ndarray, mask_dark: np.ndarray, *, stacklevel: int = 4) -> dict[str, Any]:
+    """Saturated- and dark-everywhere masks and counts; :class:`SaturationWarning` at ``stacklevel``
+    (4: the caller of the estimator that calls this; 5 when a keyword-renaming decorator wraps it)."""
     n = mask_sat.size
     count = int(mask_sat.sum())
     warn_saturation(count / n if n else 0.0, "exposure bracket", samples="samples (in every exposure)",
-                    stacklevel=4, consequence="their merged values are lower bounds (the saturation level of the "
+                    stacklevel=stacklevel, consequence="their merged values are lower bounds (the saturation level of the "
                     "shortest exposure); add a shorter exposure")
     return {
         "saturated_everywhere": mask_sat,
@@ -236,112 +240,26 @@ def merge_ml(
     n_threads = _n_threads(n_threads)
     sample_shape = stack.shape[1:]
     total = math.prod(sample_shape)
-    flat = stack.reshape(n, total)
-    bias_flat = None
-    if bias_dn is not None and np.ndim(bias_dn) > 0:
-        try:
-            bias_flat = np.broadcast_to(np.asarray(bias_dn, dtype=np.float64), sample_shape).reshape(total)
-        except ValueError:
-            raise ShapeError(f"bias_dn: shape {np.shape(bias_dn)} does not broadcast to the samples {sample_shape}") from None
-        bias_scalar = None
-    else:
-        bias_scalar = None if bias_dn is None else float(bias_dn)
-
-    # exposures from the least to the most exposed (time x gain) for the saturation guard
-    gains = np.array([iso_maps(profile, i, (1,))["gain_dn_per_e"][0] for i in iso])
-    order = np.argsort(t * gains, kind="stable")
-
-    def observe(i: int, codes: np.ndarray, bias) -> tuple[np.ndarray, ...]:
-        obs = calibrated_observation(
-            codes[None, :], exposure_s=t[i], iso=iso[i], profile=profile, gamma=gamma, bias_dn=bias,
-            saturation_margin_dn=saturation_margin_dn, variance_from="estimate", radiance_estimate=0.0,
-            correct_fixed_pattern=False,  # codes here are tables or samples, not one sensor image
-        )
-        return obs.radiance[0], obs.variance[0], obs.saturated[0], obs.black_clipped[0]
-
-    luts = None
-    if stack.dtype in (np.uint8, np.uint16) and bias_flat is None:
-        codes = np.arange(np.iinfo(stack.dtype).max + 1, dtype=np.float64)
-        luts = [observe(i, codes, bias_scalar) for i in range(n)]
-
-    # fill value of saturated-everywhere samples: the saturation code of the least exposed shot
-    first = int(order[0])
-    sat_code = iso_maps(profile, iso[first], (1,))["saturation_dn"][0]
-    fill = float(observe(first, np.array([sat_code]), bias_scalar if bias_flat is None else float(np.mean(bias_flat)))[0][0])
-    fill = max(fill, 0.0)
-    last = int(order[-1])
-
-    radiance = np.empty(total, dtype=np.float32)
-    variance = np.empty(total, dtype=np.float32)
-    sat_all = np.empty(total, dtype=bool)
-    dark_all = np.empty(total, dtype=bool)
-    n_used = np.empty(total, dtype=np.uint8)
-    moved = np.empty(total, dtype=bool)
-    inv_t = (1.0 / t).astype(np.float32)
-
-    def work(a: int, b: int) -> None:
-        c = b - a
-        T = np.empty((n, c), np.float32)
-        V0 = np.empty((n, c), np.float32)
-        S = np.empty((n, c), bool)
-        B = np.empty((n, c), bool)
-        for i in range(n):
-            if luts is not None:
-                idx = flat[i, a:b]
-                T[i], V0[i], S[i], B[i] = (lut[idx] for lut in luts[i])
-            else:
-                bias = bias_scalar if bias_flat is None else bias_flat[a:b]
-                T[i], V0[i], S[i], B[i] = observe(i, flat[i, a:b].astype(np.float64), bias)
-        # saturated in a less exposed shot -> unusable in every more exposed one
-        S[order] = np.logical_or.accumulate(S[order], axis=0)
-        usable = ~(S | B)
-        tmp = np.empty((n, c), np.float32)
-        w = np.empty((n, c), np.float32)
-
-        def weights(x):
-            np.multiply(inv_t[:, None], np.maximum(x, 0)[None, :], out=tmp)
-            np.add(tmp, V0, out=tmp)
-            np.divide(usable, tmp, out=w)
-            return w.sum(axis=0)
-
-        def mean(wsum):
-            return np.einsum("ij,ij->j", w, T) / np.where(wsum > 0, wsum, 1)
-
-        x = mean(weights(np.zeros(c, np.float32)))  # read-noise weights
-        x_prev = x
-        for _ in range(int(n_iter)):
-            x_prev, x = x, mean(weights(x))
-        wsum = weights(x)  # variance at the final estimate
-        none = wsum <= 0
-        var = 1.0 / np.where(none, 1, wsum)
-        moved[a:b] = ~none & (np.abs(x - x_prev) > ML_TOLERANCE_STD * np.sqrt(var))
-        sat = none & S.any(axis=0)
-        dark = none & ~sat
-        x[sat] = fill
-        var[sat] = fill * fill
-        if dark.any():
-            x[dark] = np.maximum(T[last, dark], 0)
-            var[dark] = V0[last, dark]
-        radiance[a:b] = x
-        variance[a:b] = var
-        sat_all[a:b] = sat
-        dark_all[a:b] = dark
-        n_used[a:b] = usable.sum(axis=0)
-
-    _run_chunks(work, total, chunk_size, n_threads)
-    n_moved = int(moved.sum())
+    bias_flat, bias_scalar = _bias_of(bias_dn, sample_shape)
+    ml = _MlBracket.build(stack.reshape(n, total), t, iso, profile, gamma=gamma, bias_flat=bias_flat,
+                          bias_scalar=bias_scalar, saturation_margin_dn=saturation_margin_dn)
+    out = {"radiance": np.empty(total, dtype=np.float32), "variance": np.empty(total, dtype=np.float32),
+           "sat": np.empty(total, dtype=bool), "dark": np.empty(total, dtype=bool),
+           "n_used": np.empty(total, dtype=np.uint8), "moved": np.empty(total, dtype=bool)}
+    _run_chunks(functools.partial(_ml_chunk, ml, out, n_iter=int(n_iter)), total, chunk_size, n_threads)
+    n_moved = int(out["moved"].sum())
     if n_iter and n_moved:
         warn_convergence(
             f"ML merge: the weights did not converge in {int(n_iter)} fixed-point update(s): the last update moved "
             f"{n_moved} sample(s) ({100 * n_moved / total:.2g} %) by more than {ML_TOLERANCE_STD:g} of their "
-            f"standard deviation; use more iterations ({option_name('max_iter', '--iterations')})"
+            f"standard deviation; use more iterations ({option_name('max_iter', '--iterations')})", stacklevel=4
         )
-    info = _summary(sat_all.reshape(sample_shape), dark_all.reshape(sample_shape))
+    info = _summary(out["sat"].reshape(sample_shape), out["dark"].reshape(sample_shape), stacklevel=5)
     info.update({
         "method": "ml",
         "converged": not n_moved if n_iter else None,
-        "n_used": n_used.reshape(sample_shape),
-        "fill_radiance": fill,
+        "n_used": out["n_used"].reshape(sample_shape),
+        "fill_radiance": ml.fill,
         "fill": "saturated-everywhere samples = saturation level of the shortest exposure (lower bound), "
                 "variance = value^2",
         "exposures_s": t.tolist(),
@@ -349,7 +267,117 @@ def merge_ml(
         "n_iter": int(n_iter),
         "profile": profile.name,
     })
-    return radiance.reshape(sample_shape), variance.reshape(sample_shape), info
+    return out["radiance"].reshape(sample_shape), out["variance"].reshape(sample_shape), info
+
+
+def _bias_of(bias_dn, sample_shape) -> tuple[np.ndarray | None, float | None]:
+    """``bias_dn`` as a flat per-sample array (an array given) or a scalar (a number or None: both None)."""
+    if bias_dn is not None and np.ndim(bias_dn) > 0:
+        try:
+            flat = np.broadcast_to(np.asarray(bias_dn, dtype=np.float64), sample_shape).reshape(math.prod(sample_shape))
+        except ValueError:
+            raise ShapeError(f"bias_dn: shape {np.shape(bias_dn)} does not broadcast to the samples {sample_shape}") from None
+        return flat, None
+    return None, None if bias_dn is None else float(bias_dn)
+
+
+@dataclass
+class _MlBracket:
+    """A bracket of linear codes being merged by :func:`merge_ml`: codes ``(N, P)``, exposures, ISOs, the
+    sensor model's observation of a code, the exposure order (least exposed first, time x gain), lookup
+    tables of integer codes and the fill value of saturated-everywhere samples."""
+    flat: np.ndarray
+    t: np.ndarray
+    iso: np.ndarray
+    profile: Any
+    gamma: float | None
+    bias_flat: np.ndarray | None
+    bias_scalar: float | None
+    saturation_margin_dn: float
+    order: np.ndarray | None = None
+    luts: list | None = None
+    fill: float = 0.0
+
+    @classmethod
+    def build(cls, flat, t, iso, profile, **kw) -> "_MlBracket":
+        ml = cls(flat=flat, t=t, iso=iso, profile=profile, **kw)
+        # exposures from the least to the most exposed (time x gain) for the saturation guard
+        gains = np.array([iso_maps(profile, i, (1,))["gain_dn_per_e"][0] for i in iso])
+        ml.order = np.argsort(t * gains, kind="stable")
+        if flat.dtype in (np.uint8, np.uint16) and ml.bias_flat is None:
+            codes = np.arange(np.iinfo(flat.dtype).max + 1, dtype=np.float64)
+            ml.luts = [ml.observe(i, codes, ml.bias_scalar) for i in range(len(t))]
+        # fill value of saturated-everywhere samples: the saturation code of the least exposed shot
+        first = int(ml.order[0])
+        sat_code = iso_maps(profile, iso[first], (1,))["saturation_dn"][0]
+        bias = ml.bias_scalar if ml.bias_flat is None else float(np.mean(ml.bias_flat))
+        ml.fill = max(float(ml.observe(first, np.array([sat_code]), bias)[0][0]), 0.0)
+        return ml
+
+    def observe(self, i: int, codes: np.ndarray, bias) -> tuple[np.ndarray, ...]:
+        """Radiance (e-/s), read-noise variance, saturated and black-clipped flags of ``codes`` in exposure ``i``."""
+        obs = calibrated_observation(
+            codes[None, :], exposure_s=self.t[i], iso=self.iso[i], profile=self.profile, gamma=self.gamma,
+            bias_dn=bias, saturation_margin_dn=self.saturation_margin_dn, variance_from="estimate",
+            radiance_estimate=0.0,
+            correct_fixed_pattern=False,  # codes here are tables or samples, not one sensor image
+        )
+        return obs.radiance[0], obs.variance[0], obs.saturated[0], obs.black_clipped[0]
+
+
+def _ml_chunk(ml: _MlBracket, out: dict[str, np.ndarray], a: int, b: int, *, n_iter: int) -> None:
+    """The ML estimate of samples ``a:b`` (module notes): observations, the saturation guard, read-noise
+    weights then ``n_iter`` fixed-point updates, the fills; written into ``out``."""
+    n, c = len(ml.t), b - a
+    flat, order = ml.flat, ml.order
+    inv_t = (1.0 / ml.t).astype(np.float32)
+    T = np.empty((n, c), np.float32)
+    V0 = np.empty((n, c), np.float32)
+    S = np.empty((n, c), bool)
+    B = np.empty((n, c), bool)
+    for i in range(n):
+        if ml.luts is not None:
+            idx = flat[i, a:b]
+            T[i], V0[i], S[i], B[i] = (lut[idx] for lut in ml.luts[i])
+        else:
+            bias = ml.bias_scalar if ml.bias_flat is None else ml.bias_flat[a:b]
+            T[i], V0[i], S[i], B[i] = ml.observe(i, flat[i, a:b].astype(np.float64), bias)
+    # saturated in a less exposed shot -> unusable in every more exposed one
+    S[order] = np.logical_or.accumulate(S[order], axis=0)
+    usable = ~(S | B)
+    tmp = np.empty((n, c), np.float32)
+    w = np.empty((n, c), np.float32)
+
+    def weights(x):
+        np.multiply(inv_t[:, None], np.maximum(x, 0)[None, :], out=tmp)
+        np.add(tmp, V0, out=tmp)
+        np.divide(usable, tmp, out=w)
+        return w.sum(axis=0)
+
+    def mean(wsum):
+        return np.einsum("ij,ij->j", w, T) / np.where(wsum > 0, wsum, 1)
+
+    x = mean(weights(np.zeros(c, np.float32)))  # read-noise weights
+    x_prev = x
+    for _ in range(n_iter):
+        x_prev, x = x, mean(weights(x))
+    wsum = weights(x)  # variance at the final estimate
+    none = wsum <= 0
+    var = 1.0 / np.where(none, 1, wsum)
+    out["moved"][a:b] = ~none & (np.abs(x - x_prev) > ML_TOLERANCE_STD * np.sqrt(var))
+    sat = none & S.any(axis=0)
+    dark = none & ~sat
+    x[sat] = ml.fill
+    var[sat] = ml.fill * ml.fill
+    if dark.any():
+        last = int(order[-1])
+        x[dark] = np.maximum(T[last, dark], 0)
+        var[dark] = V0[last, dark]
+    out["radiance"][a:b] = x
+    out["variance"][a:b] = var
+    out["sat"][a:b] = sat
+    out["dark"][a:b] = dark
+    out["n_used"][a:b] = usable.sum(axis=0)
 
 
 def merge_with_variances(
@@ -669,7 +697,7 @@ def merge_debevec(
                 raise InputError("white_level: float input needs its saturation level (white_level=...)")
     n_threads = _n_threads(n_threads)
     order = np.argsort(t, kind="stable")
-    first, last = int(order[0]), int(order[-1])
+    first = int(order[0])
     channels = stack.shape[-1] if (codes8 and g.shape[1] > 1) else 1
     total = math.prod(sample_shape) // channels
     flat = stack.reshape(n, total, channels)
@@ -691,45 +719,13 @@ def merge_debevec(
         # one table per exposure: weight and g(z) - ln t_i; zero weight from the clipping code up
         luts = [(g32 - log_t[i]).astype(np.float32) for i in range(n)]
         w8 = np.repeat(w_lut[:, None], channels, axis=1).astype(np.float32)
-
-    def work(a: int, b: int) -> None:
-        c = b - a
-        num = np.zeros((c, channels), np.float32)
-        den = np.zeros((c, channels), np.float32)
-        clipped = np.zeros((c, channels), bool)
-        for i in order:  # shortest exposure first: a clipped sample voids the longer ones
-            zc = flat[i, a:b]
-            if codes8:
-                clipped |= zc >= saturation_code
-                w = _lut8(zc, w8)
-                lg = _lut8(zc, luts[i])
-            else:
-                z = (zc.astype(np.float32) - np.float32(black_level)) / np.float32(span)
-                clipped |= z >= 1
-                w = hat_weight(z)
-                lg = np.log(np.maximum(z, np.float32(1e-30))) - log_t[i]
-            w[clipped] = 0
-            num += w * lg
-            den += w
-        none = den <= 0
-        lnE = num / np.where(none, 1, den)
-        zf = flat[first, a:b]
-        sat = none & ((zf >= 128) if codes8 else ((zf.astype(np.float32) - black_level) / span >= 0.5))
-        dark = none & ~sat
-        lnE = np.where(sat, fill_log[None, :], lnE)
-        x = np.exp(lnE)
-        if dark.any():
-            zl = flat[last, a:b]
-            if codes8:
-                dark_value = np.exp(_lut8(zl, luts[last]))
-            else:
-                dark_value = np.maximum((zl.astype(np.float32) - black_level) / span, 0) / np.float32(t[last])
-            x = np.where(dark, dark_value, x)
-        radiance[a:b] = x
-        sat_all[a:b] = sat
-        dark_all[a:b] = dark
-
-    _run_chunks(work, total, max(1, chunk_size // channels), n_threads)
+    else:
+        luts = w8 = None
+    deb = _DebevecBracket(flat=flat, t=t, log_t=log_t, order=order, codes8=codes8, saturation_code=saturation_code,
+                          luts=luts, w8=w8, black_level=black_level, span=None if codes8 else span,
+                          fill_log=fill_log)
+    out = {"radiance": radiance, "sat": sat_all, "dark": dark_all}
+    _run_chunks(functools.partial(_debevec_chunk, deb, out), total, max(1, chunk_size // channels), n_threads)
     info = _summary(sat_all.reshape(sample_shape), dark_all.reshape(sample_shape))
     info.update({
         "method": "debevec",
@@ -739,6 +735,65 @@ def merge_debevec(
         "response_kind": None if g is None else ("recovered" if response is None else "given"),
     })
     return radiance.reshape(sample_shape), info
+
+
+@dataclass(frozen=True)
+class _DebevecBracket:
+    """A bracket being merged by :func:`merge_debevec`: samples ``(N, P, C)``, exposures (and their logs,
+    order shortest first), 8-bit tables (weight, ``g(z) - ln t_i``) or the linear span, the fill of
+    saturated-everywhere samples (log)."""
+    flat: np.ndarray
+    t: np.ndarray
+    log_t: np.ndarray
+    order: np.ndarray
+    codes8: bool
+    saturation_code: int
+    luts: list | None
+    w8: np.ndarray | None
+    black_level: float
+    span: float | None
+    fill_log: np.ndarray
+
+
+def _debevec_chunk(deb: _DebevecBracket, out: dict[str, np.ndarray], a: int, b: int) -> None:
+    """The hat-weighted log-domain mean of samples ``a:b`` and the fills of those without a usable sample."""
+    flat, codes8, black_level, span = deb.flat, deb.codes8, deb.black_level, deb.span
+    first, last = int(deb.order[0]), int(deb.order[-1])
+    c, channels = b - a, flat.shape[2]
+    num = np.zeros((c, channels), np.float32)
+    den = np.zeros((c, channels), np.float32)
+    clipped = np.zeros((c, channels), bool)
+    for i in deb.order:  # shortest exposure first: a clipped sample voids the longer ones
+        zc = flat[i, a:b]
+        if codes8:
+            clipped |= zc >= deb.saturation_code
+            w = _lut8(zc, deb.w8)
+            lg = _lut8(zc, deb.luts[i])
+        else:
+            z = (zc.astype(np.float32) - np.float32(black_level)) / np.float32(span)
+            clipped |= z >= 1
+            w = hat_weight(z)
+            lg = np.log(np.maximum(z, np.float32(1e-30))) - deb.log_t[i]
+        w[clipped] = 0
+        num += w * lg
+        den += w
+    none = den <= 0
+    lnE = num / np.where(none, 1, den)
+    zf = flat[first, a:b]
+    sat = none & ((zf >= 128) if codes8 else ((zf.astype(np.float32) - black_level) / span >= 0.5))
+    dark = none & ~sat
+    lnE = np.where(sat, deb.fill_log[None, :], lnE)
+    x = np.exp(lnE)
+    if dark.any():
+        zl = flat[last, a:b]
+        if codes8:
+            dark_value = np.exp(_lut8(zl, deb.luts[last]))
+        else:
+            dark_value = np.maximum((zl.astype(np.float32) - black_level) / span, 0) / np.float32(deb.t[last])
+        x = np.where(dark, dark_value, x)
+    out["radiance"][a:b] = x
+    out["sat"][a:b] = sat
+    out["dark"][a:b] = dark
 
 
 def _lut8(codes: np.ndarray, lut: np.ndarray) -> np.ndarray:
@@ -855,78 +910,149 @@ def merge_ml_codes8(
     if x_lut.shape[1] != channels:
         x_lut = np.repeat(x_lut, channels, axis=1)
     x64 = x_lut.astype(np.float64)
-    codes = np.arange(256)
-    usable_lut = (codes > 0) & (codes < int(saturation_code))
-    hat = np.repeat((hat_weight(codes / 255.0) * usable_lut)[:, None], channels, axis=1).astype(np.float32)
-    cidx = np.arange(channels)
+    c8 = _Codes8(flat=flat, t=t, order=order, saturation_code=saturation_code, channels=channels,
+                 x_t=[(x_lut / np.float32(t[i])) for i in range(n)],  # X_i = x / t_i per exposure
+                 grid=_CodeGrid.build(x64, saturation_code, channels))
     chunk = max(1, chunk_size // channels)
-    x_t = [(x_lut / np.float32(t[i])) for i in range(n)]  # X_i = x / t_i per exposure
-    # the code an exposure x predicts: the usable code whose x_lut is nearest (x_lut is non-decreasing),
-    # tabulated on a fine grid of ln x per channel (a table look-up instead of a search per sample)
-    lo_code, hi_code = 1, int(saturation_code) - 1
-    n_grid = 4096
-    ln_lo = np.log(np.maximum(x64[lo_code], 1e-300))
-    ln_hi = np.log(np.maximum(x64[hi_code], 1e-300))
-    grid_scale = (n_grid - 1) / np.maximum(ln_hi - ln_lo, 1e-12)
-    code_grid = np.empty((n_grid, channels), np.intp)
-    for c in range(channels):
-        xs_c = np.exp(np.linspace(ln_lo[c], ln_hi[c], n_grid))
-        mids = (x64[lo_code:hi_code, c] + x64[lo_code + 1:hi_code + 1, c]) / 2
-        code_grid[:, c] = lo_code + np.searchsorted(mids, xs_c)
+    V = _code_variance(c8, x64, total=total, chunk=chunk, n_threads=n_threads)
+    w_tables, w_scale, w_dtype = _weight_tables(V, t, c8.grid)
+    fill = (x_lut[255] / t[first]).astype(np.float32)
+    out = {"radiance": np.empty((total, channels), np.float32), "variance": np.empty((total, channels), np.float32),
+           "sat": np.empty((total, channels), bool), "dark": np.empty((total, channels), bool)}
 
-    def weighted(a: int, b: int, src=flat):
-        """Hat-weighted pass (shortest first, clipping guard): sum w X, sum w, per-exposure weights and X."""
-        c = b - a
-        num = np.zeros((c, channels), np.float32)
-        den = np.zeros((c, channels), np.float32)
-        clipped = np.zeros((c, channels), bool)
-        ws, xs = [], []
-        for i in order:
-            zc = src[i, a:b]
-            clipped |= zc >= saturation_code
-            w = _lut8(zc, hat)
-            w[clipped] = 0
-            xi = _lut8(zc, x_t[i])
-            ws.append(w)
-            xs.append(xi)
-            num += w * xi
-            den += w
-        return num, den, ws, xs
+    def work(a: int, b: int) -> None:
+        _codes8_chunk(c8, a, b, out, n_iter=n_iter, w_tables=w_tables, w_scale=w_scale, w_dtype=w_dtype,
+                      fill=fill, last=last)
 
-    # V is a (256, C) table: a regular subsample of at most _V_MAX_PIXELS pixels measures it
+    _run_chunks(work, total, chunk, n_threads)
+    info = _summary(out["sat"].reshape(sample_shape), out["dark"].reshape(sample_shape), stacklevel=5)
+    info.update({
+        "method": "ml",
+        "weights": "inverse of the code variance measured on the bracket at the estimate, t^2 / V(t E)",
+        "exposures_s": t.tolist(),
+        "fill": "saturated-everywhere samples = saturation level of the shortest exposure (lower bound), "
+                "variance = value^2",
+        "response": g,
+        "response_kind": "recovered" if response is None else "given",
+        "code_variance": V,
+        "n_iter": int(n_iter),
+    })
+    return out["radiance"].reshape(sample_shape), out["variance"].reshape(sample_shape), info
+
+
+@dataclass(frozen=True)
+class _CodeGrid:
+    """The code an exposure ``x`` predicts: the usable code whose ``x_lut`` is nearest (``x_lut`` is
+    non-decreasing), tabulated on a fine grid of ``ln x`` per channel (a table look-up instead of a
+    search per sample). Grid index of ``x``: ``(ln x - ln_lo) * scale``."""
+    n_grid: int
+    ln_lo: np.ndarray
+    grid_scale: np.ndarray
+    code_grid: np.ndarray  # (n_grid, C) codes
+    ln_lo32: np.ndarray
+    scale32: np.ndarray
+
+    @classmethod
+    def build(cls, x64: np.ndarray, saturation_code: int, channels: int) -> "_CodeGrid":
+        lo_code, hi_code = 1, int(saturation_code) - 1
+        n_grid = 4096
+        ln_lo = np.log(np.maximum(x64[lo_code], 1e-300))
+        ln_hi = np.log(np.maximum(x64[hi_code], 1e-300))
+        grid_scale = (n_grid - 1) / np.maximum(ln_hi - ln_lo, 1e-12)
+        code_grid = np.empty((n_grid, channels), np.intp)
+        for c in range(channels):
+            xs_c = np.exp(np.linspace(ln_lo[c], ln_hi[c], n_grid))
+            mids = (x64[lo_code:hi_code, c] + x64[lo_code + 1:hi_code + 1, c]) / 2
+            code_grid[:, c] = lo_code + np.searchsorted(mids, xs_c)
+        return cls(n_grid=n_grid, ln_lo=ln_lo, grid_scale=grid_scale, code_grid=code_grid,
+                   ln_lo32=np.asarray(ln_lo, np.float32).reshape(-1),
+                   scale32=np.broadcast_to(np.asarray(grid_scale, np.float32), (channels,)).copy())
+
+
+@dataclass(frozen=True)
+class _Codes8:
+    """An 8-bit bracket being merged by :func:`merge_ml_codes8`: codes ``(N, P, C)``, exposures, their
+    order (shortest first), the clipping code, ``X_i = x(z) / t_i`` tables and the code grid."""
+    flat: np.ndarray
+    t: np.ndarray
+    order: np.ndarray
+    saturation_code: int
+    channels: int
+    x_t: list
+    grid: _CodeGrid
+
+    @functools.cached_property
+    def hat(self) -> np.ndarray:
+        """Hat weights per code and channel, 0 for code 0 and from the clipping code up."""
+        codes = np.arange(256)
+        usable_lut = (codes > 0) & (codes < int(self.saturation_code))
+        return np.repeat((hat_weight(codes / 255.0) * usable_lut)[:, None], self.channels, axis=1).astype(np.float32)
+
+
+def _hat_pass(c8: _Codes8, a: int, b: int, src: np.ndarray | None = None, hat: np.ndarray | None = None):
+    """Hat-weighted pass over samples ``a:b`` (shortest first, clipping guard): sum w X, sum w, per-exposure
+    weights and X."""
+    src = c8.flat if src is None else src
+    hat = c8.hat if hat is None else hat
+    c, channels = b - a, c8.channels
+    num = np.zeros((c, channels), np.float32)
+    den = np.zeros((c, channels), np.float32)
+    clipped = np.zeros((c, channels), bool)
+    ws, xs = [], []
+    for i in c8.order:
+        zc = src[i, a:b]
+        clipped |= zc >= c8.saturation_code
+        w = _lut8(zc, hat)
+        w[clipped] = 0
+        xi = _lut8(zc, c8.x_t[i])
+        ws.append(w)
+        xs.append(xi)
+        num += w * xi
+        den += w
+    return num, den, ws, xs
+
+
+def _residual_bins(c8: _Codes8, sub: np.ndarray, a: int, b: int, hat: np.ndarray):
+    """Leave-one-out squared residuals of every usable sample of a pixel with >= 2 usable samples, binned by
+    the code the other exposures predict: (count, sum of squares), each ``(256 * C,)``."""
+    channels, grid = c8.channels, c8.grid
+    num, den, ws, xs = _hat_pass(c8, a, b, sub, hat)
+    n_ok = sum((w > 0).astype(np.int8) for w in ws)
+    ch_index = np.broadcast_to(np.arange(channels), num.shape)
+    cnt = np.zeros(256 * channels)
+    tot = np.zeros(256 * channels)
+    for k, i in enumerate(c8.order):
+        w, xi = ws[k], xs[k]
+        rest = den - w
+        ok = (w > 0) & (rest > 0) & (n_ok >= 2)
+        if not ok.any():
+            continue
+        ti = np.float32(c8.t[i])
+        pred = (num[ok] - w[ok] * xi[ok]) / rest[ok] * ti  # t_i E_-i of the usable samples, 1-D
+        r = xi[ok] * ti - pred
+        ch = ch_index[ok]
+        with np.errstate(divide="ignore"):
+            kg = (np.log(pred) - grid.ln_lo32[ch]) * grid.scale32[ch]
+        kg = np.clip(np.nan_to_num(kg, nan=0.0, neginf=0.0), 0, grid.n_grid - 1).astype(np.intp)
+        key = grid.code_grid[kg, ch] * channels + ch
+        cnt += np.bincount(key, minlength=256 * channels)
+        tot += np.bincount(key, (r.astype(np.float64)) ** 2, minlength=256 * channels)
+    return cnt, tot
+
+
+def _code_variance(c8: _Codes8, x64: np.ndarray, *, total: int, chunk: int, n_threads: int) -> np.ndarray:
+    """Step 3 of :func:`merge_ml_codes8`: the variance ``V`` (256, C) of a linearised code, measured on the
+    bracket (a regular subsample of at most :data:`_V_MAX_PIXELS` pixels), smoothed over 9 codes, never
+    below the quantisation."""
+    channels = c8.channels
+    codes = np.arange(256)
     step = max(1, -(-total // _V_MAX_PIXELS))
-    sub = np.ascontiguousarray(flat[:, ::step]) if step > 1 else flat
+    sub = np.ascontiguousarray(c8.flat[:, ::step]) if step > 1 else c8.flat
     bounds = [(a, min(a + chunk, sub.shape[1])) for a in range(0, sub.shape[1], chunk)]
-
-    ln_lo32 = np.asarray(ln_lo, np.float32).reshape(-1)
-    scale32 = np.broadcast_to(np.asarray(grid_scale, np.float32), (channels,)).copy()
+    hat = c8.hat
 
     def pass1(ab):
-        # leave-one-out squared residuals of every usable sample of a pixel with >= 2 usable samples,
-        # binned by the code the other exposures predict
-        a, b = ab
-        num, den, ws, xs = weighted(a, b, sub)
-        n_ok = sum((w > 0).astype(np.int8) for w in ws)
-        ch_index = np.broadcast_to(cidx, num.shape)
-        cnt = np.zeros(256 * channels)
-        tot = np.zeros(256 * channels)
-        for k, i in enumerate(order):
-            w, xi = ws[k], xs[k]
-            rest = den - w
-            ok = (w > 0) & (rest > 0) & (n_ok >= 2)
-            if not ok.any():
-                continue
-            ti = np.float32(t[i])
-            pred = (num[ok] - w[ok] * xi[ok]) / rest[ok] * ti  # t_i E_-i of the usable samples, 1-D
-            r = xi[ok] * ti - pred
-            ch = ch_index[ok]
-            with np.errstate(divide="ignore"):
-                kg = (np.log(pred) - ln_lo32[ch]) * scale32[ch]
-            kg = np.clip(np.nan_to_num(kg, nan=0.0, neginf=0.0), 0, n_grid - 1).astype(np.intp)
-            key = code_grid[kg, ch] * channels + ch
-            cnt += np.bincount(key, minlength=256 * channels)
-            tot += np.bincount(key, (r.astype(np.float64)) ** 2, minlength=256 * channels)
-        return cnt, tot
+        return _residual_bins(c8, sub, ab[0], ab[1], hat)
 
     if n_threads == 1 or len(bounds) == 1:
         stats = [pass1(ab) for ab in bounds]
@@ -947,70 +1073,59 @@ def merge_ml_codes8(
         V[:, c] = V_c[seen[np.abs(codes[:, None] - seen[None, :]).argmin(axis=1)]]
     dx = np.gradient(x64, axis=0)
     # never below the quantisation of a code, nor (a flat stretch of g) below a 1e-6 relative error
-    V = np.maximum(V, np.maximum(dx * dx / 12.0, (1e-6 * x64) ** 2))
-    fill = (x_lut[255] / t[first]).astype(np.float32)
+    return np.maximum(V, np.maximum(dx * dx / 12.0, (1e-6 * x64) ** 2))
+
+
+def _weight_tables(V: np.ndarray, t: np.ndarray, grid: _CodeGrid) -> tuple[list[np.ndarray], float, type]:
+    """Weight tables ``t_i^2 / V`` over the code grid, scaled so the largest is 1: float32 when their range
+    allows it (half the memory traffic), float64 otherwise; the variance takes the scale back."""
+    channels = V.shape[1]
     t2 = t**2
-    inv_v_grid = (1.0 / V[code_grid, cidx]).ravel()  # 1 / V at the code each grid exposure predicts
-    # weight tables t_i^2 / V, scaled so the largest is 1: float32 when their range allows it (half the
-    # memory traffic), float64 otherwise; the variance takes the scale back
+    inv_v_grid = (1.0 / V[grid.code_grid, np.arange(channels)]).ravel()  # 1 / V at the code each grid exposure predicts
     w_scale = float(t2.max() * inv_v_grid.max())
-    w_tables = [t2[i] * inv_v_grid / w_scale for i in range(n)]
+    w_tables = [t2[i] * inv_v_grid / w_scale for i in range(len(t))]
     w_dtype = np.float32 if min(float(wt.min()) for wt in w_tables) > 1e-30 else np.float64
-    w_tables = [wt.astype(w_dtype) for wt in w_tables]
-    ln_t_grid = [np.float32(np.log(t[i]) * grid_scale) for i in range(n)]
+    return [wt.astype(w_dtype) for wt in w_tables], w_scale, w_dtype
 
-    radiance = np.empty((total, channels), np.float32)
-    variance = np.empty((total, channels), np.float32)
-    sat_all = np.empty((total, channels), bool)
-    dark_all = np.empty((total, channels), bool)
 
-    def work(a: int, b: int) -> None:
-        num, den, ws, xs = weighted(a, b)
-        usable = [w > 0 for w in ws]
-        none = den <= 0
-        e = (num / np.where(none, 1, den)).astype(w_dtype)
+def _codes8_chunk(c8: _Codes8, a: int, b: int, out: dict[str, np.ndarray], *, n_iter, w_tables, w_scale, w_dtype,
+                  fill, last) -> None:
+    """Step 4 of :func:`merge_ml_codes8` on samples ``a:b``: the inverse-variance fixed point from the hat
+    estimate, the fills of samples without a usable code; written into ``out``."""
+    grid, channels, flat = c8.grid, c8.channels, c8.flat
+    cidx = np.arange(channels)
+    ln_t_grid = [np.float32(np.log(c8.t[i]) * grid.grid_scale) for i in range(len(c8.t))]
+    num, den, ws, xs = _hat_pass(c8, a, b)
+    usable = [w > 0 for w in ws]
+    none = den <= 0
+    e = (num / np.where(none, 1, den)).astype(w_dtype)
+    wsum = np.zeros(e.shape, w_dtype)
+    for _ in range(max(1, int(n_iter))):  # weights at the current estimate, never at the sample's own code
+        acc = np.zeros(e.shape, w_dtype)
         wsum = np.zeros(e.shape, w_dtype)
-        for _ in range(max(1, int(n_iter))):  # weights at the current estimate, never at the sample's own code
-            acc = np.zeros(e.shape, w_dtype)
-            wsum = np.zeros(e.shape, w_dtype)
-            with np.errstate(divide="ignore"):
-                k0 = ((np.log(e) - ln_lo32) * scale32).astype(np.float32)
-            k0 = np.nan_to_num(k0, nan=-1e30, neginf=-1e30, posinf=1e30)
-            for k, i in enumerate(order):
-                idx = np.clip(k0 + ln_t_grid[i], 0, n_grid - 1).astype(np.intp) * channels + cidx
-                w = w_tables[i][idx]
-                w *= usable[k]
-                acc += w * xs[k]
-                wsum += w
-            e = np.where(wsum > 0, acc / np.where(wsum > 0, wsum, 1), e)
-        var = 1.0 / (np.where(none | (wsum <= 0), 1, wsum).astype(np.float64) * w_scale)
-        sat = none & (flat[first, a:b] >= 128)
-        dark = none & ~sat
-        e = np.where(sat, fill[None, :], e)
-        var = np.where(sat, fill[None, :].astype(np.float64) ** 2, var)
-        if dark.any():
-            xd = _lut8(np.maximum(flat[last, a:b], 1), x_t[last])
-            e = np.where(dark, xd, e)
-            var = np.where(dark, xd.astype(np.float64) ** 2, var)
-        radiance[a:b] = e
-        variance[a:b] = np.clip(var, np.finfo(np.float32).tiny, np.finfo(np.float32).max)
-        sat_all[a:b] = sat
-        dark_all[a:b] = dark
-
-    _run_chunks(work, total, chunk, n_threads)
-    info = _summary(sat_all.reshape(sample_shape), dark_all.reshape(sample_shape))
-    info.update({
-        "method": "ml",
-        "weights": "inverse of the code variance measured on the bracket at the estimate, t^2 / V(t E)",
-        "exposures_s": t.tolist(),
-        "fill": "saturated-everywhere samples = saturation level of the shortest exposure (lower bound), "
-                "variance = value^2",
-        "response": g,
-        "response_kind": "recovered" if response is None else "given",
-        "code_variance": V,
-        "n_iter": int(n_iter),
-    })
-    return radiance.reshape(sample_shape), variance.reshape(sample_shape), info
+        with np.errstate(divide="ignore"):
+            k0 = ((np.log(e) - grid.ln_lo32) * grid.scale32).astype(np.float32)
+        k0 = np.nan_to_num(k0, nan=-1e30, neginf=-1e30, posinf=1e30)
+        for k, i in enumerate(c8.order):
+            idx = np.clip(k0 + ln_t_grid[i], 0, grid.n_grid - 1).astype(np.intp) * channels + cidx
+            w = w_tables[i][idx]
+            w *= usable[k]
+            acc += w * xs[k]
+            wsum += w
+        e = np.where(wsum > 0, acc / np.where(wsum > 0, wsum, 1), e)
+    var = 1.0 / (np.where(none | (wsum <= 0), 1, wsum).astype(np.float64) * w_scale)
+    sat = none & (flat[c8.order[0], a:b] >= 128)
+    dark = none & ~sat
+    e = np.where(sat, fill[None, :], e)
+    var = np.where(sat, fill[None, :].astype(np.float64) ** 2, var)
+    if dark.any():
+        xd = _lut8(np.maximum(flat[last, a:b], 1), c8.x_t[last])
+        e = np.where(dark, xd, e)
+        var = np.where(dark, xd.astype(np.float64) ** 2, var)
+    out["radiance"][a:b] = e
+    out["variance"][a:b] = np.clip(var, np.finfo(np.float32).tiny, np.finfo(np.float32).max)
+    out["sat"][a:b] = sat
+    out["dark"][a:b] = dark
 
 
 # -- light fields ------------------------------------------------------------------------------
@@ -1124,7 +1239,29 @@ def merge_lightfields(
         As returned by the estimator, plus ``dynamic_range_stops``, ``negative_clipped``.
     """
     check_choice("method", method, MERGE_METHODS)
-    n_iter = max_iter
+    br = _light_field_bracket(lfs, exposures_s, isos, profile)
+    run = _merge_bracket_ml if method == "ml" else _merge_bracket_debevec
+    return run(br, response=response, n_iter=max_iter, random_state=random_state, n_threads=n_threads,
+               chunk_size=chunk_size)
+
+
+@dataclass
+class _LightFieldBracket:
+    """A bracket of light fields checked for :func:`merge_lightfields`: the light fields, their names,
+    exposures (s), ISOs (None when one is unknown), units, whether they are 8-bit codes, the stacked data
+    and the camera profile (or None)."""
+    lfs: list
+    names: list[str]
+    t: np.ndarray
+    iso: np.ndarray | None
+    unit: str
+    codes8: bool
+    data: np.ndarray | None
+    prof: Any
+
+
+def _light_field_bracket(lfs, exposures_s, isos, profile) -> _LightFieldBracket:
+    """Check a bracket of light fields (shapes, exposures, ISOs, units, exposure order)."""
     lfs = list(lfs)
     if len(lfs) < 2:
         raise InputError(f"a bracket needs at least two exposures, got {len(lfs)} input")
@@ -1149,7 +1286,6 @@ def merge_lightfields(
     units = {lf.units for lf in lfs}
     if len(units) != 1:
         raise InputError(f"inputs mix units {', '.join(sorted(units))}; a bracket needs one kind of data")
-    unit = units.pop()
     codes8 = [lf.attrs.get("codes_bits") == 8 for lf in lfs]
     if any(codes8) and not all(codes8):
         raise InputError("inputs mix 8-bit non-linear images with linear data")
@@ -1159,80 +1295,93 @@ def merge_lightfields(
     prof = None
     if profile is not None:
         prof = load_profile(profile)
+    return _LightFieldBracket(lfs=lfs, names=names, t=t, iso=iso, unit=units.pop(), codes8=codes8, data=data,
+                              prof=prof)
+
+
+def _ml_codes(br: _LightFieldBracket) -> tuple[np.ndarray, str]:
+    """The bracket's data as sensor codes for :func:`merge_ml` (uint16 when they are integers) and how they
+    were mapped (``"dn"``, or linear data mapped to the profile's levels)."""
+    data, prof, n = br.data, br.prof, len(br.lfs)
     mapping = "dn"
-    if method == "ml":
-        if codes8:
-            # non-linear 8-bit camera images: recovered response, noise measured on the bracket
-            stack = np.clip(np.round(data * 255), 0, 255).astype(np.uint8)
-            del data
-            radiance, variance, info = merge_ml_codes8(stack, exposures_s=t, response=response, max_iter=n_iter,
-                                                       random_state=random_state, n_threads=n_threads,
-                                                       chunk_size=chunk_size)
-            return _finish(lfs, names, method, t, iso, prof, "codes8", radiance, variance, info, "relative", n_iter,
-                           per_second_iso=None)
-        if unit != "dn" and all(lf.variance is not None for lf in lfs):
-            # decoded captures: their own noise-model variances give the weights
-            variances = np.stack([lf.variance for lf in lfs])
-            radiance, variance, info = merge_with_variances(data, variances, exposures_s=t, n_threads=n_threads,
-                                                            chunk_size=chunk_size)
-            same_iso = None if iso is None or len(set(iso.tolist())) != 1 else float(iso[0])
-            return _finish(lfs, names, method, t, iso, prof, "input-variances", radiance, variance, info, unit,
-                           n_iter, per_second_iso=same_iso)
+    if prof is None:
+        raise InputError(f"method ml needs a camera profile ({option_name('profile=', '--profile')}): gain and "
+                         "read noise set its weights")
+    if br.iso is None:
+        missing = next(nm for lf, nm in zip(br.lfs, br.names) if lf.iso is None)
+        raise InputError(f"{missing}: no ISO in its metadata; method ml needs one per exposure "
+                         f"(give {option_name('isos=', '--isos')})")
+    if br.unit != "dn":
+        sat = [lf.saturation_level for lf in br.lfs]
+        if any(s is None for s in sat):
+            bad = next(nm for s, nm in zip(sat, br.names) if s is None)
+            raise InputError(f"{bad}: linear {br.unit} data without a saturation level cannot be mapped to sensor "
+                             "codes for method ml")
+        span = prof.white_level_dn - prof.black_level_dn
+        scale = np.array(sat, dtype=np.float32).reshape((n,) + (1,) * (data.ndim - 1))
+        data = prof.black_level_dn + data / scale * span
+        mapping = "relative-to-profile-levels"
+    if np.all(data <= 65535) and np.array_equal(data, np.round(data)):
+        return data.astype(np.uint16), mapping
+    return data, mapping
+
+
+def _merge_bracket_ml(br: _LightFieldBracket, *, response, n_iter, random_state, n_threads, chunk_size):
+    """Method ``ml`` of :func:`merge_lightfields`: 8-bit codes, the inputs' own variances, or sensor codes."""
+    t, iso = br.t, br.iso
+    if br.codes8:
+        # non-linear 8-bit camera images: recovered response, noise measured on the bracket
+        stack = np.clip(np.round(br.data * 255), 0, 255).astype(np.uint8)
+        br.data = None
+        radiance, variance, info = merge_ml_codes8(stack, exposures_s=t, response=response, max_iter=n_iter,
+                                                   random_state=random_state, n_threads=n_threads,
+                                                   chunk_size=chunk_size)
+        return _finish(br, "ml", "codes8", radiance, variance, info, "relative", n_iter, per_second_iso=None)
+    if br.unit != "dn" and all(lf.variance is not None for lf in br.lfs):
+        # decoded captures: their own noise-model variances give the weights
+        variances = np.stack([lf.variance for lf in br.lfs])
+        radiance, variance, info = merge_with_variances(br.data, variances, exposures_s=t, n_threads=n_threads,
+                                                        chunk_size=chunk_size)
+        same_iso = None if iso is None or len(set(iso.tolist())) != 1 else float(iso[0])
+        return _finish(br, "ml", "input-variances", radiance, variance, info, br.unit, n_iter,
+                       per_second_iso=same_iso)
+    dn, mapping = _ml_codes(br)
+    br.data = None
+    radiance, variance, info = merge_ml(dn, exposures_s=t, isos=iso, profile=br.prof, max_iter=n_iter,
+                                        n_threads=n_threads, chunk_size=chunk_size)
+    return _finish(br, "ml", mapping, radiance, variance, info, "e-/s", n_iter, per_second_iso=None)
+
+
+def _merge_bracket_debevec(br: _LightFieldBracket, *, response, n_iter, random_state, n_threads, chunk_size):
+    """Method ``debevec`` of :func:`merge_lightfields`: 8-bit codes, raw codes or linear data."""
+    data, prof, iso = br.data, br.prof, br.iso
+    if br.codes8:
+        stack = np.clip(np.round(data * 255), 0, 255).astype(np.uint8)
+        kwargs = {}
+    elif br.unit == "dn":
         if prof is None:
-            raise InputError(f"method ml needs a camera profile ({option_name('profile=', '--profile')}): gain and "
-                             "read noise set its weights")
-        if iso is None:
-            missing = next(nm for lf, nm in zip(lfs, names) if lf.iso is None)
-            raise InputError(f"{missing}: no ISO in its metadata; method ml needs one per exposure "
-                             f"(give {option_name('isos=', '--isos')})")
-        if unit != "dn":
-            sat = [lf.saturation_level for lf in lfs]
-            if any(s is None for s in sat):
-                bad = next(nm for s, nm in zip(sat, names) if s is None)
-                raise InputError(f"{bad}: linear {unit} data without a saturation level cannot be mapped to sensor "
-                                 "codes for method ml")
-            span = prof.white_level_dn - prof.black_level_dn
-            scale = np.array(sat, dtype=np.float32).reshape((n,) + (1,) * (data.ndim - 1))
-            data = prof.black_level_dn + data / scale * span
-            mapping = "relative-to-profile-levels"
-        if np.all(data <= 65535) and np.array_equal(data, np.round(data)):
-            dn = data.astype(np.uint16)
-        else:
-            dn = data
-        del data
-        radiance, variance, info = merge_ml(dn, exposures_s=t, isos=iso, profile=prof, max_iter=n_iter,
-                                            n_threads=n_threads, chunk_size=chunk_size)
-        out_units = "e-/s"
+            raise InputError(f"raw (dn) input needs a camera profile ({option_name('profile=', '--profile')}) "
+                             "for its black and white levels")
+        stack, kwargs = data, {"white_level": prof.white_level_dn, "black_level": prof.black_level_dn}
     else:
-        if codes8:
-            stack = np.clip(np.round(data * 255), 0, 255).astype(np.uint8)
-            kwargs = {}
-        elif unit == "dn":
-            if prof is None:
-                raise InputError(f"raw (dn) input needs a camera profile ({option_name('profile=', '--profile')}) "
-                                 "for its black and white levels")
-            stack, kwargs = data, {"white_level": prof.white_level_dn, "black_level": prof.black_level_dn}
-        else:
-            sat = {lf.saturation_level for lf in lfs}
-            if None in sat or len(sat) != 1:
-                raise InputError("method debevec on linear data needs one saturation level shared by all inputs")
-            stack, kwargs = data, {"white_level": sat.pop()}
-        # ISO enters the exposure as a gain: relative exposure t * ISO / 100
-        exp_rel = t * (iso / 100.0 if iso is not None else 1.0)
-        radiance, info = merge_debevec(stack, exposures_s=exp_rel, response=response, random_state=random_state,
-                                       n_threads=n_threads, chunk_size=chunk_size, **kwargs)
-        variance = None
-        out_units = "relative"
-    return _finish(lfs, names, method, t, iso, prof, mapping if method == "ml" else ("codes8" if codes8 else unit),
-                   radiance, variance, info, out_units, n_iter,
-                   per_second_iso=(100.0 if iso is not None else None) if method == "debevec" else None)
+        sat = {lf.saturation_level for lf in br.lfs}
+        if None in sat or len(sat) != 1:
+            raise InputError("method debevec on linear data needs one saturation level shared by all inputs")
+        stack, kwargs = data, {"white_level": sat.pop()}
+    # ISO enters the exposure as a gain: relative exposure t * ISO / 100
+    exp_rel = br.t * (iso / 100.0 if iso is not None else 1.0)
+    radiance, info = merge_debevec(stack, exposures_s=exp_rel, response=response, random_state=random_state,
+                                   n_threads=n_threads, chunk_size=chunk_size, **kwargs)
+    return _finish(br, "debevec", "codes8" if br.codes8 else br.unit, radiance, None, info, "relative", n_iter,
+                   per_second_iso=100.0 if iso is not None else None)
 
 
-def _finish(lfs, names, method, t, iso, prof, mapping, radiance, variance, info, out_units, n_iter, *,
+def _finish(br: _LightFieldBracket, method, mapping, radiance, variance, info, out_units, n_iter, *,
             per_second_iso=None):
     """The merged light field. Relative (not e-/s) output is a radiance per second: it carries
     ``exposure_s = 1`` (and the ISO it refers to, when known), so later stages (``evaluate
     --align exposure``) can compare it with a capture of another exposure."""
+    lfs, names, t, iso, prof = br.lfs, br.names, br.t, br.iso, br.prof
     negative = int((radiance < 0).sum())
     data_out = np.maximum(radiance, 0)
     attrs = {

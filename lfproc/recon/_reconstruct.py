@@ -469,6 +469,42 @@ def _solver_settings(capture, dictionary, settings: ReconstructionSettings, T: n
                      c_median=max(c_median, 1e-30), debias=_int_option("debias", settings.debias, low=0))
 
 
+def _execution(workers, threads) -> tuple[int | None, int]:
+    """``workers`` (None: no Dask cluster) and ``threads`` (None: the CPUs available) checked."""
+    if workers is not None:
+        workers = _int_option("workers", workers)
+    if threads is None:
+        threads = _default_threads()
+    return workers, _int_option("threads", threads)
+
+
+def _weighted_observations(capture, variance: str) -> tuple[np.ndarray, np.ndarray]:
+    """The calibrated observations ``T`` (e-/s) and their weights ``W = 1/std(T)``, float32 ``(S, H, W)``."""
+    from ..camera.capture import observations
+
+    obs = observations(capture, variance_from=variance)
+    T = np.ascontiguousarray(obs.radiance, dtype=np.float32)
+    W = np.ascontiguousarray(obs.weight, dtype=np.float32)
+    if not (W > 0).any():
+        raise InputError("capture: every measurement has weight zero (all saturated or black-clipped); nothing to "
+                         "reconstruct from")
+    return T, W
+
+
+def _combine(solved: dict[str, Any], capture) -> tuple[np.ndarray, float, str]:
+    """The weighted mean of the patch estimates over each pixel, negatives clipped to 0, in the units of the
+    light field the capture was simulated from (e-/s for a real capture); returns it, the fraction of
+    negatives and the units."""
+    count = np.maximum(solved["wsum"], np.float32(1e-30))  # a pixel of empty patches only: 0 (nothing was measured)
+    data = solved["acc"] / count[None, None, :, :, None]
+    negative = float((data < 0).mean())
+    np.maximum(data, 0, out=data)
+    if capture.radiance_scale is None:
+        return data, negative, "e-/s"
+    data /= np.float32(capture.radiance_scale)
+    return data, negative, capture.parameters.get("light_field_units") or "relative"
+
+
 @dataclass
 class _Plan:
     """The blocks of one reconstruction: what every block shares, the blocks, and how to attach a block's
@@ -716,36 +752,17 @@ def reconstruct(
     settings = resolve_options(ReconstructionSettings, settings, options, func_name="reconstruct",
                                argument="settings", renames={"sparsity": "n_nonzero_coefs"})
     settings = _checked_settings(settings)
-    if workers is not None:
-        workers = _int_option("workers", workers)
-    if threads is None:
-        threads = _default_threads()
-    threads = _int_option("threads", threads)
+    workers, threads = _execution(workers, threads)
     capture, dictionary = _load_inputs(capture, dictionary)
     settings = _check_fit(capture, dictionary, settings)
-
-    obs = observations(capture, variance_from=settings.variance)
-    T = np.ascontiguousarray(obs.radiance, dtype=np.float32)
-    W = np.ascontiguousarray(obs.weight, dtype=np.float32)
-    if not (W > 0).any():
-        raise InputError("capture: every measurement has weight zero (all saturated or black-clipped); nothing to "
-                         "reconstruct from")
+    T, W = _weighted_observations(capture, settings.variance)
     plan = _plan(capture, dictionary, _solver_settings(capture, dictionary, settings, T, W), T, W,
                  stride=settings.stride, block_patches=settings.block_patches)
     v_n, u_n, _, _, c_n = dictionary.patch
     solved = _solve_plan(plan, (v_n, u_n, *capture.size, c_n), workers=workers, scheduler=scheduler,
                          threads=threads, progress_bar=progress_bar)
-
-    count = np.maximum(solved["wsum"], np.float32(1e-30))  # a pixel of empty patches only: 0 (nothing was measured)
-    data = solved["acc"] / count[None, None, :, :, None]
-    negative = float((data < 0).mean())
-    np.maximum(data, 0, out=data)
+    data, negative, units = _combine(solved, capture)
     radiance_scale = capture.radiance_scale
-    if radiance_scale is not None:
-        data /= np.float32(radiance_scale)
-        units = capture.parameters.get("light_field_units") or "relative"
-    else:
-        units = "e-/s"
     record = _record(settings, dictionary, capture, plan, solved, negative=negative,
                      seconds=time.perf_counter() - started)
     return LightField(data=data, units=units, colour_space="camera-rgb" if radiance_scale is None else "linear-srgb",
