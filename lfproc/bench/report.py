@@ -482,6 +482,22 @@ def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path
     _plot_measurements(rows, paths[plots["measurements"]])
     _plot_best_worst(rows, bench_dir, meta, paths[plots["best_worst"]])
 
+    lines = _settings_section(rows, meta)
+    lines += _table1_section(rows)
+    lines += _table2_section()
+    lines += _table3_section(rows)
+    lines += _table4_section(rows)
+    lines += _iso_sets_section(rows)
+    lines += _noise_section(rows)
+    lines += _claims_section(rows)
+    lines += _plots_section(plots)
+    lines += _baselines_section()
+    paths["report.md"].write_text("\n".join(lines))
+    return paths["report.md"]
+
+
+def _settings_section(rows, meta) -> list[str]:
+    """The header and the settings: preset, crop, mask, dictionary, reconstruction, seeds, times, scenes."""
     n_scenes = len({r["scene"] for r in rows})
     first = rows[0]
     recon_text = (f"solver {first.get('solver')}, mu {first.get('mu')}, at most {first.get('max_iter')} iterations, "
@@ -523,7 +539,12 @@ def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path
                 for s in meta["scenes"]]),
         "",
     ]
+    return lines
 
+
+def _table1_section(rows) -> list[str]:
+    """Table I: joint multi-ISO reconstruction and the individual-ISO baseline."""
+    lines: list[str] = []
     shots3 = (1, 2, 3)
     lines += ["## Table I: joint multi-ISO reconstruction and the individual-ISO baseline", "",
               "Entries are `1 ; 2 ; 3 shots`. PU21 columns: lfproc on these scenes; last two columns: the paper's "
@@ -543,7 +564,12 @@ def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path
                      _paper(("individual-iso", "global"), "ssim", 4) if merge == "debevec" else "-"])
     lines += [_table(["method", "PU21-PSNR (dB)", "PU21-SSIM", "PU2-PSNR (dB)", "paper PU2-PSNR", "paper PU2-SSIM"],
                      body), ""]
+    return lines
 
+
+def _table2_section() -> list[str]:
+    """Table II: the two-step LDR + HDR-CNN baseline (not run)."""
+    lines: list[str] = []
     lines += ["## Table II: two-step LDR reconstruction + single-image HDR CNN", "",
               "Not run. The two-step baseline needs HDR-CNN's trained weights (Eilertsen et al. 2017, "
               "`gabrieleilertsen/hdrcnn`, a separate download from webstaff.itn.liu.se), which cannot be obtained on "
@@ -552,7 +578,13 @@ def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path
               _table(["method", "PU21-PSNR (dB)", "PU21-SSIM", "paper PU2-PSNR", "paper PU2-SSIM"],
                      [["LDR + HDR-CNN", "not available", "not available", _paper(("two-step", ""), "psnr", 2),
                        _paper(("two-step", ""), "ssim", 2)]]), ""]
+    return lines
 
+
+def _table3_section(rows) -> list[str]:
+    """Table III: dual-ISO rows against the multi-ISO patterns."""
+    lines: list[str] = []
+    shots3 = (1, 2, 3)
     lines += ["## Table III: dual-ISO rows against the multi-ISO patterns", "",
               "Dual ISO uses the lowest and highest ISO of the set: (100, 1600) at the reference set. Entries "
               "`1 ; 2 ; 3 shots`.", ""]
@@ -561,7 +593,12 @@ def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path
              _paper(("dual-iso", "dual"), "psnr", 2), _paper(("dual-iso", "dual"), "ssim", 4)]]
     body += [_joint_row(rows, pattern, f"joint, {pattern} ISO ({REF_ISOS})") for pattern in ("random", "row")]
     lines += [_table(["method", "PU21-PSNR (dB)", "PU21-SSIM", "paper PU2-PSNR", "paper PU2-SSIM"], body), ""]
+    return lines
 
+
+def _table4_section(rows) -> list[str]:
+    """Table IV: exposure bracketing."""
+    lines: list[str] = []
     lines += ["## Table IV: exposure bracketing", "",
               "Bracketing: 2 ; 3 ; 4 shots at ISO 100, relative exposures (0.5, 8) ; (0.5, 2, 8) ; (0.5, 2, 4, 8). "
               "Per-shot rows reconstruct every shot alone and merge (the paper); `joint solve` reconstructs all shots "
@@ -577,7 +614,12 @@ def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path
                      _paper(("bracketing", "global"), "ssim", 3) if merge == "debevec" else "-"])
     body += [_joint_row(rows, pattern, f"joint, {pattern} ISO (1 ; 2 ; 3 shots)") for pattern in ("random", "row")]
     lines += [_table(["method", "PU21-PSNR (dB)", "PU21-SSIM", "paper PU2-PSNR", "paper PU2-SSIM"], body), ""]
+    return lines
 
+
+def _iso_sets_section(rows) -> list[str]:
+    """ISO sets, saturation and the exposure sweep."""
+    lines: list[str] = []
     # ISO sets and saturation
     lines += ["## ISO sets, saturation and exposure", "",
               "PU21-PSNR (dB) and the fraction of saturated measurements, mean over scenes, noise "
@@ -606,7 +648,12 @@ def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path
             body.append([f"x{e:g}", _fmt(100 * mean_metric(rows, "saturated_fraction", **want), 1),
                          _fmt(mean_metric(rows, **want)), _fmt(mean_metric(rows, "pu21_ssim", **want), 4)])
         lines += [_table(["relative exposure", "saturated (%)", "PU21-PSNR (dB)", "PU21-SSIM"], body), ""]
+    return lines
 
+
+def _noise_section(rows) -> list[str]:
+    """Quality against the noise levels."""
+    lines: list[str] = []
     # noise
     lines += ["## Noise levels", "",
               f"PU21-PSNR (dB), mean over scenes, ISO {REF_ISOS}, exposure 1 (paper Table VI noise levels).", ""]
@@ -625,21 +672,36 @@ def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path
         if sum(math.isfinite(v) for v in vals) >= 2:
             body.append([f"{method}{' ' + merge if merge else ''}, {shots} shots"] + [_fmt(v) for v in vals])
     lines += [_table(["acquisition"] + list(NOISE_LEVELS), body), ""]
+    return lines
 
+
+def _claims_section(rows) -> list[str]:
+    """The paper's claims decided on these rows."""
+    lines: list[str] = []
     # claims
     lines += ["## The paper's claims on these scenes", "",
               "Decided from the rows above by the rules in `lfproc.bench.report` (margins in dB of PU21-PSNR; "
               "means over scenes).", ""]
     for i, c in enumerate(claims(rows), 1):
         lines += [f"{i}. **{c['claim']}: {c['verdict']}.** {c['evidence']}.", ""]
+    return lines
 
+
+def _plots_section(plots) -> list[str]:
+    """The plots, one section each."""
+    lines: list[str] = []
     lines += ["## Plots", ""]
     for key, title in (("shots", "Quality vs shots per ISO pattern"), ("noise", "Quality vs noise level"),
                        ("saturation", "Quality vs saturated fraction as ISO steps widen"),
                        ("measurements", "Joint vs bracketing at equal numbers of measurements"),
                        ("best_worst", "Best and worst cell, centre view, with the error map")):
         lines += [f"### {title}", "", f"![{title}]({plots[key]})", ""]
+    return lines
 
+
+def _baselines_section() -> list[str]:
+    """How the baselines are run."""
+    lines: list[str] = []
     lines += ["## How the baselines are run", "",
               "- **Individual ISO** and **bracketing**: every shot is reconstructed alone with the same dictionary and "
               "options as the joint method (the dictionary's patches are l2-normalised, so it has no scale, and the "
@@ -653,6 +715,4 @@ def _render(bench_dir: Path, rows: list[dict], meta: dict, paths: dict[str, Path
               "- **Dual ISO**: the joint reconstruction of the dual-ISO row pattern.",
               "- **Two-step LDR + HDR-CNN**: not available (Table II).",
               ""]
-    paths["report.md"].write_text("\n".join(lines))
-    return paths["report.md"]
-
+    return lines
