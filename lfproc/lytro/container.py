@@ -30,6 +30,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from .. import _untrusted as ut
+from .._deprecate import resolve_options
 from .._version import __version__
 from ..errors import ChecksumError, InputError, LfpFormatError, MissingFileError, ShapeError
 from ..io._atomic import atomic_file
@@ -47,6 +48,7 @@ __all__ = [
     "write_lfp",
     "write_lfr",
     "illum_metadata",
+    "IllumFrameSettings",
 ]
 
 LFP_MAGIC = b"\x89LFP\r\n\x1a\n\x00\x00\x00\x01"
@@ -463,11 +465,25 @@ def _deep_update(base: dict, extra: dict) -> dict:
     return base
 
 
-def illum_metadata(*, height: int = 5368, width: int = 7728, zoom_step: int = 0, focus_step: int = 0,
-                   exposure_s: float = 1 / 60, iso: float = 100, black_level: float = 64,
-                   white_level: float = 1023, modulation_exposure_bias_ev: float = 0.0,
-                   white_balance: dict[str, float] | None = None, ccm=None,
-                   mla_rotation_rad: float = 0.0, extra: dict | None = None) -> dict[str, Any]:
+@dataclass(frozen=True)
+class IllumFrameSettings:
+    """The capture settings an Illum frame's metadata records (the fields of :func:`illum_metadata`)."""
+    height: int = 5368
+    width: int = 7728
+    zoom_step: int = 0
+    focus_step: int = 0
+    exposure_s: float = 1 / 60
+    iso: float = 100
+    black_level: float = 64
+    white_level: float = 1023
+    modulation_exposure_bias_ev: float = 0.0
+    white_balance: dict[str, float] | None = None
+    ccm: Any = None
+    mla_rotation_rad: float = 0.0
+
+
+def illum_metadata(settings: IllumFrameSettings | None = None, *, extra: dict | None = None,
+                   **fields) -> dict[str, Any]:
     """Illum frame metadata (the layout of a real Illum ``.LFR``) for the given capture settings.
 
     Field layout follows a real Illum picture's frame metadata (``image.pixelFormat``,
@@ -476,6 +492,10 @@ def illum_metadata(*, height: int = 5368, width: int = 7728, zoom_step: int = 0,
 
     Parameters
     ----------
+    settings : IllumFrameSettings, optional
+        Every setting below (``height``, ``width``, ``zoom_step``, ``focus_step``, ``black_level``,
+        ``white_level``, ``white_balance``, ``ccm``, ``mla_rotation_rad`` and the ones listed); or give
+        them as keywords (``**fields``), not both.
     exposure_s : float
         Frame exposure duration in seconds.
     iso : float
@@ -483,6 +503,9 @@ def illum_metadata(*, height: int = 5368, width: int = 7728, zoom_step: int = 0,
     modulation_exposure_bias_ev : float
         ``image.modulationExposureBias`` in EV (stops).
     """
+    f = resolve_options(IllumFrameSettings, settings, fields, func_name="illum_metadata", argument="settings")
+    height, width, iso, exposure_s = f.height, f.width, f.iso, f.exposure_s
+    black_level, white_level, white_balance, ccm = f.black_level, f.white_level, f.white_balance, f.ccm
     levels_b = {c: black_level for c in ("r", "gr", "gb", "b")}
     levels_w = {c: white_level for c in ("r", "gr", "gb", "b")}
     wb = {"r": 1.0, "gr": 1.0, "gb": 1.0, "b": 1.0}
@@ -498,7 +521,7 @@ def illum_metadata(*, height: int = 5368, width: int = 7728, zoom_step: int = 0,
             "width": int(width),
             "height": int(height),
             "orientation": 1,
-            "modulationExposureBias": float(modulation_exposure_bias_ev),
+            "modulationExposureBias": float(f.modulation_exposure_bias_ev),
             "limitExposureBias": 0.0,
             "pixelPacking": {"bitsPerPixel": 10, "endianness": "little"},
             "pixelFormat": {"black": levels_b, "white": levels_w, "rightShift": 0},
@@ -521,10 +544,10 @@ def illum_metadata(*, height: int = 5368, width: int = 7728, zoom_step: int = 0,
             },
             "shutter": {"mechanism": "focalPlaneCurtain", "frameExposureDuration": float(exposure_s),
                         "pixelExposureDuration": float(exposure_s), "maxSyncSpeed": 0.004},
-            "mla": {"config": "com.lytro.mla.3", "rotation": float(mla_rotation_rad), "tiling": "hexUniformRowMajor",
+            "mla": {"config": "com.lytro.mla.3", "rotation": float(f.mla_rotation_rad), "tiling": "hexUniformRowMajor",
                     "scaleFactor": {"x": 1.0, "y": 1.0}, "lensPitch": 2e-05,
                     "sensorOffset": {"x": 0.0, "y": 0.0, "z": 3.7e-05}},
-            "lens": {"zoomStep": int(zoom_step), "focusStep": int(focus_step), "fNumber": 2.0,
+            "lens": {"zoomStep": int(f.zoom_step), "focusStep": int(f.focus_step), "fNumber": 2.0,
                      "exitPupilOffset": {"z": 10000}, "focalLength": 0.0095, "infinityLambda": 15.0,
                      "opticalCenterOffset": {"x": 0.0, "y": 0.0}},
         },
@@ -565,6 +588,56 @@ def _png(image: np.ndarray) -> bytes:
     if not ok:  # pragma: no cover
         raise OSError("could not encode PNG")
     return enc.tobytes()
+
+
+def _lfr_frame_metadata(path, metadata, shape: tuple[int, int]) -> dict[str, Any]:
+    """A copy of an Illum frame's ``metadata`` checked against a raw image of ``shape`` (H, W), with the
+    image size, the 10-bit packing and the camera make and model filled in."""
+    height, width = shape
+    if not isinstance(metadata, dict):
+        raise InputError(f"{path}: metadata must be a dict, got {type(metadata).__name__}")
+    meta = deepcopy(metadata)
+    model = meta.get("camera", {}).get("model", "ILLUM")
+    if str(model).upper() not in ("ILLUM", "B01"):
+        raise InputError(f"{path}: write_lfr writes Illum captures; metadata camera.model is {model!r}")
+    image = meta.setdefault("image", {})
+    for key, value in (("width", width), ("height", height)):
+        if key in image and int(image[key]) != value:
+            raise ShapeError(f"{path}: metadata image.{key} = {image[key]} does not match raw of shape "
+                             f"{tuple(shape)} (H, W)")
+        image[key] = int(value)
+    packing = image.setdefault("pixelPacking", {"bitsPerPixel": 10, "endianness": "little"})
+    if int(packing.get("bitsPerPixel", 10)) != 10 or str(packing.get("endianness", "little")) != "little":
+        raise InputError(f"{path}: Illum LFRs are 10-bit little-endian; metadata image.pixelPacking is {packing}")
+    image["pixelPacking"] = {"bitsPerPixel": 10, "endianness": "little"}
+    meta.setdefault("camera", {}).setdefault("model", "ILLUM")
+    meta["camera"].setdefault("make", "Lytro, Inc.")
+    return meta
+
+
+def _lfr_thumbnail(path, arr: np.ndarray, thumbnail) -> tuple[bytes, int, int]:
+    """The JPEG thumbnail of an LFR (``thumbnail`` given, or a quick rendering of ``arr``), width, height."""
+    if thumbnail is None:
+        thumb, tw, th = _thumbnail_jpeg(arr)
+    else:
+        import cv2
+
+        t = np.asarray(thumbnail)
+        if t.ndim != 3 or t.shape[2] != 3 or t.dtype != np.uint8:
+            raise ShapeError(f"{path}: thumbnail must be uint8 of shape (h, w, 3), got {t.dtype} {t.shape}")
+        ok, enc = cv2.imencode(".jpg", np.ascontiguousarray(t[..., ::-1]))
+        thumb, th, tw = enc.tobytes(), t.shape[0], t.shape[1]
+    return thumb, tw, th
+
+
+def _hot_pixel_section(path, hot_pixels, width: int, height: int) -> bytes:
+    """The hot-pixel section (HOTPIXEL.BIN layout: count, then the x and the y coordinates, uint16)."""
+    hp = np.zeros((0, 2), dtype=np.uint16) if hot_pixels is None else np.asarray(hot_pixels, dtype=np.int64)
+    if hp.ndim != 2 or hp.shape[1] != 2 or (hp.size and (hp.min() < 0 or hp[:, 0].max() >= width
+                                                         or hp[:, 1].max() >= height)):
+        raise ShapeError(f"{path}: hot_pixels must be (x, y) pairs inside the {width} x {height} image")
+    hot = struct.pack("<I", hp.shape[0]) + hp[:, 0].astype("<u2").tobytes() + hp[:, 1].astype("<u2").tobytes()
+    return hot
 
 
 def write_lfr(path: str | os.PathLike, *, raw: np.ndarray, metadata: dict[str, Any],
@@ -611,24 +684,7 @@ def write_lfr(path: str | os.PathLike, *, raw: np.ndarray, metadata: dict[str, A
     if arr.ndim != 2:
         raise ShapeError(f"{path}: raw must be a 2-D array (H, W), got shape {arr.shape}")
     height, width = arr.shape
-    if not isinstance(metadata, dict):
-        raise InputError(f"{path}: metadata must be a dict, got {type(metadata).__name__}")
-    meta = deepcopy(metadata)
-    model = meta.get("camera", {}).get("model", "ILLUM")
-    if str(model).upper() not in ("ILLUM", "B01"):
-        raise InputError(f"{path}: write_lfr writes Illum captures; metadata camera.model is {model!r}")
-    image = meta.setdefault("image", {})
-    for key, value in (("width", width), ("height", height)):
-        if key in image and int(image[key]) != value:
-            raise ShapeError(f"{path}: metadata image.{key} = {image[key]} does not match raw of shape "
-                             f"{arr.shape} (H, W)")
-        image[key] = int(value)
-    packing = image.setdefault("pixelPacking", {"bitsPerPixel": 10, "endianness": "little"})
-    if int(packing.get("bitsPerPixel", 10)) != 10 or str(packing.get("endianness", "little")) != "little":
-        raise InputError(f"{path}: Illum LFRs are 10-bit little-endian; metadata image.pixelPacking is {packing}")
-    image["pixelPacking"] = {"bitsPerPixel": 10, "endianness": "little"}
-    meta.setdefault("camera", {}).setdefault("model", "ILLUM")
-    meta["camera"].setdefault("make", "Lytro, Inc.")
+    meta = _lfr_frame_metadata(path, metadata, arr.shape)
 
     packed = pack_raw10(arr)
     if private_metadata is None:
@@ -641,27 +697,14 @@ def write_lfr(path: str | os.PathLike, *, raw: np.ndarray, metadata: dict[str, A
     elif not isinstance(private_metadata, dict):
         raise InputError(f"{path}: private_metadata must be a dict, got {type(private_metadata).__name__}")
 
-    if thumbnail is None:
-        thumb, tw, th = _thumbnail_jpeg(arr)
-    else:
-        import cv2
-
-        t = np.asarray(thumbnail)
-        if t.ndim != 3 or t.shape[2] != 3 or t.dtype != np.uint8:
-            raise ShapeError(f"{path}: thumbnail must be uint8 of shape (h, w, 3), got {t.dtype} {t.shape}")
-        ok, enc = cv2.imencode(".jpg", np.ascontiguousarray(t[..., ::-1]))
-        thumb, th, tw = enc.tobytes(), t.shape[0], t.shape[1]
+    thumb, tw, th = _lfr_thumbnail(path, arr, thumbnail)
 
     mla = meta.get("devices", {}).get("mla", {})
     if geometry_correction is None:
         geometry_correction = json.dumps({"generator": f"lfproc {__version__}", "kind": "geometryCorrection",
                                           "mla": mla, "width": width, "height": height},
                                          sort_keys=True).encode("ascii")
-    hp = np.zeros((0, 2), dtype=np.uint16) if hot_pixels is None else np.asarray(hot_pixels, dtype=np.int64)
-    if hp.ndim != 2 or hp.shape[1] != 2 or (hp.size and (hp.min() < 0 or hp[:, 0].max() >= width
-                                                         or hp[:, 1].max() >= height)):
-        raise ShapeError(f"{path}: hot_pixels must be (x, y) pairs inside the {width} x {height} image")
-    hot = struct.pack("<I", hp.shape[0]) + hp[:, 0].astype("<u2").tobytes() + hp[:, 1].astype("<u2").tobytes()
+    hot = _hot_pixel_section(path, hot_pixels, width, height)
     histogram = np.bincount(arr.ravel().astype(np.int64), minlength=1024)[:1024].astype("<u4").tobytes()
     aberration = np.zeros((2, 2, 2), dtype="<f4").tobytes()  # identity: zero displacement everywhere
     aberration_meta = json.dumps({"generator": f"lfproc {__version__}", "representation": "float32",

@@ -40,9 +40,11 @@ from __future__ import annotations
 import math
 import os
 from typing import Any, Literal
+from dataclasses import dataclass
 
 import numpy as np
 
+from .._deprecate import resolve_options
 from .._shared.validation import check_choice
 from .._shared.frozen import freeze
 from .._version import __version__
@@ -290,12 +292,23 @@ def fill_unusable(data: np.ndarray, unusable: np.ndarray, *, keep: np.ndarray | 
     return np.maximum(out, 0.0, out=out)
 
 
-def decode_lenslet(raw: np.ndarray, white: np.ndarray, grid: LensletGrid, *, black_level: float,
-                   white_level: float, cfa_pattern: str = "GRBG", white_responses=(1.0, 1.0, 1.0),
-                   n_views: int = 5, hot_pixels: np.ndarray | None = None, demosaic_method: str = "opencv-ea",
-                   hex_method: Literal["spline", "linear"] = "spline", gain_dn_per_e: float | None = None,
-                   read_noise_dn: float = 0.0, white_threshold: float = 0.05,
-                   fill: bool = True) -> dict[str, Any]:
+@dataclass(frozen=True)
+class LensletSensor:
+    """The sensor figures :func:`decode_lenslet` needs: levels, CFA, the white target's response, known
+    hot pixels and the noise figures at the capture's ISO (see its parameters)."""
+    black_level: float
+    white_level: float
+    cfa_pattern: str = "GRBG"
+    white_responses: Any = (1.0, 1.0, 1.0)
+    hot_pixels: np.ndarray | None = None
+    gain_dn_per_e: float | None = None
+    read_noise_dn: float = 0.0
+
+
+def decode_lenslet(raw: np.ndarray, white: np.ndarray, grid: LensletGrid, sensor: LensletSensor | None = None, *,
+                   n_views: int = 5, demosaic_method: str = "opencv-ea",
+                   hex_method: Literal["spline", "linear"] = "spline", white_threshold: float = 0.05,
+                   fill: bool = True, **sensor_fields) -> dict[str, Any]:
     """Decode a raw lenslet image with its white image and lenslet grid.
 
     Parameters
@@ -304,6 +317,10 @@ def decode_lenslet(raw: np.ndarray, white: np.ndarray, grid: LensletGrid, *, bla
         Raw counts (DN, black level included) of the capture and of its white image.
     grid : LensletGrid
         Grid of the white image (``grid.image_size`` must equal ``(H, W)``).
+    sensor : LensletSensor, optional
+        The sensor figures below (``black_level`` to ``read_noise_dn``, except the decoding options
+        ``n_views``, ``demosaic_method``, ``hex_method``, ``white_threshold`` and ``fill``); or give them
+        as keywords (``**sensor_fields``; ``black_level`` and ``white_level`` are required), not both.
     black_level, white_level : float
         Levels of both images (DN).
     cfa_pattern : str
@@ -333,6 +350,10 @@ def decode_lenslet(raw: np.ndarray, white: np.ndarray, grid: LensletGrid, *, bla
     (n, n, rows, cols) in [0, 1] (white-image transmission, 0 where unusable) and
     ``hot_pixels`` (count replaced in the capture and the white image).
     """
+    sensor = resolve_options(LensletSensor, sensor, sensor_fields, func_name="decode_lenslet", argument="sensor")
+    black_level, white_level, cfa_pattern = sensor.black_level, sensor.white_level, sensor.cfa_pattern
+    white_responses, hot_pixels = sensor.white_responses, sensor.hot_pixels
+    gain_dn_per_e, read_noise_dn = sensor.gain_dn_per_e, sensor.read_noise_dn
     raw = np.asarray(raw)
     white = np.asarray(white)
     if raw.ndim != 2 or white.shape != raw.shape:

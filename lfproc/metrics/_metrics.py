@@ -584,6 +584,58 @@ def _brightest(y: np.ndarray, fraction: float) -> np.ndarray:
     return np.argpartition(y, y.size - k)[y.size - k:]
 
 
+def _figure_mask(mask, shape) -> tuple[np.ndarray | None, int]:
+    """The mask of :func:`hdr_figures` broadcast to the luminance ``shape`` (None: every sample) and the
+    number of samples it keeps."""
+    if mask is None:
+        keep = None
+    else:
+        m = np.asarray(mask)
+        if m.dtype != bool:
+            raise ShapeError(f"mask: expected a boolean array, got dtype {m.dtype}")
+        if m.shape != shape and m.shape != shape[-2:]:
+            raise ShapeError(f"mask: expected shape {shape[-2:]} or {shape}, got {m.shape}")
+        keep = np.broadcast_to(m, shape)
+    n = math.prod(shape) if keep is None else int(np.count_nonzero(keep))
+    if n == 0:
+        raise ShapeError("mask: expected at least one sample to evaluate, the mask selects none")
+    return keep, n
+
+
+def _stops_by_decade(res_k: np.ndarray, ref_k: np.ndarray, floor: float) -> tuple[list[dict], float, int]:
+    """``stops_by_decade`` of :func:`hdr_figures` over the samples (1-d luminances) above ``floor``, the
+    share of those whose result is ``<= 0`` (``nan`` when none is above), and their number."""
+    above = ref_k > floor
+    n_above = int(np.count_nonzero(above))
+    ref_a, res_a = ref_k[above], res_k[above]
+    positive = res_a > 0
+    stops = np.full(ref_a.shape, np.inf)
+    stops[positive] = np.abs(np.log2(res_a[positive] / ref_a[positive]))
+    decades = np.floor(np.log10(ref_a)).astype(np.int64)
+    by_decade = []
+    for k in np.unique(decades):
+        sel = decades == k
+        by_decade.append({"decade": (10.0 ** int(k), 10.0 ** (int(k) + 1)),
+                          "median_stops": float(np.median(stops[sel])), "samples": int(np.count_nonzero(sel))})
+    zeros = float(np.count_nonzero(~positive) / n_above) if n_above else math.nan
+    return by_decade, zeros, n_above
+
+
+def _detail_ratio(err: np.ndarray, p_ref: np.ndarray, keep: np.ndarray | None) -> float:
+    """``detail_ratio`` of :func:`hdr_figures`: the Laplacian energy of the PU21 error over the reference's,
+    per view, over the kept samples (``nan`` for a reference without detail)."""
+    from scipy.ndimage import laplace
+
+    h, w = p_ref.shape[-2:]
+    flat_keep = None if keep is None else keep.reshape(-1, h, w)
+    lap_err = lap_ref = 0.0
+    for i, (e, r) in enumerate(zip(err.reshape(-1, h, w), p_ref.reshape(-1, h, w))):
+        le, lr = np.square(laplace(e)), np.square(laplace(r))
+        lap_err += float(np.sum(le if flat_keep is None else le[flat_keep[i]]))
+        lap_ref += float(np.sum(lr if flat_keep is None else lr[flat_keep[i]]))
+    return lap_err / lap_ref if lap_ref > 0 else math.nan
+
+
 def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None, mask: Any = None,
                 peak_luminance: float | None = 1000.0) -> dict[str, Any]:
     """Figures of an HDR result a user can check: error in stops per decade, zeros, highlights, detail.
@@ -651,8 +703,6 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
     InputError
         Non-finite values, a negative noise floor, a reference without a positive maximum.
     """
-    from scipy.ndimage import laplace
-
     y_res = _figure_luminance(result, "result")
     y_ref = _figure_luminance(reference, "reference")
     if y_res.shape != y_ref.shape:
@@ -666,35 +716,11 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
             raise InputError(f"noise_floor: expected a finite value >= 0, got {noise_floor!r}")
     ref_data = reference.data if isinstance(reference, LightField) else np.asarray(reference)
     factor = _scale_factor(ref_data, peak_luminance)
-    if mask is None:
-        keep = None
-    else:
-        m = np.asarray(mask)
-        if m.dtype != bool:
-            raise ShapeError(f"mask: expected a boolean array, got dtype {m.dtype}")
-        if m.shape != y_ref.shape and m.shape != y_ref.shape[-2:]:
-            raise ShapeError(f"mask: expected shape {y_ref.shape[-2:]} or {y_ref.shape}, got {m.shape}")
-        keep = np.broadcast_to(m, y_ref.shape)
-    n = y_ref.size if keep is None else int(np.count_nonzero(keep))
-    if n == 0:
-        raise ShapeError("mask: expected at least one sample to evaluate, the mask selects none")
-
+    keep, n = _figure_mask(mask, y_ref.shape)
     # the kept samples, 1-d (views of the luminance when every sample is kept)
     ref_k, res_k = (y_ref.ravel(), y_res.ravel()) if keep is None else (y_ref[keep], y_res[keep])
-    above = ref_k > floor
-    n_above = int(np.count_nonzero(above))
-    ref_a, res_a = ref_k[above], res_k[above]
-    positive = res_a > 0
-    stops = np.full(ref_a.shape, np.inf)
-    stops[positive] = np.abs(np.log2(res_a[positive] / ref_a[positive]))
-    decades = np.floor(np.log10(ref_a)).astype(np.int64)
-    by_decade = []
-    for k in np.unique(decades):
-        sel = decades == k
-        by_decade.append({"decade": (10.0 ** int(k), 10.0 ** (int(k) + 1)),
-                          "median_stops": float(np.median(stops[sel])), "samples": int(np.count_nonzero(sel))})
+    by_decade, zeros, n_above = _stops_by_decade(res_k, ref_k, floor)
     max_stops = max((d["median_stops"] for d in by_decade), default=math.nan)
-    zeros = float(np.count_nonzero(~positive) / n_above) if n_above else math.nan
 
     top = _brightest(ref_k, _HIGHLIGHT_FRACTION)
     ref_energy = float(ref_k[top].sum())
@@ -708,15 +734,7 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
     emitters = _brightest(ref_k, _EMITTER_FRACTION)
     share = float(sq[emitters].sum()) / total if total > 0 else 0.0
 
-    h, w = y_ref.shape[-2:]
-    flat_keep = None if keep is None else keep.reshape(-1, h, w)
-    lap_err = lap_ref = 0.0
-    for i, (e, r) in enumerate(zip(err.reshape(-1, h, w), p_ref.reshape(-1, h, w))):
-        le, lr = np.square(laplace(e)), np.square(laplace(r))
-        lap_err += float(np.sum(le if flat_keep is None else le[flat_keep[i]]))
-        lap_ref += float(np.sum(lr if flat_keep is None else lr[flat_keep[i]]))
-    detail = lap_err / lap_ref if lap_ref > 0 else math.nan
-
+    detail = _detail_ratio(err, p_ref, keep)
     return {
         "stops_by_decade": by_decade,
         "max_decade_stops": float(max_stops),
@@ -977,6 +995,47 @@ def _ssim_images_masked(p_res: np.ndarray, p_ref: np.ndarray, keep: np.ndarray) 
     return out.reshape(lead)
 
 
+def _luminance_figures(result, reference, keep, *, factor, display_peak, variant):
+    """Per-view PU21-PSNR, PU21-SSIM, PU2-PSNR and log-PSNR of :func:`evaluate` (arrays (V, U)), and the
+    PU2 and log peaks."""
+    # luminance of every view at once, float64 (V, U, H, W), scaled by the one factor
+    y_res = metric_luminance(result.data, channel_axis=-1)
+    y_ref = metric_luminance(reference.data, channel_axis=-1)
+    if factor != 1.0:
+        y_res *= factor
+        y_ref *= factor
+
+    p_res, p_ref = pu21_encode(y_res, variant=variant), pu21_encode(y_ref, variant=variant)
+    pu21_psnr_v = _psnr_from_mse(_view_means(np.square(p_res - p_ref), keep), PU21_PSNR_PEAK)
+    pu21_ssim_v = _ssim_images(p_res, p_ref) if keep is None else _ssim_images_masked(p_res, p_ref, keep)
+    del p_res, p_ref
+    pu2_peak = float(pu2_encode(display_peak))
+    pu2_psnr_v = _psnr_from_mse(_view_means(np.square(pu2_encode(y_res) - pu2_encode(y_ref)), keep), pu2_peak)
+    log_peak = _log_peak(display_peak)
+    log_psnr_v = _psnr_from_mse(_view_means(np.square(_log_luminance(y_res) - _log_luminance(y_ref)), keep),
+                                log_peak)
+    return {"pu21_psnr_db": pu21_psnr_v, "pu21_ssim": pu21_ssim_v, "pu2_psnr_db": pu2_psnr_v,
+            "log_psnr_db": log_psnr_v}, (pu2_peak, log_peak)
+
+
+def _colour_figures(result, reference, keep, *, epsilon_relative):
+    """Per-view linear PSNR and mean relative error of the colour samples of :func:`evaluate`, and the
+    linear peak (the reference's 99.9th percentile)."""
+    nv = reference.shape[0]
+    # relative error of the colour samples, one row of views at a time (bounds float64 temporaries);
+    # the colour axis averaged first, then the pixels (the same mean when every pixel is kept)
+    eps = epsilon_relative * float(reference.data.max())
+    mre_v = np.stack([_view_means(np.mean(_relative_error(result.data[v], reference.data[v], eps), axis=-1),
+                                  None if keep is None else keep[v]) for v in range(nv)])
+
+    lin_peak = float(np.percentile(reference.data, 99.9))
+    if not lin_peak > 0:
+        lin_peak = float(reference.data.max())
+    lin_mse = np.stack([_view_means(np.mean(np.square(result.data[v].astype(np.float64) - reference.data[v]),
+                                            axis=-1), None if keep is None else keep[v]) for v in range(nv)])
+    return {"linear_psnr_db": _psnr_from_mse(lin_mse, lin_peak), "mean_relative_error": mre_v}, lin_peak
+
+
 def evaluate(result: LightField, reference: LightField, *, peak_luminance: float | None = 1000.0,
              variant: Pu21Variant = "banding_glare", epsilon_relative: float = 1e-3,
              scale_tolerance_stops: float | None = 4.0, align: str = "none", mask: Any = None,
@@ -1061,42 +1120,11 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
     hdr.pop("scale_factor")
     factor = _scale_factor(reference.data, peak_luminance)
     display_peak = float(reference.data.max()) * factor
-    # luminance of every view at once, float64 (V, U, H, W), scaled by the one factor
-    y_res = metric_luminance(result.data, channel_axis=-1)
-    y_ref = metric_luminance(reference.data, channel_axis=-1)
-    if factor != 1.0:
-        y_res *= factor
-        y_ref *= factor
-
-    p_res, p_ref = pu21_encode(y_res, variant=variant), pu21_encode(y_ref, variant=variant)
-    pu21_psnr_v = _psnr_from_mse(_view_means(np.square(p_res - p_ref), keep), PU21_PSNR_PEAK)
-    pu21_ssim_v = _ssim_images(p_res, p_ref) if keep is None else _ssim_images_masked(p_res, p_ref, keep)
-    del p_res, p_ref
-    pu2_peak = float(pu2_encode(display_peak))
-    pu2_psnr_v = _psnr_from_mse(_view_means(np.square(pu2_encode(y_res) - pu2_encode(y_ref)), keep), pu2_peak)
-    log_peak = _log_peak(display_peak)
-    log_psnr_v = _psnr_from_mse(_view_means(np.square(_log_luminance(y_res) - _log_luminance(y_ref)), keep),
-                                log_peak)
-    del y_res, y_ref
-    # relative error of the colour samples, one row of views at a time (bounds float64 temporaries);
-    # the colour axis averaged first, then the pixels (the same mean when every pixel is kept)
-    eps = epsilon_relative * float(reference.data.max())
-    mre_v = np.stack([_view_means(np.mean(_relative_error(result.data[v], reference.data[v], eps), axis=-1),
-                                  None if keep is None else keep[v]) for v in range(nv)])
-
-    lin_peak = float(np.percentile(reference.data, 99.9))
-    if not lin_peak > 0:
-        lin_peak = float(reference.data.max())
-    lin_mse = np.stack([_view_means(np.mean(np.square(result.data[v].astype(np.float64) - reference.data[v]),
-                                            axis=-1), None if keep is None else keep[v]) for v in range(nv)])
-    figures = {
-        "pu21_psnr_db": pu21_psnr_v,
-        "pu21_ssim": pu21_ssim_v,
-        "pu2_psnr_db": pu2_psnr_v,
-        "log_psnr_db": log_psnr_v,
-        "linear_psnr_db": _psnr_from_mse(lin_mse, lin_peak),
-        "mean_relative_error": mre_v,
-    }
+    figures, peaks = _luminance_figures(result, reference, keep, factor=factor, display_peak=display_peak,
+                                        variant=variant)
+    colour, lin_peak = _colour_figures(result, reference, keep, epsilon_relative=epsilon_relative)
+    figures |= colour
+    pu2_peak, log_peak = peaks
     views = [{"v": v, "u": u} | {k: float(a[v, u]) for k, a in figures.items()} for v in range(nv) for u in range(nu)]
     out: dict[str, Any] = {k: float(np.mean(a) if keep is None else _nanmean(a)) for k, a in figures.items()}
     out |= {
