@@ -819,64 +819,81 @@ def calibrate(
         if abs(key - r.iso) > 1e-6:
             raise InputError(f"{r.where or r.path}: ISO: expected a whole number, found {r.iso:g}")
         by_iso.setdefault(key, []).append(r)
-    unknown: dict[str, str] = {}
-    figures: dict[str, dict[str, Any]] = {}
-    curves: dict[str, dict[str, Any]] = {}
-    hot_pixels: dict[str, np.ndarray] = {}
-    bias_frames: dict[int, np.ndarray] = {}
+    m = _measure_isos(by_iso, cfa=cfa, hot_pixel_sigma=hot_pixel_sigma)
+    return _build(m, name=name or options.get("name") or (source_path.stem if source_path else "calibrated"),
+                  adc_bits=adc_bits or options.get("adc_bits") or (m.bit_source[0] if m.bit_source else None),
+                  bits_from=("argument" if adc_bits else "manifest" if options.get("adc_bits") else
+                             m.bit_source[1] if m.bit_source else None),
+                  max_code=m.max_code, cfa=cfa or m.frame_cfa, input_path=source_path, kind="frames")
+
+
+@dataclass
+class _Measured:
+    """What the frames gave, per ISO key: figures, curves, hot-pixel maps, master bias frames and the
+    unknown figures' reasons; the combined flat field; for EMVA data the ISO of each key and extra source
+    entries; for frames the CFA they carry, the bit depth's source and the largest saturation code."""
+    figures: dict[str, dict[str, Any]] = field(default_factory=dict)
+    curves: dict[str, dict[str, Any]] = field(default_factory=dict)
+    hot_pixels: dict[str, np.ndarray] = field(default_factory=dict)
+    bias_frames: dict[int, np.ndarray] = field(default_factory=dict)
+    unknown: dict[str, str] = field(default_factory=dict)
+    flat_field: np.ndarray | None = None
+    flat_field_std: float | None = None
+    bias_frame_std_dn: dict | None = None
+    iso_keys: dict | None = None
+    extra_source: dict | None = None
+    frame_cfa: str | None = None
+    bit_source: tuple | None = None
+    max_code: int = 0
+
+
+def _measure_isos(by_iso: dict[int, list[FrameRecord]], *, cfa, hot_pixel_sigma: float) -> _Measured:
+    """Calibrate every ISO (:func:`_calibrate_iso`), check one frame size throughout, combine the flat fields."""
+    m = _Measured()
     flats: dict[int, tuple[np.ndarray, float]] = {}
-    frame_cfa = None
-    bit_source = None
-    max_code = 0
     shapes = {}
     for key in sorted(by_iso):
         fig, cur, bias, hot, checker, flat = _calibrate_iso(str(key), by_iso[key], cfa=cfa,
-                                                            hot_pixel_sigma=hot_pixel_sigma, unknown=unknown)
+                                                            hot_pixel_sigma=hot_pixel_sigma, unknown=m.unknown)
         if flat is not None:
             flats[key] = flat
-        figures[str(key)] = fig
-        curves[str(key)] = cur
+        m.figures[str(key)] = fig
+        m.curves[str(key)] = cur
         shapes[key] = checker.first.shape
         if hot is not None:
-            hot_pixels[str(key)] = hot
+            m.hot_pixels[str(key)] = hot
         if bias is not None:
-            bias_frames[key] = bias.astype(np.float32)
-        frame_cfa = frame_cfa or checker.first.cfa_pattern
+            m.bias_frames[key] = bias.astype(np.float32)
+        m.frame_cfa = m.frame_cfa or checker.first.cfa_pattern
         if checker.first.white_level_dn and checker.first.source != "image":
-            bit_source = (checker.first.bit_depth, f"white level of {checker.first.path.name}")
+            m.bit_source = (checker.first.bit_depth, f"white level of {checker.first.path.name}")
         for v in (fig.get("saturation_dn"),):
             if v:
-                max_code = max(max_code, int(v))
-    unknown["quantum_efficiency"] = ("a frame manifest gives no photon counts, so no quantum efficiency, responsivity "
-                                     "or linearity (an EMVA 1288 descriptor's 'b' lines give them)")
+                m.max_code = max(m.max_code, int(v))
+    m.unknown["quantum_efficiency"] = ("a frame manifest gives no photon counts, so no quantum efficiency, "
+                                       "responsivity or linearity (an EMVA 1288 descriptor's 'b' lines give them)")
     if len(set(shapes.values())) > 1:
         detail = ", ".join(f"ISO {k}: {s[0]}x{s[1]}" for k, s in shapes.items())
         raise CalibrationError(f"frames of different sizes across ISOs ({detail}); one sensor mode per calibration")
-    cfa = cfa or frame_cfa
-    flat_field = flat_field_std = None
     if flats:  # the ISOs' maps, inverse-variance weighted (the PRNU is a property of the pixel)
         weights = {k: 1.0 / relvar for k, (_, relvar) in flats.items()}
         total = sum(weights.values())
-        combined = sum(weights[k] * m for k, (m, _) in flats.items()) / total
+        combined = sum(weights[k] * fm for k, (fm, _) in flats.items()) / total
         good = None
-        for hot in hot_pixels.values():
+        for hot in m.hot_pixels.values():
             good = ~hot if good is None else good & ~hot
-        flat_field = _normalise_flat(combined, good).astype(np.float32)
-        flat_field_std = math.sqrt(1.0 / total)
-    bias_std = {k: figures[str(k)]["bias_frame_std_dn"] for k in bias_frames
-                if figures[str(k)].get("bias_frame_std_dn") is not None}
-    return _build(figures=figures, curves=curves, hot_pixels=hot_pixels, bias_frames=bias_frames, unknown=unknown,
-                  flat_field=flat_field, flat_field_std=flat_field_std, bias_frame_std_dn=bias_std,
-                  name=name or options.get("name") or (source_path.stem if source_path else "calibrated"),
-                  adc_bits=adc_bits or options.get("adc_bits") or (bit_source[0] if bit_source else None),
-                  bits_from=("argument" if adc_bits else "manifest" if options.get("adc_bits") else
-                             bit_source[1] if bit_source else None),
-                  max_code=max_code, cfa=cfa, input_path=source_path, kind="frames")
+        m.flat_field = _normalise_flat(combined, good).astype(np.float32)
+        m.flat_field_std = math.sqrt(1.0 / total)
+    m.bias_frame_std_dn = {k: m.figures[str(k)]["bias_frame_std_dn"] for k in m.bias_frames
+                           if m.figures[str(k)].get("bias_frame_std_dn") is not None}
+    return m
 
 
-def _build(*, figures, curves, hot_pixels, bias_frames, unknown, name, adc_bits, bits_from, max_code, cfa,
-           input_path, kind, iso_keys=None, extra_source=None, flat_field=None, flat_field_std=None,
-           bias_frame_std_dn=None) -> CalibrationResult:
+def _build(m: _Measured, *, name, adc_bits, bits_from, max_code, cfa, input_path, kind) -> CalibrationResult:
+    """The camera profile and the calibration result of what the frames (or EMVA data) gave."""
+    figures, curves, hot_pixels, bias_frames, unknown = m.figures, m.curves, m.hot_pixels, m.bias_frames, m.unknown
+    iso_keys, extra_source, flat_field, flat_field_std = m.iso_keys, m.extra_source, m.flat_field, m.flat_field_std
+    bias_frame_std_dn = m.bias_frame_std_dn
     with_gain = {k: f for k, f in figures.items() if f.get("gain_dn_per_e")}
     if not with_gain:
         reasons = "; ".join(f"ISO {k}: {unknown.get(f'isos.{k}.gain_dn_per_e', 'unknown')}" for k in figures)
@@ -1076,9 +1093,9 @@ def _calibrate_emva(desc: EmvaDescriptor, *, name, adc_bits, cfa_pattern, iso) -
                                     "for a Bayer sensor)"
     bias_frames, bias_std, flat_field, flat_std = _emva_maps(data, res, fig, iso_int, saturation_dn, cfa_pattern,
                                                             unknown_all, key)
-    return _build(figures={key: fig}, curves=curves, hot_pixels={}, bias_frames=bias_frames, unknown=unknown_all,
-                  flat_field=flat_field, flat_field_std=flat_std, bias_frame_std_dn=bias_std,
-                  name=name or (desc.path.stem if desc.path else "emva1288"), adc_bits=adc_bits or desc.bits,
+    measured = _Measured(figures={key: fig}, curves=curves, hot_pixels={}, bias_frames=bias_frames,
+                         unknown=unknown_all, flat_field=flat_field, flat_field_std=flat_std, bias_frame_std_dn=bias_std,
+                         iso_keys={key: iso_int}, extra_source=extra)
+    return _build(measured, name=name or (desc.path.stem if desc.path else "emva1288"), adc_bits=adc_bits or desc.bits,
                   bits_from="argument" if adc_bits else "descriptor 'n' line", max_code=int(saturation_dn or 0),
-                  cfa=cfa_pattern, input_path=desc.path, kind="emva1288", iso_keys={key: iso_int},
-                  extra_source=extra)
+                  cfa=cfa_pattern, input_path=desc.path, kind="emva1288")

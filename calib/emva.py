@@ -414,6 +414,48 @@ def saturation_index(s2_y: np.ndarray) -> int:
     return int(best_i)
 
 
+def _linearity(data: EmvaData, Y: np.ndarray, isat: int, out: dict, unknown: dict, *, photons: bool) -> None:
+    """EMVA 1288 linearity error ``LE_min``, ``LE_max`` (%) between 5 and 95 % of saturation, 1/Y weighted,
+    into ``out`` (``photons``: photon counts and saturation are known; else None with the reason)."""
+    if photons:
+        lo = int(np.nonzero(Y >= 0.05 * Y[isat])[0].min())
+        hi = int(np.nonzero(Y <= 0.95 * Y[isat])[0].max())
+        if hi - lo >= 1:
+            xs, ys = data.u_p[lo:hi + 1], Y[lo:hi + 1]
+            a, b = np.polyfit(xs, ys, 1, w=1.0 / ys)
+            dev = 100.0 * (ys - (a * xs + b)) / (a * xs + b)
+            out["LE_min"], out["LE_max"] = float(dev.min()), float(dev.max())
+    for k in ("LE_min", "LE_max"):
+        if k not in out:
+            out[k] = None
+            unknown[k] = "the linearity needs photon counts and saturation"
+
+
+def _spatial_nonuniformity(data: EmvaData, K: float, out: dict, unknown: dict) -> None:
+    """EMVA 1288 ``DSNU1288`` (e-, and ``_DN``) and ``PRNU1288`` (%) of the dark and bright stacks, into ``out``."""
+    sp, spd = data.spatial, data.spatial_dark
+    out["DSNU1288"] = out["DSNU1288_DN"] = out["PRNU1288"] = None
+    if spd is None:
+        unknown["DSNU1288"] = unknown["PRNU1288"] = "the descriptor has no dark stack (a 'd' step with more than two images)"
+    else:
+        s2_yd = spd["avg_var"] - spd["var_mean"] / spd["L"]
+        if s2_yd >= 0:
+            out["DSNU1288_DN"] = math.sqrt(s2_yd)
+            out["DSNU1288"] = out["DSNU1288_DN"] / K
+        else:
+            unknown["DSNU1288"] = "the corrected dark spatial variance is negative (no measurable DSNU)"
+            s2_yd = 0.0
+        if sp is None:
+            unknown["PRNU1288"] = "the descriptor has no bright stack (a 'b' step with more than two images)"
+        else:
+            s2_y = sp["avg_var"] - sp["var_mean"] / sp["L"]
+            signal = sp["avg_mean"] - spd["avg_mean"]
+            if signal > 0 and s2_y - s2_yd >= 0:
+                out["PRNU1288"] = 100.0 * math.sqrt(s2_y - s2_yd) / signal
+            else:
+                unknown["PRNU1288"] = "the bright stack's spatial variance is not above the dark one"
+
+
 def evaluate(data: EmvaData) -> tuple[dict[str, Any], dict[str, str]]:
     """EMVA 1288 linear-model figures of reduced data.
 
@@ -503,41 +545,8 @@ def evaluate(data: EmvaData) -> tuple[dict[str, Any], dict[str, str]]:
         unknown["u_I_mean"] = unknown["u_I_var"] = (
             f"dark pairs at {len(texp)} exposure time(s); the dark current needs more than two")
         out["black_level_dn"] = float(data.u_ydark[np.argmin(data.texp_s)])
-    # linearity (5-95 % of saturation, 1/Y weighted)
-    if photons and saturated:
-        lo = int(np.nonzero(Y >= 0.05 * Y[isat])[0].min())
-        hi = int(np.nonzero(Y <= 0.95 * Y[isat])[0].max())
-        if hi - lo >= 1:
-            xs, ys = data.u_p[lo:hi + 1], Y[lo:hi + 1]
-            a, b = np.polyfit(xs, ys, 1, w=1.0 / ys)
-            dev = 100.0 * (ys - (a * xs + b)) / (a * xs + b)
-            out["LE_min"], out["LE_max"] = float(dev.min()), float(dev.max())
-    for k in ("LE_min", "LE_max"):
-        if k not in out:
-            out[k] = None
-            unknown[k] = "the linearity needs photon counts and saturation"
-    # spatial
-    sp, spd = data.spatial, data.spatial_dark
-    out["DSNU1288"] = out["DSNU1288_DN"] = out["PRNU1288"] = None
-    if spd is None:
-        unknown["DSNU1288"] = unknown["PRNU1288"] = "the descriptor has no dark stack (a 'd' step with more than two images)"
-    else:
-        s2_yd = spd["avg_var"] - spd["var_mean"] / spd["L"]
-        if s2_yd >= 0:
-            out["DSNU1288_DN"] = math.sqrt(s2_yd)
-            out["DSNU1288"] = out["DSNU1288_DN"] / K
-        else:
-            unknown["DSNU1288"] = "the corrected dark spatial variance is negative (no measurable DSNU)"
-            s2_yd = 0.0
-        if sp is None:
-            unknown["PRNU1288"] = "the descriptor has no bright stack (a 'b' step with more than two images)"
-        else:
-            s2_y = sp["avg_var"] - sp["var_mean"] / sp["L"]
-            signal = sp["avg_mean"] - spd["avg_mean"]
-            if signal > 0 and s2_y - s2_yd >= 0:
-                out["PRNU1288"] = 100.0 * math.sqrt(s2_y - s2_yd) / signal
-            else:
-                unknown["PRNU1288"] = "the bright stack's spatial variance is not above the dark one"
+    _linearity(data, Y, isat, out, unknown, photons=photons and saturated)
+    _spatial_nonuniformity(data, K, out, unknown)
     out["curves"] = {k: getattr(data, k).tolist() for k in ("texp_s", "u_p", "u_y", "s2_y", "u_ydark", "s2_ydark")}
     return out, unknown
 

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from .._deprecate import renamed_keywords
+from .._deprecate import renamed_keywords, resolve_options
 from .._shared.validation import check_choice
 from .._shared.progress import progress
 from .._version import __version__
@@ -43,7 +43,7 @@ from .._shared.patches import patch_grid
 from ..metrics import pu21_psnr
 from ..synth import SCENES, synthesize
 
-__all__ = ["Preset", "PRESETS", "synthetic_lightfields", "train_dictionary", "evaluate_dictionary", "approximate"]
+__all__ = ["Preset", "PRESETS", "TrainingSizes", "synthetic_lightfields", "train_dictionary", "evaluate_dictionary", "approximate"]
 
 
 @dataclass(frozen=True)
@@ -68,6 +68,18 @@ PRESETS: dict[str, Preset] = {
     "paper": Preset(patch=(5, 5, 9, 9, 3), atoms=16402, sparsity=10, iterations=20, patches=300000,
                     synthetic_scenes=240, synthetic_size=(160, 160)),
 }
+
+@dataclass(frozen=True)
+class TrainingSizes:
+    """Overrides of a :class:`Preset`'s sizes in :func:`train_dictionary` (None: the preset's):
+    patch ``(V, U, P, P, C)``, atoms, atoms per training patch, K-SVD iterations (all run), patches."""
+
+    patch: tuple[int, int, int, int, int] | None = None
+    atoms: int | None = None
+    n_nonzero_coefs: int | None = None
+    max_iter: int | None = None
+    patches: int | None = None
+
 
 #: Baselines (largest |disparity|, pixels per view step) cycled through the synthetic scenes.
 SYNTHETIC_BASELINES = (0.5, 1.0, 1.5, 2.0, 0.25, 3.0)
@@ -101,18 +113,15 @@ def train_dictionary(
     lightfields: Sequence[Any] | None = None,
     *,
     preset: str = "default",
+    sizes: TrainingSizes | None = None,
     synthetic: bool = False,
-    patch=None,
-    atoms: int | None = None,
-    n_nonzero_coefs: int | None = None,
-    max_iter: int | None = None,
-    patches: int | None = None,
     normalise: str = "l2",
     random_state: int = 0,
     checkpoint=None,
     scheduler: str | None = None,
     command: str | None = None,
     sources: Sequence[str] | None = None,
+    **size_overrides,
 ) -> Dictionary:
     """Train a dictionary with K-SVD on HDR light fields (see the module documentation).
 
@@ -124,7 +133,10 @@ def train_dictionary(
         Sizes; the keyword arguments below override them.
     synthetic : bool
         Add the preset's synthetic training set (:func:`synthetic_lightfields`).
-    patch, atoms, n_nonzero_coefs, max_iter, patches : overrides of the preset.
+    sizes : TrainingSizes, optional
+        Overrides of the preset's sizes: ``patch``, ``atoms``, ``n_nonzero_coefs``, ``max_iter``,
+        ``patches`` (None: the preset's). Give either ``sizes`` or these fields as keywords, not both.
+    patch, atoms, n_nonzero_coefs, max_iter, patches : overrides of the preset (``**size_overrides``).
         ``n_nonzero_coefs``: atoms per training patch (the preset's ``sparsity``); ``max_iter``: K-SVD
         iterations (all are run; the preset's ``iterations``). The keywords ``sparsity`` and
         ``iterations`` are deprecated.
@@ -147,11 +159,12 @@ def train_dictionary(
     Dictionary
     """
     p = get_preset(preset)
-    patch = tuple(int(x) for x in (patch or p.patch))
-    atoms = int(atoms or p.atoms)
-    sparsity = int(n_nonzero_coefs or p.sparsity)
-    iterations = int(p.iterations if max_iter is None else max_iter)
-    n_patches = int(patches or p.patches)
+    sizes = resolve_options(TrainingSizes, sizes, size_overrides, func_name="train_dictionary", argument="sizes")
+    patch = tuple(int(x) for x in (sizes.patch or p.patch))
+    atoms = int(sizes.atoms or p.atoms)
+    sparsity = int(sizes.n_nonzero_coefs or p.sparsity)
+    iterations = int(p.iterations if sizes.max_iter is None else sizes.max_iter)
+    n_patches = int(sizes.patches or p.patches)
     seed = random_state
     if isinstance(seed, bool) or int(seed) != seed or seed < 0:
         raise InputError(f"random_state: expected a non-negative integer, got {seed!r}")

@@ -297,6 +297,71 @@ class Observation(ReadOnlyState):
         return float(self.black_clipped.mean())
 
 
+def _sensor_codes(dn) -> np.ndarray:
+    """``dn`` as float64 codes of one 2-D sensor image, checked (numeric, finite)."""
+    dn = np.asarray(dn)
+    if not (np.issubdtype(dn.dtype, np.integer) or np.issubdtype(dn.dtype, np.floating)):
+        raise InputError(f"sensor image: expected DN codes (integers or floats), got dtype {dn.dtype}")
+    dn = dn.astype(np.float64, copy=False)
+    if dn.ndim != 2:
+        raise ShapeError(f"sensor image: expected shape (H, W), got {dn.shape}")
+    n_bad = int(np.count_nonzero(~np.isfinite(dn)))
+    if n_bad:
+        raise InputError(f"sensor image: expected finite DN codes, found {n_bad} NaN or Inf values")
+    return dn
+
+
+def _bias_map(bias_dn, m: dict, t: float, shape) -> np.ndarray:
+    """The bias (DN) under every pixel: ``bias_dn`` broadcast, or the black level plus the mean dark signal."""
+    h = m["gain_dn_per_e"]
+    if bias_dn is None:
+        bias = m["black_level_dn"] + h * t * m["dark_current_e_per_s"]
+    else:
+        try:
+            bias = np.broadcast_to(np.asarray(bias_dn, dtype=np.float64), shape)
+        except (TypeError, ValueError):
+            raise ShapeError(f"bias_dn: expected a number or a map of shape {shape}, got {np.shape(bias_dn)}") from None
+        if not np.isfinite(bias).all():
+            raise InputError("bias_dn: expected finite DN values, found NaN or Inf")
+    return bias
+
+
+def _fixed_pattern_of(correct_fixed_pattern, profile, iso, shape):
+    """The fixed-pattern maps to correct with (None: no correction)."""
+    if isinstance(correct_fixed_pattern, FixedPattern):
+        fp = correct_fixed_pattern
+        if fp.shape != shape:
+            raise ShapeError(f"fixed pattern: maps of shape {fp.shape} do not fit the sensor image {shape}")
+    elif correct_fixed_pattern is True:
+        fp = _fixed_pattern_maps(profile, shape, iso, simulate=False) if _has_fixed_pattern(profile) else None
+    elif correct_fixed_pattern is False:
+        fp = None
+    else:
+        raise InputError(f"correct_fixed_pattern: expected True, False or a FixedPattern, got {correct_fixed_pattern!r}")
+    return fp
+
+
+def _variance_signal(variance_from: str, radiance_estimate, T: np.ndarray) -> np.ndarray:
+    """The signal (e-/s) in the photon-noise variance: the estimate given, or the measurement ``T``."""
+    if variance_from == "estimate":
+        if radiance_estimate is None:
+            raise InputError("variance_from='estimate' needs radiance_estimate")
+        try:
+            signal = np.broadcast_to(np.asarray(radiance_estimate, dtype=np.float64), T.shape)
+        except (TypeError, ValueError):
+            raise ShapeError(
+                f"radiance_estimate: expected a map of shape {T.shape}, got {np.shape(radiance_estimate)}"
+            ) from None
+        if not np.isfinite(signal).all():
+            raise InputError("radiance_estimate: expected finite values, found NaN or Inf")
+        signal = np.maximum(signal, 0)
+    elif variance_from == "measurement":
+        signal = np.maximum(T, 0)
+    else:
+        raise InputError(f"variance_from: expected 'measurement' or 'estimate', got {variance_from!r}")
+    return signal
+
+
 def calibrated_observation(
     dn: np.ndarray,
     *,
@@ -339,40 +404,15 @@ def calibrated_observation(
     """
     profile = load_profile(profile)
     t = check_positive("exposure_s", exposure_s)
-    dn = np.asarray(dn)
-    if not (np.issubdtype(dn.dtype, np.integer) or np.issubdtype(dn.dtype, np.floating)):
-        raise InputError(f"sensor image: expected DN codes (integers or floats), got dtype {dn.dtype}")
-    dn = dn.astype(np.float64, copy=False)
-    if dn.ndim != 2:
-        raise ShapeError(f"sensor image: expected shape (H, W), got {dn.shape}")
-    n_bad = int(np.count_nonzero(~np.isfinite(dn)))
-    if n_bad:
-        raise InputError(f"sensor image: expected finite DN codes, found {n_bad} NaN or Inf values")
+    dn = _sensor_codes(dn)
     gamma = profile.gamma if gamma is None else check_positive("gamma", gamma)
     if gamma < 1:
         # the response I = I_max (h e / I_max)^(1/gamma) of expose() needs gamma >= 1 (as the profile does)
         raise InputError(f"gamma: expected a value >= 1, got {gamma}")
     m = iso_maps(profile, iso, dn.shape)
     h = m["gain_dn_per_e"]
-    if bias_dn is None:
-        bias = m["black_level_dn"] + h * t * m["dark_current_e_per_s"]
-    else:
-        try:
-            bias = np.broadcast_to(np.asarray(bias_dn, dtype=np.float64), dn.shape)
-        except (TypeError, ValueError):
-            raise ShapeError(f"bias_dn: expected a number or a map of shape {dn.shape}, got {np.shape(bias_dn)}") from None
-        if not np.isfinite(bias).all():
-            raise InputError("bias_dn: expected finite DN values, found NaN or Inf")
-    if isinstance(correct_fixed_pattern, FixedPattern):
-        fp = correct_fixed_pattern
-        if fp.shape != dn.shape:
-            raise ShapeError(f"fixed pattern: maps of shape {fp.shape} do not fit the sensor image {dn.shape}")
-    elif correct_fixed_pattern is True:
-        fp = _fixed_pattern_maps(profile, dn.shape, iso, simulate=False) if _has_fixed_pattern(profile) else None
-    elif correct_fixed_pattern is False:
-        fp = None
-    else:
-        raise InputError(f"correct_fixed_pattern: expected True, False or a FixedPattern, got {correct_fixed_pattern!r}")
+    bias = _bias_map(bias_dn, m, t, dn.shape)
+    fp = _fixed_pattern_of(correct_fixed_pattern, profile, iso, dn.shape)
     imax = float(profile.white_level_dn)
     rel = (dn - bias) / imax
     linear_dn = imax * _power(rel, gamma)  # h * electrons
@@ -382,22 +422,7 @@ def calibrated_observation(
             linear_dn = linear_dn - h * fp.offset_e  # dark-signal (DSNU) correction
         g = fp.gain  # flat-field (PRNU) correction
     T = linear_dn / (h * t * g)
-    if variance_from == "estimate":
-        if radiance_estimate is None:
-            raise InputError("variance_from='estimate' needs radiance_estimate")
-        try:
-            signal = np.broadcast_to(np.asarray(radiance_estimate, dtype=np.float64), dn.shape)
-        except (TypeError, ValueError):
-            raise ShapeError(
-                f"radiance_estimate: expected a map of shape {dn.shape}, got {np.shape(radiance_estimate)}"
-            ) from None
-        if not np.isfinite(signal).all():
-            raise InputError("radiance_estimate: expected finite values, found NaN or Inf")
-        signal = np.maximum(signal, 0)
-    elif variance_from == "measurement":
-        signal = np.maximum(T, 0)
-    else:
-        raise InputError(f"variance_from: expected 'measurement' or 'estimate', got {variance_from!r}")
+    signal = _variance_signal(variance_from, radiance_estimate, T)
     # quantisation noise: uniform over one code step, the step's width mapped through the power
     # law (1/12 DN^2 when gamma = 1; never zero, also at the black level)
     if gamma == 1:
