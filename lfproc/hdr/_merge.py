@@ -707,23 +707,19 @@ def merge_debevec(
     if codes8:
         g32 = g.astype(np.float32)
         w_lut = hat_weight(np.arange(256) / 255.0)
-        cidx = np.arange(channels)
-        fill_log = g32[255, cidx] - log_t[first]
+        fill_log = g32[255, np.arange(channels)] - log_t[first]
+        # one table per exposure: weight and g(z) - ln t_i; zero weight from the clipping code up
+        luts = [(g32 - log_t[i]).astype(np.float32) for i in range(n)]
+        w8 = np.repeat(w_lut[:, None], channels, axis=1).astype(np.float32)
+        span = None
     else:
         span = float(white_level) - float(black_level)
         if span <= 0:
             raise InputError(f"white_level ({white_level}) must exceed black_level ({black_level})")
         fill_log = np.full(channels, -log_t[first], np.float32)
-
-    if codes8:
-        # one table per exposure: weight and g(z) - ln t_i; zero weight from the clipping code up
-        luts = [(g32 - log_t[i]).astype(np.float32) for i in range(n)]
-        w8 = np.repeat(w_lut[:, None], channels, axis=1).astype(np.float32)
-    else:
         luts = w8 = None
     deb = _DebevecBracket(flat=flat, t=t, log_t=log_t, order=order, codes8=codes8, saturation_code=saturation_code,
-                          luts=luts, w8=w8, black_level=black_level, span=None if codes8 else span,
-                          fill_log=fill_log)
+                          luts=luts, w8=w8, black_level=black_level, span=span, fill_log=fill_log)
     out = {"radiance": radiance, "sat": sat_all, "dark": dark_all}
     _run_chunks(functools.partial(_debevec_chunk, deb, out), total, max(1, chunk_size // channels), n_threads)
     info = _summary(sat_all.reshape(sample_shape), dark_all.reshape(sample_shape))
