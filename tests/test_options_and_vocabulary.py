@@ -117,8 +117,9 @@ def test_reconstruct_sparsity_is_deprecated_for_n_nonzero_coefs(small):
 
     _, capture, dct = small
     new = reconstruct(capture, dct, solver="omp", n_nonzero_coefs=2, threads=1)
-    with pytest.warns(DeprecationWarning, match="'sparsity' is deprecated.*use 'n_nonzero_coefs'"):
+    with pytest.warns(DeprecationWarning, match="'sparsity' is deprecated.*use 'n_nonzero_coefs'") as rec:
         old = reconstruct(capture, dct, solver="omp", sparsity=2, threads=1)
+    assert rec[0].filename == __file__  # the warning points at the caller
     np.testing.assert_array_equal(new.data, old.data)
     assert _record(new) == _record(old) and _record(new)["sparsity"] == 2
     with pytest.raises(TypeError, match="got both 'sparsity' and its new name 'n_nonzero_coefs'"):
@@ -407,3 +408,22 @@ def test_sensor_steps_known_answers():
          "dark_current_e_per_s": np.full((1, 2), 10.0)}
     np.testing.assert_array_equal(_bias_map(None, m, 2.0, (1, 2)), [[74.0, 74.0]])
     np.testing.assert_array_equal(_bias_map(60, m, 2.0, (1, 2)), [[60.0, 60.0]])
+
+
+def test_merge_warnings_still_point_at_the_caller():
+    """merge_ml is wrapped by the keyword-renaming decorator; its ConvergenceWarning and SaturationWarning
+    keep pointing at the code that called it."""
+    from lfproc.camera.sensor import expose
+    from lfproc.errors import ConvergenceWarning, SaturationWarning
+    from lfproc.merge import merge_ml
+
+    times = [0.01, 0.02, 0.04]
+    truth = synthesize("lamps", size=(16, 16), views=1, random_state=0).data[0, 0].astype(np.float64) * 2e5
+    dn = np.stack([expose(truth.reshape(-1, 3), exposure_s=t, iso=100, profile="illum", random_state=k)
+                   .reshape(truth.shape) for k, t in enumerate(times)])
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        merge_ml(dn, exposures_s=times, isos=100, profile="illum", max_iter=1)
+    kinds = {type(w.message) for w in rec}
+    assert ConvergenceWarning in kinds and SaturationWarning in kinds
+    assert all(w.filename == __file__ for w in rec), [(type(w.message).__name__, w.filename) for w in rec]
