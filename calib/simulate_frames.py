@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from lfproc._deprecate import renamed_keywords
+from lfproc._shared.deprecate import renamed_keywords
 from lfproc._shared.validation import check_choice
 from lfproc._shared.random import check_random_state
 from lfproc._shared.progress import progress

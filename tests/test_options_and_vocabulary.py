@@ -15,7 +15,7 @@ import warnings
 import numpy as np
 import pytest
 
-from lfproc._deprecate import REMOVED_IN, rename_keywords, renamed_keywords, resolve_options
+from lfproc._shared.deprecate import REMOVED_IN, rename_keywords, renamed_keywords, resolve_options
 from lfproc.errors import InputError
 from lfproc.synth import synthesize
 
@@ -142,7 +142,7 @@ def test_capture_design_object_equals_keywords(small):
 
 
 def test_capture_design_steps_known_answers():
-    from lfproc.calib import load_profile
+    from lfproc.sensor import load_profile
     from lfproc.camera.simulate import CaptureDesign, _mask_period, _seeded, _shot_plan
 
     assert _mask_period(CaptureDesign()) == 4
@@ -212,7 +212,7 @@ def _same(new_call, old_call, old: str, new: str):
 def test_seed_is_deprecated_for_random_state(tmp_path):
     from lfproc.calib.simulate_frames import simulate_frames
     from lfproc.camera.iso import describe_iso_pattern
-    from lfproc.dictionary import synthetic_lightfields
+    from lfproc.dictionary._train import synthetic_lightfields
 
     a, b = _same(lambda: describe_iso_pattern("random", [100, 400], random_state=3),
                  lambda: describe_iso_pattern("random", [100, 400], seed=3), "seed", "random_state")
@@ -274,10 +274,10 @@ def test_sparsity_is_deprecated_for_n_nonzero_coefs():
 def test_n_iter_is_deprecated_for_max_iter(tmp_path):
     from PIL import Image
 
-    from lfproc.bracket import merge_files, simulate_ldr_bracket
-    from lfproc.camera.sensor import expose
+    from lfproc.hdr import merge_files, simulate_ldr_bracket
+    from lfproc.sensor import expose
     from lfproc.lightfield import LightField
-    from lfproc.merge import merge_lightfields, merge_ml, merge_ml_codes8
+    from lfproc.hdr import merge_lightfields, merge_ml, merge_ml_codes8
 
     times = [0.01, 0.02, 0.04]
     truth = synthesize("layers", size=(16, 16), views=1, random_state=0).data[0, 0].astype(np.float64)
@@ -323,7 +323,7 @@ def test_the_cli_uses_the_new_names(tmp_path, capsys):
 # -- known answers of split steps ---------------------------------------------------------------------
 
 def test_hdr_figure_steps_known_answers():
-    from lfproc.metrics import _detail_ratio, _figure_mask, _stops_by_decade
+    from lfproc.metrics._metrics import _detail_ratio, _figure_mask, _stops_by_decade
 
     ref = np.array([1.5, 2.0, 20.0, 300.0, 0.01])
     res = np.array([3.0, 2.0, 10.0, 0.0, 5.0])
@@ -355,7 +355,7 @@ def test_reconstruction_steps_known_answers():
 
 
 def test_merge_steps_known_answers():
-    from lfproc.merge import _bias_of, _CodeGrid
+    from lfproc.hdr._merge import _bias_of, _CodeGrid
 
     flat, scalar = _bias_of(np.array([1.0, 2.0]), (3, 2))
     assert scalar is None and flat.tolist() == [1.0, 2.0] * 3
@@ -397,7 +397,7 @@ def test_emva_linearity_of_a_linear_sensor_is_zero():
 
 
 def test_sensor_steps_known_answers():
-    from lfproc.camera.sensor import _bias_map, _variance_signal
+    from lfproc.sensor._model import _bias_map, _variance_signal
 
     T = np.array([[-1.0, 2.0]])
     np.testing.assert_array_equal(_variance_signal("measurement", None, T), [[0.0, 2.0]])
@@ -413,9 +413,9 @@ def test_sensor_steps_known_answers():
 def test_merge_warnings_still_point_at_the_caller():
     """merge_ml is wrapped by the keyword-renaming decorator; its ConvergenceWarning and SaturationWarning
     keep pointing at the code that called it."""
-    from lfproc.camera.sensor import expose
+    from lfproc.sensor import expose
     from lfproc.errors import ConvergenceWarning, SaturationWarning
-    from lfproc.merge import merge_ml
+    from lfproc.hdr import merge_ml
 
     times = [0.01, 0.02, 0.04]
     truth = synthesize("lamps", size=(16, 16), views=1, random_state=0).data[0, 0].astype(np.float64) * 2e5

@@ -4,6 +4,7 @@ One module per job: :mod:`.random` (``check_random_state``), :mod:`.progress` (p
 :mod:`.validation` (option checks), :mod:`.parallel` (worker counts, Dask realignment),
 :mod:`.jsonable`, :mod:`.hashing`, :mod:`.warn` (saturation/convergence warnings),
 :mod:`.frozen` (read-only arrays of the core types), :mod:`.reprs` (short reprs),
-:mod:`.stdio` (capturing output), :mod:`.zipfiles` (ZIP sniffing). Private to lfproc: import the
+:mod:`.stdio` (capturing output), :mod:`.zipfiles` (ZIP sniffing), :mod:`.deprecate` (renamed
+keywords, option objects). Private to lfproc: import the
 module you need, e.g. ``from lfproc._shared.random import check_random_state``.
 """

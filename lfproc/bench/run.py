@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .._deprecate import renamed_keywords
+from .._shared.deprecate import renamed_keywords
 from .._shared.hashing import file_sha256
 from .._shared.progress import progress
 from .._shared.jsonable import to_jsonable

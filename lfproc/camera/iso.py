@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._deprecate import renamed_keywords
+from .._shared.deprecate import renamed_keywords
 from .._shared.random import check_random_state
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 from .. import _untrusted as ut

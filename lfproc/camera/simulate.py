@@ -51,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from .._deprecate import resolve_options
+from .._shared.deprecate import resolve_options
 from .._shared.validation import check_choice, check_count, check_positive
 from .._shared.random import check_random_state
 from .._shared.frozen import freeze

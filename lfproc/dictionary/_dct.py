@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .._deprecate import renamed_keywords
+from .._shared.deprecate import renamed_keywords
 from ..errors import InputError
 from ._files import Dictionary
 

@@ -52,7 +52,7 @@ from typing import Any
 
 import numpy as np
 
-from .._deprecate import renamed_keywords
+from .._shared.deprecate import renamed_keywords
 from .._shared.deps import require
 from .._shared.random import check_random_state
 from .._shared.progress import progress

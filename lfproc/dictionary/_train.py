@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from .._deprecate import renamed_keywords, resolve_options
+from .._shared.deprecate import renamed_keywords, resolve_options
 from .._shared.validation import check_choice
 from .._shared.progress import progress
 from .._version import __version__

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .._deprecate import renamed_keywords
+from .._shared.deprecate import renamed_keywords
 from .._shared.frozen import freeze
 from ..errors import FileFormatError, InputError, MissingFileError, option_name
 from ..lytro.decode import decode_capture

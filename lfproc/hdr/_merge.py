@@ -56,7 +56,7 @@ from typing import Any
 
 import numpy as np
 
-from .._deprecate import renamed_keywords
+from .._shared.deprecate import renamed_keywords
 from .._shared.validation import check_choice
 from .._shared.random import check_random_state
 from .._shared.frozen import freeze

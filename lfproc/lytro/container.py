@@ -30,7 +30,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from .. import _untrusted as ut
-from .._deprecate import resolve_options
+from .._shared.deprecate import resolve_options
 from .._version import __version__
 from ..errors import ChecksumError, InputError, LfpFormatError, MissingFileError, ShapeError
 from ..io._atomic import atomic_file

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._deprecate import resolve_options
+from .._shared.deprecate import resolve_options
 from .._shared.validation import check_choice
 from .._shared.frozen import freeze
 from .._version import __version__

@@ -72,7 +72,7 @@ from typing import Any
 
 import numpy as np
 
-from .._deprecate import resolve_options
+from .._shared.deprecate import resolve_options
 from .._shared.validation import check_choice
 from .._shared.progress import progress
 from .._shared.parallel import realign
@@ -480,8 +480,6 @@ def _execution(workers, threads) -> tuple[int | None, int]:
 
 def _weighted_observations(capture, variance: str) -> tuple[np.ndarray, np.ndarray]:
     """The calibrated observations ``T`` (e-/s) and their weights ``W = 1/std(T)``, float32 ``(S, H, W)``."""
-    from ..camera.capture import observations
-
     obs = observations(capture, variance_from=variance)
     T = np.ascontiguousarray(obs.radiance, dtype=np.float32)
     W = np.ascontiguousarray(obs.weight, dtype=np.float32)
