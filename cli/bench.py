@@ -29,6 +29,9 @@ def register(sub, common) -> None:
                        help="processes of the local Dask cluster (default: the CPU count)")
     where.add_argument("--scheduler", default=None, metavar="ADDRESS",
                        help="address of a running Dask scheduler, or 'synchronous' (this process)")
+    p.add_argument("--method", default="auto", choices=("auto", "gmm", "dictionary"),
+                   help="reconstruction method of every cell: auto (default) is gmm for a preset with a periodic mask "
+                        "(quick), as lfproc reconstruct chooses, and dictionary otherwise (paper)")
     p.add_argument("--seed", type=int, default=0, help="bench seed; every cell's seed derives from it (default 0)")
     p.add_argument("--force", action="store_true",
                    help="recompute every cell (and use a folder that is not a bench folder)")
@@ -46,7 +49,8 @@ def run(args) -> int:
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers: expected a positive number, got {args.workers}")
     result = run_bench(args.scenes, args.output, preset=args.preset, dictionary=args.dictionary,
-                       workers=args.workers, scheduler=args.scheduler, force=args.force, random_state=args.seed)
+                       workers=args.workers, scheduler=args.scheduler, force=args.force, random_state=args.seed,
+                       recon_options={"method": args.method})
     failed = result["failed"]
     summary = {k: v for k, v in result.items() if k != "rows"}
     summary["failed"] = len(failed)

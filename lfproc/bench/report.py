@@ -703,14 +703,18 @@ def _baselines_section() -> list[str]:
     """How the baselines are run."""
     lines: list[str] = []
     lines += ["## How the baselines are run", "",
-              "- **Individual ISO** and **bracketing**: every shot is reconstructed alone with the same dictionary and "
-              "options as the joint method (the dictionary's patches are l2-normalised, so it has no scale, and the "
-              "reconstruction drops saturated and black-clipped measurements rather than fitting clipped values); "
+              "- Every cell is reconstructed with the method in results.csv's `recon_method` column: `gmm` "
+              "(`lfproc.recon.reconstruct_gmm`, lfproc's default for the quick preset's periodic mask) or "
+              "`dictionary` (`lfproc.recon.reconstruct`, the paper's; the paper preset, or `--dictionary`).",
+              "- **Individual ISO** and **bracketing**: every shot is reconstructed alone with the same method and "
+              "options as the joint method (both have no scale: the dictionary's patches are l2-normalised, the "
+              "patch model's are divided by their level; both drop black-clipped measurements rather than fitting "
+              "clipped values); "
               "each reconstruction is re-exposed into the codes its shot would record for every view sample, with the "
               "samples over a saturated sensor pixel (and its 3 x 3 neighbours) set to saturation; then the shots are "
               "merged view by view with `lfproc.merge.merge_debevec` (hat weights, the paper's) and "
-              "`lfproc.merge.merge_ml` (noise-aware ML). See `lfproc.bench.baselines`.",
-              "- **Bracketing, joint solve**: `lfproc.recon.reconstruct` of the bracketing capture, all shots in one "
+              "`lfproc.merge.merge_ml` (noise-aware ML). See `lfproc.recon.reconstruct_per_shot`.",
+              "- **Bracketing, joint solve**: the method's reconstruction of the bracketing capture, all shots in one "
               "solve.",
               "- **Dual ISO**: the joint reconstruction of the dual-ISO row pattern.",
               "- **Two-step LDR + HDR-CNN**: not available (Table II).",

@@ -20,6 +20,7 @@ file system every worker sees at the same paths.
 from __future__ import annotations
 
 import csv
+import math
 import json
 import os
 import shutil
@@ -32,12 +33,13 @@ import numpy as np
 
 from .._shared.deprecate import renamed_keywords
 from .._shared.hashing import file_sha256
+from .._shared.validation import check_choice
 from .._shared.progress import progress
 from .._shared.jsonable import to_jsonable
 from .._version import __version__
 from ..errors import InputError, OutputExistsError, SaturationWarning, ShapeError
 from ..camera.iso import DEFAULT_BLOCK_PX
-from ..recon import DEFAULTS as RECON_DEFAULTS, reconstruct, reconstruct_per_shot
+from ..recon import DEFAULTS as RECON_DEFAULTS, reconstruct, reconstruct_gmm, reconstruct_per_shot
 from .grid import Cell, Job, Preset, cell_id, cell_seed, get_preset, grid_cells, group_jobs
 from .cells import BenchScene, _cell_path, load_scene, read_cells, read_centre  # noqa: F401  (read_centre: its old path)
 from ..camera.capture import observations
@@ -57,7 +59,8 @@ COLUMNS = (
     "scene", "method", "iso_pattern", "shots", "isos", "noise", "pu21_psnr_db", "pu21_ssim", "seconds",
     "saturated_fraction", "cpu_seconds", "merge", "exposure", "relative_exposures", "isos_used", "pu2_psnr_db",
     "log_psnr_db", "mean_relative_error", "black_clipped_fraction", "sampling_rate_percent", "seed",
-    "simulate_seconds", "iterations_mean", "empty_patches", "size", "views", "profile", "mask_period", "dictionary",
+    "simulate_seconds", "iterations_mean", "empty_patches", "size", "views", "profile", "mask_period", "recon_method",
+    "dictionary",
     "solver", "mu", "max_iter", "scale", "overlap", "lfproc_version", "cell_id",
 )
 
@@ -129,6 +132,22 @@ def _simulate(lf, cell: Cell, preset: Preset, seed: int):
     return simulate_capture(lf, baseline="bracketing", shots=cell.shots, **common)
 
 
+#: Reconstruction methods of the bench: ``auto`` is gmm for a preset with a periodic mask, else dictionary.
+METHODS = ("auto", "gmm", "dictionary")
+
+
+def recon_method(method: str, preset: Preset, dictionary_given: bool = False) -> str:
+    """The method a bench cell uses (``auto``: :func:`lfproc.recon.reconstruct_gmm` when the preset's
+    mask is periodic and no dictionary was given, as ``lfproc reconstruct`` chooses, else
+    :func:`lfproc.recon.reconstruct`)."""
+    check_choice("method", method, METHODS)
+    if method == "auto":
+        return "gmm" if preset.mask_period and not dictionary_given else "dictionary"
+    if method == "gmm" and not preset.mask_period:
+        raise InputError(f"method gmm: needs a periodic mask; preset {preset.name!r} has none (use dictionary)")
+    return method
+
+
 def run_job(spec: dict[str, Any], dictionary) -> list[dict[str, Any]]:
     """Simulate, reconstruct, score and write the cells of one job; returns their rows."""
     scene: BenchScene = spec["scene"]
@@ -147,10 +166,14 @@ def run_job(spec: dict[str, Any], dictionary) -> list[dict[str, Any]]:
         simulate_seconds = time.perf_counter() - t0
         obs = observations(capture)
         options = dict(spec["recon"])
+        method = recon_method(options.pop("method", "auto"), preset)
         t0, c0 = time.perf_counter(), time.process_time()
         if first.method in ("individual-iso", "bracketing"):
-            recs = reconstruct_per_shot(capture, dictionary, merges=[c.merge for c in cells], **options)
+            recs = reconstruct_per_shot(capture, dictionary if method == "dictionary" else "default",
+                                        merges=[c.merge for c in cells], method=method, **options)
             results = [recs[c.merge] for c in cells]
+        elif method == "gmm":
+            results = [reconstruct_gmm(capture, **options)]
         else:
             results = [reconstruct(capture, dictionary, **options)]
         seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
@@ -169,12 +192,14 @@ def run_job(spec: dict[str, Any], dictionary) -> list[dict[str, Any]]:
             "seconds": seconds, "cpu_seconds": cpu_seconds, "simulate_seconds": simulate_seconds,
             "saturated_fraction": obs.saturated_fraction, "black_clipped_fraction": obs.black_clipped_fraction,
             "sampling_rate_percent": 100.0 * capture.sampling_rate, "seed": seed,
-            "iterations_mean": float(np.mean([p["iterations_mean"] for p in per])),
-            "empty_patches": int(sum(p["empty_patches"] for p in per)),
+            "recon_method": method,
+            "iterations_mean": float(np.mean([p.get("iterations_mean", math.nan) for p in per])),
+            "empty_patches": int(sum(p.get("empty_patches", 0) for p in per)),
             "size": f"{lf.size[0]}x{lf.size[1]}", "views": f"{lf.views[0]}x{lf.views[1]}",
             "profile": capture.profile.name, "mask_period": preset.mask_period if preset.mask_period else "",
-            "dictionary": spec["dictionary_id"], "solver": per[0]["solver"], "mu": per[0]["mu"],
-            "max_iter": per[0]["max_iter"], "scale": per[0].get("scale"), "overlap": per[0].get("overlap"),
+            "dictionary": spec["dictionary_id"] if method == "dictionary" else "", "solver": per[0].get("solver", ""),
+            "mu": per[0].get("mu", ""), "max_iter": per[0].get("max_iter", ""), "scale": per[0].get("scale"),
+            "overlap": per[0].get("overlap"),
             "lfproc_version": __version__, "cell_id": cid,
         }
         path = _cell_path(Path(spec["cells_dir"]), cid)
@@ -301,7 +326,10 @@ def run_bench(
         Bench seed (every cell's seed derives from it; recorded per cell as ``"seed"``; the keyword
         ``seed`` is deprecated).
     recon_options : dict, optional
-        Options of :func:`lfproc.recon.reconstruct` over the preset's (solver, mu, max_iter...).
+        ``method`` (:data:`METHODS`; default ``auto``: gmm when the preset's mask is periodic, as
+        ``lfproc reconstruct``) and the options of that method's function over the preset's
+        (:func:`lfproc.recon.reconstruct_gmm`: stride...; :func:`lfproc.recon.reconstruct`:
+        solver, mu, max_iter...).
     report : bool
         Write report.md and the plots (results.csv is always written).
 
@@ -328,6 +356,9 @@ def run_bench(
     cells_dir = _prepare_bench_dir(out, force=force)
 
     recon = {**preset.recon, **(recon_options or {})}
+    # the method resolved here (a bad one fails before any job) and part of every cell's identity
+    given = not (isinstance(source, (str, os.PathLike)) and str(source) == "default")
+    recon["method"] = recon_method(recon.get("method", "auto"), preset, given)
     # the library defaults a cell relies on: a later lfproc with other defaults recomputes the cell
     # instead of reusing a result made with the old ones
     defaults = {"recon": RECON_DEFAULTS, "block_px": DEFAULT_BLOCK_PX}

@@ -66,6 +66,7 @@ from ..camera.capture import Capture, load_capture, observations
 from ..camera.simulate import _saturation_electrons
 from ..dictionary import Dictionary, load_dictionary
 from ..hdr import merge_debevec, merge_ml
+from ._gmm import reconstruct_gmm
 from ._reconstruct import reconstruct
 
 __all__ = ["MERGES", "split_shots", "reexpose", "merge_reconstructions", "reconstruct_per_shot"]
@@ -244,6 +245,7 @@ def reconstruct_per_shot(
     *,
     merges: Sequence[str] = ("debevec",),
     guard_px: int = 1,
+    method: str = "dictionary",
     **options: Any,
 ) -> dict[str, LightField]:
     """Reconstruct every shot on its own and merge the results (the paper's baselines; module notes).
@@ -254,12 +256,17 @@ def reconstruct_per_shot(
         A capture whose shots each have one global ISO: ``simulate_capture(...,
         baseline="individual-iso" | "bracketing")``.
     dictionary : as for :func:`lfproc.recon.reconstruct`
+        With ``method="dictionary"``; ``method="gmm"`` takes only ``"default"`` here (its model is
+        an option, ``model=``).
     merges : sequence of {"debevec", "ml"}
         The merges to return (the per-shot reconstructions are shared).
     guard_px : int
         Radius of the saturation guard (module notes).
+    method : {"dictionary", "gmm"}
+        Reconstruct each shot with :func:`lfproc.recon.reconstruct` or
+        :func:`lfproc.recon.reconstruct_gmm` (a periodic mask).
     **options
-        Passed to :func:`lfproc.recon.reconstruct` (solver, mu, max_iter, stride...).
+        Passed to the reconstruction (solver, mu, max_iter, stride...; for gmm: model, stride...).
 
     Returns
     -------
@@ -282,7 +289,11 @@ def reconstruct_per_shot(
         if np.unique(capture.iso[s]).size != 1:
             raise InputError(f"capture: shot {s + 1} has a per-pixel ISO pattern; per-shot merging takes shots of one "
                              "global ISO each (baseline individual-iso or bracketing)")
-    if not isinstance(dictionary, Dictionary):
+    check_choice("method", method, ("dictionary", "gmm"))
+    if method == "gmm":
+        if not (isinstance(dictionary, str) and dictionary == "default"):
+            raise InputError("dictionary: method 'gmm' reconstructs with a patch model (model=...), not a dictionary")
+    elif not isinstance(dictionary, Dictionary):
         dictionary = load_dictionary(dictionary)
     started = time.perf_counter()
     observations(capture)  # SaturationWarning when the capture's least sensitive shot saturates
@@ -290,7 +301,8 @@ def reconstruct_per_shot(
     with warnings.catch_warnings():
         # each higher-ISO or longer shot saturates by design; the capture was checked as a whole above
         warnings.simplefilter("ignore", SaturationWarning)
-        recs = [reconstruct(s, dictionary, **options) for s in shots]
+        recs = [reconstruct_gmm(s, **options) if method == "gmm" else reconstruct(s, dictionary, **options)
+                for s in shots]
     recon_seconds = time.perf_counter() - started
     out = {}
     for m in merges:
@@ -299,8 +311,8 @@ def reconstruct_per_shot(
         per = [r.attrs["reconstruction"] for r in recs]
         # the first shot's settings, with the figures summed or averaged over the shots
         record = {**per[0], "patches": int(sum(p["patches"] for p in per)),
-                  "empty_patches": int(sum(p["empty_patches"] for p in per)),
-                  "iterations_mean": float(np.mean([p["iterations_mean"] for p in per])),
+                  "empty_patches": int(sum(p.get("empty_patches", 0) for p in per)),
+                  "iterations_mean": float(np.mean([p.get("iterations_mean", math.nan) for p in per])),
                   "per_shot": per, "seconds": recon_seconds + time.perf_counter() - t0,
                   "mode": "per-shot", "merge": m}
         out[m] = lf.replace(attrs={**lf.attrs, "reconstruction": record})

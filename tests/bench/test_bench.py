@@ -342,8 +342,8 @@ def test_a_bench_cell_is_the_score_of_its_reconstruction(tiny_inputs, tmp_path):
     root, scenes, dictionary = tiny_inputs
     cell = Cell("layers", "joint", "random", 2, (100, 400, 800, 1600), "low")
     scene = BenchScene(name="layers", path=str(scenes[0]), sha256="-", crop=None, views=(5, 5), size=(16, 16))
-    spec = {"scene": scene, "preset": PRESETS["quick"], "cells": [cell], "ids": ["one"], "seed": 0, "recon": {},
-            "cells_dir": str(tmp_path), "dictionary_id": "dct4"}
+    spec = {"scene": scene, "preset": PRESETS["quick"], "cells": [cell], "ids": ["one"], "seed": 0,
+            "recon": {"method": "dictionary"}, "cells_dir": str(tmp_path), "dictionary_id": "dct4"}
     (row,) = run_job(spec, load_dictionary(dictionary))
     assert row["seed"] == cell_seed(0, cell)
     expected = _cell_by_hand(scenes[0], dictionary, row["seed"])
@@ -425,3 +425,41 @@ def test_cli_reconstruct_per_shot_mode(ramp, dct8, tmp_path, capsys):
     assert main(["reconstruct", str(cap_path), "-o", str(tmp_path / "x.exr"), "--dictionary", str(dpath),
                  "--per-shot", "median"]) == 2
     assert "merge" in capsys.readouterr().err
+
+
+def test_recon_method_rules():
+    """``auto`` is gmm for a preset with a periodic mask (quick) unless a dictionary is given, dictionary
+    otherwise (paper: non-periodic mask); gmm on a non-periodic preset and unknown names are refused."""
+    from lfproc.bench.run import recon_method
+
+    quick, paper = PRESETS["quick"], PRESETS["paper"]
+    assert quick.mask_period and not paper.mask_period
+    assert recon_method("auto", quick) == "gmm" and recon_method("gmm", quick) == "gmm"
+    assert recon_method("auto", quick, dictionary_given=True) == "dictionary"
+    assert recon_method("auto", paper) == "dictionary" and recon_method("dictionary", quick) == "dictionary"
+    with pytest.raises(InputError, match="needs a periodic mask"):
+        recon_method("gmm", paper)
+    with pytest.raises(InputError, match="method"):
+        recon_method("lasso", quick)
+
+
+@pytest.mark.slow
+def test_bench_default_method_is_gmm_and_a_cell_matches_the_public_api(tiny_inputs, tmp_path):
+    """The quick preset without a dictionary reconstructs every cell with gmm (``recon_method``); the
+    reference joint cell equals simulate -> reconstruct_gmm -> evaluate by hand (the grid's documented
+    settings, as _cell_by_hand)."""
+    from lfproc.recon import reconstruct_gmm
+
+    root, scenes, _ = tiny_inputs
+    result = run_bench(scenes[:1], tmp_path / "b", preset="quick", scheduler="synchronous", report=False,
+                       progress_bar=False)
+    rows = result["rows"]
+    assert rows and {r["recon_method"] for r in rows} == {"gmm"} and result["failed"] == {}
+    (ref,) = [r for r in rows if r["method"] == "joint" and r["iso_pattern"] == "random" and r["shots"] == 2
+              and r["noise"] == "low" and r["isos"] == "100,400,800,1600" and r["exposure"] == 1]
+    lf = lfproc.read_lightfield(scenes[0])
+    capture = simulate_capture(lf, profile="paper-low", isos=(100, 400, 800, 1600), exposure_s=0.004, mask="random",
+                               mask_period=4, iso_pattern_kind="random", shots=2, relative_exposures=[1.0, 1.0],
+                               random_state=int(ref["seed"]))
+    expected = evaluate(reconstruct_gmm(capture), lf, scale_tolerance_stops=None)
+    assert ref["pu21_psnr_db"] == pytest.approx(expected["pu21_psnr_db"], abs=1e-6)
