@@ -53,6 +53,7 @@ import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import NamedTuple
 from pathlib import Path
 
 import numpy as np
@@ -383,32 +384,102 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
     if not isinstance(capture, Capture):
         raise InputError(f"reconstruct_gmm: expected a Capture or a capture file, got {type(capture).__name__}")
     model = load_patch_model(model)
+    opt = _checked_options(capture, model, stride=stride, search_stride=search_stride, disparities=disparities,
+                           scales=scales, pool_radius=pool_radius, search=search, saturation=saturation, chunk=chunk,
+                           threads=threads)
+    nv, nu = capture.views
+    p, scales, disparities = model.patch, opt["scales"], opt["disparities"]
+    # S_d (V U P P 3, E E 3): at most 4 non-zeros a row (bilinear), so sparse
+    shears_sparse = [sparse.csr_matrix(np.kron(shear_matrix((nv, nu), p, model.margin, d), np.eye(3)))
+                     for d in disparities]
+    data = _measurements(capture, saturation)
+    g = _Grids(capture, p, opt["stride"], opt["search_stride"])
+    acc = np.zeros((nv, nu, *capture.size, 3))
+    wacc = np.zeros(capture.size)
+    x1 = (np.arange(p) + 0.5) / p
+    win = np.outer(np.sin(np.pi * x1) ** 2 + 1e-3, np.sin(np.pi * x1) ** 2 + 1e-3)
+    bar = progress(total=len(g.gt) + len(g.ct), desc="reconstruct (gmm)", unit="patch",
+                   disable=None if progress_bar is None else not progress_bar)
+    log_pi = np.log(model.weights)
+    n_s = len(scales)
+    scores = np.full((len(g.ct), len(disparities) * model.components * n_s), -np.inf)
+    # "staged": the disparity at the scale nearest the model's own (1) only
+    first = [int(np.argmin(np.abs(np.log(scales))))] if search == "staged" else list(range(n_s))
+    cjobs, jobs = _jobs(g.cphase, opt["chunk"]), _jobs(g.phase, opt["chunk"])
+
+    try:
+        with threadpool_limits(1), ThreadPoolExecutor(max_workers=opt["threads"]) as pool:
+            keys = np.unique(g.ops.index)
+            phases = dict(zip(keys, pool.map(lambda ph: _phase_matrices(g.ops, ph, shears_sparse, model), keys)))
+            # pass 1, search grid: the evidence of every hypothesis (disparity, component, scale)
+            for (ph, sel), out in zip(cjobs, pool.map(lambda j: _evidence(
+                    data.T, data.W, g.ct[j[1]], g.cl[j[1]], p, phases[j[0]], log_pi, scales, first), cjobs)):
+                scores[sel] = out
+                bar.update(len(sel))
+            # the disparity: the evidence pooled over the neighbouring patches (one patch's evidence alone is
+            # noisy), read at the nearest search patch of every estimate patch
+            per_d = scores.reshape(len(g.ct), len(disparities), -1).max(axis=2)
+            pooled = _pool(per_d.reshape(len(g.ctops), len(g.clefts), -1), opt["pool_radius"])
+            iy, ix = _nearest(g.ctops, g.tops), _nearest(g.clefts, g.lefts)
+            chosen_d = pooled[iy[:, None], ix[None, :]].reshape(len(g.gt), -1).argmax(axis=1)
+
+            def solve(job):  # pass 2, estimate grid: the component and scale of largest evidence at that disparity
+                ph, sel = job
+                chosen, alpha = _best_at_disparity(data.T, data.W, g.gt[sel], g.gl[sel], p, phases[ph], log_pi,
+                                                   scales, chosen_d[sel])
+                return _estimate(data, g.gt[sel], g.gl[sel], p, phases[ph], chosen, shears_sparse, model, (nv, nu),
+                                 scales, alpha=alpha)
+
+            # the estimates added in a fixed order (the output does not depend on the threads)
+            for (ph, sel), est in zip(jobs, pool.map(solve, jobs)):
+                _add(acc, wacc, est, g.gt[sel], g.gl[sel], win)
+                bar.update(len(sel))
+    finally:
+        bar.close()
+    acc /= np.maximum(wacc, 1e-300)[None, None, :, :, None]
+    record = {"lfproc_version": __version__, "method": "gmm", "model": repr(model), "model_attrs": model.attrs,
+              **{k: opt[k] for k in ("stride", "search_stride", "disparities", "scales", "pool_radius")},
+              "search": search, "saturation": saturation,
+              "disparity_counts": np.bincount(chosen_d, minlength=len(disparities)).tolist(), "patches": int(len(g.gt))}
+    return _result(acc, capture, record, started)
+
+
+def _checked_options(capture, model, *, stride, search_stride, disparities, scales, pool_radius, search, saturation,
+                     chunk, threads) -> dict:
+    """The options of :func:`reconstruct_gmm`, checked (one line naming the option) and normalised."""
     check_choice("saturation", saturation, SATURATION_MODES)
     check_choice("search", search, SEARCHES)
-    threads = _int_option("threads", _default_threads() if threads is None else threads)
-    chunk = _int_option("chunk", chunk)
-    stride = _int_option("stride", stride)
-    search_stride = _int_option("search_stride", model.patch // 2 if search_stride is None else search_stride)
-    _check_capture(capture, model, stride)
-    _check_capture(capture, model, search_stride, name="search_stride")
+    out = {"threads": _int_option("threads", _default_threads() if threads is None else threads),
+           "chunk": _int_option("chunk", chunk), "stride": _int_option("stride", stride),
+           "search_stride": _int_option("search_stride", model.patch // 2 if search_stride is None else search_stride),
+           "pool_radius": _int_option("pool_radius", pool_radius, low=0)}
+    _check_capture(capture, model, out["stride"])
+    _check_capture(capture, model, out["search_stride"], name="search_stride")
     try:
-        disparities = [float(d) for d in disparities]
+        out["disparities"] = [float(d) for d in disparities]
     except (TypeError, ValueError):
         raise InputError(f"disparities: expected numbers, got {disparities!r}") from None
-    if not disparities or not all(math.isfinite(d) for d in disparities):
+    if not out["disparities"] or not all(math.isfinite(d) for d in out["disparities"]):
         raise InputError(f"disparities: expected at least one finite number, got {disparities!r}")
     try:
-        scales = sorted({float(v) for v in scales})
+        out["scales"] = sorted({float(v) for v in scales})
     except (TypeError, ValueError):
         raise InputError(f"scales: expected positive numbers, got {scales!r}") from None
-    if not scales or not all(math.isfinite(v) and v > 0 for v in scales):
+    if not out["scales"] or not all(math.isfinite(v) and v > 0 for v in out["scales"]):
         raise InputError(f"scales: expected positive numbers, got {scales!r}")
-    radius = _int_option("pool_radius", pool_radius, low=0)
-    nv, nu = capture.views
-    p, r = model.patch, model.margin
-    # S_d (V U P P 3, E E 3): at most 4 non-zeros a row (bilinear), so sparse
-    shears_sparse = [sparse.csr_matrix(np.kron(shear_matrix((nv, nu), p, r, d), np.eye(3))) for d in disparities]
+    return out
 
+
+class _Data(NamedTuple):
+    """The measurements of a capture as :func:`reconstruct_gmm` uses them, ``(S, H, W)`` each."""
+
+    T: np.ndarray  #: calibrated radiance (e-/s)
+    W: np.ndarray  #: weights 1/std, 0 where unusable
+    W_sat: np.ndarray  #: weights of saturated measurements used as bounds, 0 elsewhere
+
+
+def _measurements(capture, saturation: str) -> _Data:
+    """The observations (local photon-noise signal), saturated ones imputed or kept as bounds (module notes)."""
     obs = observations(capture, variance_from="local")
     T = np.asarray(obs.radiance, np.float64)
     W = np.asarray(obs.weight, np.float64)
@@ -420,84 +491,50 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
     if saturation == "bound":
         r = transmittance_map(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern, size=capture.size)
         T, W, W_sat = _impute_saturated(T, W, sat, W_sat, r)
-    h, w = capture.size
-    # two grids: the disparity is searched on patches every `search_stride` pixels (a surface is larger
-    # than a patch), the estimates are made every `stride` pixels (overlaps of several mask phases)
-    tops, lefts = patch_grid((h, w), p, stride)
-    gt, gl = np.repeat(tops, len(lefts)), np.tile(lefts, len(tops))
-    ctops, clefts = patch_grid((h, w), p, search_stride)
-    ct, cl = np.repeat(ctops, len(clefts)), np.tile(clefts, len(ctops))
-    ops = patch_operators(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern,
-                          tops=np.concatenate([gt, ct]), lefts=np.concatenate([gl, cl]), size=p, sensor_size=(h, w))
-    phase, cphase = ops.index[:len(gt)], ops.index[len(gt):]  # patches of one phase share their matrix Phi_p
-    acc = np.zeros((nv, nu, h, w, 3))
-    wacc = np.zeros((h, w))
-    x1 = (np.arange(p) + 0.5) / p
-    win = np.outer(np.sin(np.pi * x1) ** 2 + 1e-3, np.sin(np.pi * x1) ** 2 + 1e-3)
-    bar = progress(total=len(gt) + len(ct), desc="reconstruct (gmm)", unit="patch",
-                   disable=None if progress_bar is None else not progress_bar)
-    log_pi = np.log(model.weights)
-    n_s, n_k = len(scales), model.components
-    scores = np.full((len(ct), len(disparities) * n_k * n_s), -np.inf)
-    # "staged": the disparity at the scale nearest the model's own (1) only
-    first = [int(np.argmin(np.abs(np.log(scales))))] if search == "staged" else list(range(n_s))
-    cjobs = [(ph, members[start:start + chunk]) for ph in np.unique(cphase) for members in [np.flatnonzero(cphase == ph)]
-             for start in range(0, len(members), chunk)]
-    jobs = [(ph, members[start:start + chunk]) for ph in np.unique(phase) for members in [np.flatnonzero(phase == ph)]
+    return _Data(T, W, W_sat)
+
+
+class _Grids:
+    """The estimate grid (every ``stride`` pixels), the search grid (every ``search_stride``) and their operators."""
+
+    def __init__(self, capture, p: int, stride: int, search_stride: int):
+        self.tops, self.lefts = patch_grid(capture.size, p, stride)
+        self.gt, self.gl = np.repeat(self.tops, len(self.lefts)), np.tile(self.lefts, len(self.tops))
+        self.ctops, self.clefts = patch_grid(capture.size, p, search_stride)
+        self.ct, self.cl = np.repeat(self.ctops, len(self.clefts)), np.tile(self.clefts, len(self.ctops))
+        self.ops = patch_operators(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern,
+                                   tops=np.concatenate([self.gt, self.ct]), lefts=np.concatenate([self.gl, self.cl]),
+                                   size=p, sensor_size=capture.size)
+        # patches of one phase share their matrix Phi_p
+        self.phase, self.cphase = self.ops.index[:len(self.gt)], self.ops.index[len(self.gt):]
+
+
+def _add(acc, wacc, est: dict, tops, lefts, win) -> None:
+    """Add patch estimates to the light field's sums ``acc`` and their weights ``window x patch weight`` to ``wacc``."""
+    p = len(win)
+    for b, (t, l) in enumerate(zip(tops, lefts)):
+        q = win * est["weight"][b]
+        acc[:, :, t:t + p, l:l + p] += est["patches"][b] * q[None, None, :, :, None]
+        wacc[t:t + p, l:l + p] += q
+
+
+def _jobs(phase: np.ndarray, chunk: int) -> list:
+    """Chunks of at most ``chunk`` patches of one phase: ``[(phase, indices), ...]``, in a fixed order."""
+    return [(ph, members[start:start + chunk]) for ph in np.unique(phase) for members in [np.flatnonzero(phase == ph)]
             for start in range(0, len(members), chunk)]
 
-    try:
-        with threadpool_limits(1), ThreadPoolExecutor(max_workers=threads) as pool:
-            keys = np.unique(ops.index)
-            phases = dict(zip(keys, pool.map(lambda ph: _phase_matrices(ops, ph, shears_sparse, model), keys)))
-            # pass 1, search grid: the evidence of every hypothesis (disparity, component, scale)
-            for (ph, sel), out in zip(cjobs, pool.map(
-                    lambda j: _evidence(T, W, ct[j[1]], cl[j[1]], p, phases[j[0]], log_pi, scales, first), cjobs)):
-                scores[sel] = out
-                bar.update(len(sel))
-            # the disparity: the evidence pooled over the neighbouring patches (one patch's evidence alone is
-            # noisy), read at the nearest search patch of every estimate patch
-            per_d = scores.reshape(len(ct), len(disparities), -1).max(axis=2)
-            pooled = _pool(per_d.reshape(len(ctops), len(clefts), -1), radius)
-            iy, ix = _nearest(ctops, tops), _nearest(clefts, lefts)
-            chosen_d = pooled[iy[:, None], ix[None, :]].reshape(len(gt), -1).argmax(axis=1)
-            # pass 2, estimate grid: the component and scale of largest evidence at that disparity, its estimate
-            def solve(job):
-                ph, sel = job
-                chosen, alpha = _best_at_disparity(T, W, gt[sel], gl[sel], p, phases[ph], log_pi, scales, chosen_d[sel])
-                est = _estimate(T, W, W_sat, gt[sel], gl[sel], p, phases[ph], chosen, shears_sparse, model, (nv, nu), scales,
-                                alpha=alpha)
-                est["chosen"] = chosen
-                return est
 
-            # the estimates added in a fixed order (the output does not depend on the threads)
-            chosen_all = np.zeros(len(gt), np.intp)
-            for (ph, sel), est in zip(jobs, pool.map(solve, jobs)):
-                chosen_all[sel] = est["chosen"]
-                for b, i in enumerate(sel):
-                    t, l = gt[i], gl[i]
-                    q = win * est["weight"][b]
-                    acc[:, :, t:t + p, l:l + p] += est["patches"][b] * q[None, None, :, :, None]
-                    wacc[t:t + p, l:l + p] += q
-                bar.update(len(sel))
-    finally:
-        bar.close()
-    data = acc / np.maximum(wacc, 1e-300)[None, None, :, :, None]
-    del acc
-    negative = float((data < 0).mean())
+def _result(data: np.ndarray, capture, record: dict, started: float) -> LightField:
+    """The light field of the combined estimates (clipped at 0, in the light field's units) and its record."""
+    record["negative_fraction_clipped"] = float((data < 0).mean())
     np.maximum(data, 0, out=data)
     if capture.radiance_scale is not None:
         data /= float(capture.radiance_scale)
         units = capture.parameters.get("light_field_units") or "relative"
     else:
         units = "e-/s"
-    counts = np.bincount(chosen_d, minlength=len(disparities))
-    record = {"lfproc_version": __version__, "method": "gmm", "model": repr(model), "model_attrs": model.attrs,
-              "stride": stride, "search_stride": search_stride, "disparities": disparities, "scales": scales, "pool_radius": radius, "search": search,
-              "saturation": saturation,
-              "disparity_counts": counts.tolist(), "patches": int(len(gt)), "negative_fraction_clipped": negative,
-              "radiance_scale": capture.radiance_scale, "capture_ground_truth": capture.ground_truth,
-              "seconds": time.perf_counter() - started}
+    record.update(radiance_scale=capture.radiance_scale, capture_ground_truth=capture.ground_truth,
+                  seconds=time.perf_counter() - started)
     return LightField(data=data.astype(np.float32), units=units,
                       colour_space="camera-rgb" if capture.radiance_scale is None else "linear-srgb",
                       source="lfproc.reconstruct_gmm", attrs={"reconstruction": record})
@@ -640,11 +677,11 @@ def _best_at_disparity(T, W, tops, lefts, p, phase, log_pi, scales, chosen_d):
     return chosen, alpha
 
 
-def _estimate(T, W, W_sat, tops, lefts, p, phase, chosen, shears_sparse, model, views, scales, alpha=None) -> dict:
+def _estimate(data: _Data, tops, lefts, p, phase, chosen, shears_sparse, model, views, scales, alpha=None) -> dict:
     """The estimate of each patch under its chosen hypothesis, and its overlap weight (``alpha``: the first
     solution of every patch, when known)."""
-    yn, wn, level = _normalised(T, W, tops, lefts, p, phase["rowsum"])
-    ws = _gather(W_sat, tops, lefts, p) * level[:, None]
+    yn, wn, level = _normalised(data.T, data.W, tops, lefts, p, phase["rowsum"])
+    ws = _gather(data.W_sat, tops, lefts, p) * level[:, None]
     b_n = len(yn)
     patches = np.zeros((b_n, shears_sparse[0].shape[0]))
     weight = np.zeros(b_n)
