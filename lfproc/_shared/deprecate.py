@@ -82,3 +82,20 @@ def resolve_options(cls: type[_O], options: _O | None, keywords: dict[str, Any],
         raise TypeError(f"{func_name}(): {names} given both in {argument} and as keywords: pass one "
                         f"(dataclasses.replace({argument}, {sorted(keywords)[0]}=...) changes a field)")
     return options
+
+
+def former_module_names(implementation, package: str) -> Callable[[str], Any]:
+    """A module ``__getattr__`` for a package that was a flat module: its former private names still resolve.
+
+    ``lfproc.metrics`` (and synth, refocus, preview, dataset) were modules; as packages their public
+    names are the ``__all__`` of the package, and any other name a caller of the former module used
+    is looked up in ``implementation`` (the module that holds the code now).
+    """
+
+    def __getattr__(name: str) -> Any:
+        try:
+            return getattr(implementation, name)
+        except AttributeError:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}") from None
+
+    return __getattr__

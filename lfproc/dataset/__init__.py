@@ -6,6 +6,7 @@ The implementation is :mod:`lfproc.dataset._dataset`; this package was the modul
 ``lfproc.dataset``, whose other (private) names are still found here.
 """
 
+from .._shared.deprecate import former_module_names
 from . import _dataset
 from ._dataset import (EXPOSURE_FILES, MANIFEST_FIELDS, SCENE_OUTPUTS, Scene, build_dataset, find_scenes,
                        process_scene, read_exposure_file, read_manifest)
@@ -14,8 +15,5 @@ __all__ = ["Scene", "EXPOSURE_FILES", "read_exposure_file", "find_scenes", "proc
            "read_manifest", "SCENE_OUTPUTS", "MANIFEST_FIELDS"]
 
 
-def __getattr__(name):  # names of the former flat module lfproc.dataset that are not public
-    try:
-        return getattr(_dataset, name)
-    except AttributeError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+# names of the former flat module lfproc.dataset that are not public
+__getattr__ = former_module_names(_dataset, __name__)

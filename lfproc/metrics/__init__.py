@@ -4,6 +4,7 @@ The implementation is :mod:`lfproc.metrics._metrics`; this package was the modul
 whose other (private) names are still found here.
 """
 
+from .._shared.deprecate import former_module_names
 from . import _metrics
 from ._metrics import (
     ALIGN_MODES, align_result, EMITTER_SHARE_DOMINATES, error_stops, evaluate, evaluation_mask, hdr_figures,
@@ -12,36 +13,8 @@ from ._metrics import (
     pu2_psnr,
 )
 
-__all__ = [
-    "PU21_PARAMETERS",
-    "PU21_VARIANTS",
-    "PU21_L_MIN",
-    "PU21_L_MAX",
-    "PU21_PSNR_PEAK",
-    "PU21_LUMA",
-    "metric_luminance",
-    "pu21_encode",
-    "pu21_decode",
-    "pu2_encode",
-    "psnr",
-    "pu21_psnr",
-    "pu21_ssim",
-    "pu2_psnr",
-    "log_psnr",
-    "mean_relative_error",
-    "log_luminance_error",
-    "align_result",
-    "ALIGN_MODES",
-    "hdr_figures",
-    "EMITTER_SHARE_DOMINATES",
-    "evaluation_mask",
-    "error_stops",
-    "evaluate",
-]
+__all__ = list(_metrics.__all__)  # the public names, listed once (tests/test_api_surface.py pins them)
 
 
-def __getattr__(name):  # names of the former flat module lfproc.metrics that are not public
-    try:
-        return getattr(_metrics, name)
-    except AttributeError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+# names of the former flat module lfproc.metrics that are not public
+__getattr__ = former_module_names(_metrics, __name__)

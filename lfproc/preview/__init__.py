@@ -15,6 +15,7 @@ imported: importing a capture or a dictionary no longer changes :data:`PREVIEWS`
 
 from functools import partial
 
+from .._shared.deprecate import former_module_names
 from . import _preview
 from ._atoms import render_atoms
 from ._capture import PREVIEW_KINDS as CAPTURE_PREVIEW_KINDS
@@ -56,8 +57,5 @@ def _register_core_types() -> None:
 _register_core_types()
 
 
-def __getattr__(name):  # names of the former flat module lfproc.preview that are not public
-    try:
-        return getattr(_preview, name)
-    except AttributeError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+# names of the former flat module lfproc.preview that are not public
+__getattr__ = former_module_names(_preview, __name__)

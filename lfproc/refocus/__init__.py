@@ -4,6 +4,7 @@ The implementation is :mod:`lfproc.refocus._refocus`; this package was the modul
 whose other (private) names are still found here.
 """
 
+from .._shared.deprecate import former_module_names
 from . import _refocus
 from ._refocus import check_slopes, focal_stack, refocus
 
@@ -14,8 +15,5 @@ __all__ = [
 ]
 
 
-def __getattr__(name):  # names of the former flat module lfproc.refocus that are not public
-    try:
-        return getattr(_refocus, name)
-    except AttributeError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+# names of the former flat module lfproc.refocus that are not public
+__getattr__ = former_module_names(_refocus, __name__)

@@ -4,6 +4,7 @@ The implementation is :mod:`lfproc.synth._synth`; this package was the module ``
 whose other (private) names are still found here.
 """
 
+from .._shared.deprecate import former_module_names
 from . import _synth
 from ._synth import check_scene, Layer, render_layers, scene_layers, scene_names, SCENES, synthesize
 
@@ -18,8 +19,5 @@ __all__ = [
 ]
 
 
-def __getattr__(name):  # names of the former flat module lfproc.synth that are not public
-    try:
-        return getattr(_synth, name)
-    except AttributeError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+# names of the former flat module lfproc.synth that are not public
+__getattr__ = former_module_names(_synth, __name__)
