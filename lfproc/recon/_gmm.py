@@ -36,11 +36,13 @@ patches of four mask phases, whose errors differ and average out; a stride equal
 prints the mask's period on the result (a grid over smooth regions, measured on the tune
 scenes: detail ratio 1.23 at stride 4, 0.99 at stride 2).
 
-Overlapping patches are combined per pixel with weights ``window / (t^2 max(1, chi2))``: a
+Overlapping patches are combined per pixel with weights ``window / ((t^2 + n^2) max(1, chi2))``: a
 centre-weighted window, ``t`` the larger of the patch's level and the brightest pixel of its
 centre-view estimate (an error relative to the patch's brightest part: a patch across the edge
-of a light has a low mean but the light's error), and the patch's reduced chi-square (a patch
-that fits its data badly, an occlusion edge, counts less).
+of a light has a low mean but the light's error), ``n`` the radiance one of its measurements
+resolves (the median of ``1 / (w r)``: without it, patches estimated near 0 in a region at the
+noise floor outweigh their neighbours and print dark blobs), and the patch's reduced chi-square
+(a patch that fits its data badly, an occlusion edge, counts less).
 
 The mask must be periodic (``mask_period``): every patch of a phase then shares ``A_d`` and
 ``A_d Sigma A_d^T`` (computed once per phase, disparity and component).
@@ -707,8 +709,18 @@ def _estimate(data: _Data, tops, lefts, p, phase, chosen, shears_sparse, model, 
         # the error of a patch is relative to its brightest part (its mean understates it across the edge of a light)
         centre = patches[g].reshape(len(g), views[0], views[1], p, p, 3)[:, views[0] // 2, views[1] // 2]
         top = np.maximum(centre.mean(axis=3).max(axis=(1, 2)), level[g])
-        weight[g] = 1.0 / (top ** 2 * np.maximum(chi2, 1.0))
+        # ... but not below its noise: the radiance one measurement resolves (std 1 / (w r), the median over the
+        # patch's usable measurements); else the patches estimated near 0 in a dark region outweigh the others
+        noise = level[g] * _median_noise(wn[g], phase["rowsum"])
+        weight[g] = 1.0 / ((top ** 2 + noise ** 2) * np.maximum(chi2, 1.0))
     return {"patches": patches.reshape(b_n, *views, p, p, 3), "weight": weight}
+
+
+def _median_noise(wn: np.ndarray, rowsum: np.ndarray) -> np.ndarray:
+    """Per patch, the median of ``1 / (w r)`` over its usable measurements (level units); 0 when none."""
+    sig = np.where(wn > 0, 1.0 / np.maximum(wn * rowsum[None], 1e-300), np.nan)
+    out = np.nanmedian(np.where(np.isnan(sig).all(axis=1, keepdims=True), 0.0, sig), axis=1)
+    return np.nan_to_num(out)
 
 
 def _wiener(kmat, a_mu, y, w, log_prior, want_solution=True):

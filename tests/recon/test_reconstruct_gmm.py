@@ -348,3 +348,13 @@ def test_saturated_measurement_takes_the_level_of_its_neighbours_above_its_bound
     T[0, 8, 6] = 2.0
     value, weight, w_sat = _impute_saturated(T, W, sat, W_sat, r)
     assert value[0, 6, 6] == 20.0 and weight[0, 6, 6] == 0.0 and w_sat[0, 6, 6] == 0.5
+
+
+def test_median_noise_of_a_patch_is_one_measurements_radiance_std():
+    """Known answer for ``_median_noise``: std of T is 1/w, a measurement of transmittance r resolves
+    radiance to 1/(w r); the median over the usable (w > 0) measurements; 0 for a patch without any."""
+    from lfproc.recon._gmm import _median_noise
+
+    wn = np.array([[1.0, 2.0, 4.0, 0.0], [0.0, 0.0, 0.0, 0.0]])
+    rowsum = np.array([2.0, 2.0, 2.0, 5.0])
+    np.testing.assert_allclose(_median_noise(wn, rowsum), [0.25, 0.0])  # median of 1/2, 1/4, 1/8
