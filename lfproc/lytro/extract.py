@@ -257,9 +257,7 @@ def extract_lfp(path: str | os.PathLike, out_dir: str | os.PathLike, *, force: b
                 verify: bool = True) -> dict[str, Any]:
     """Write what a Lytro container holds into ``out_dir`` (see the module documentation).
 
-    Every section is written as a file named by its kind (``metadata.json``,
-    ``raw_lenslet.bin``, ``thumbnail_00.jpg``, embedded images, depth maps...), with
-    ``table_of_contents.json`` and an index, ``extracted.json``.
+    One file per section, named by its kind, plus ``table_of_contents.json`` and ``extracted.json``.
 
     Parameters
     ----------
