@@ -13,13 +13,8 @@ captures only those are the bracket; files named ``truth.*`` (the ground truth w
 
 Exposure times come from each input's metadata (EXIF ``ExposureTime``, lfproc's ``exposure_s``,
 Lytro metadata) unless the scene folder holds an **exposure file** (:data:`EXPOSURE_FILES`),
-which then gives them for every input of the bracket:
-
-* ``exposures.txt``: one line per input, ``NAME SECONDS`` (``img_1.jpg 1/8``; seconds as a
-  number or a fraction), or only ``SECONDS`` lines in the order of the inputs' sorted names;
-  ``#`` starts a comment; or Debevec's HDRShop image list (``NAME 1/t F_STOP ...`` lines, as
-  ``memorial.hdr_image_list.txt``; see :func:`read_exposure_file`);
-* ``exposures.json``: ``{"NAME": SECONDS, ...}`` or a list of seconds in that order.
+which then gives them for every input of the bracket: ``exposures.txt`` or ``exposures.json``
+(see "Exposure files" below).
 
 Layout of ``DATASET_DIR`` (every file written atomically)::
 
@@ -36,6 +31,26 @@ written as a whole (temporary folder, then rename) before the done-record, so an
 run leaves either a finished scene or none. A failed scene is reported and does not stop the
 others. A new run removes the hidden temporaries a killed run left (those whose process is gone:
 :func:`lfproc.io.clean_stale`).
+
+Exposure files
+--------------
+The forms :func:`read_exposure_file` reads (``#`` starts a comment):
+
+* ``NAME SECONDS`` lines (``img_1.jpg 1/8``; seconds as a number or a fraction);
+* ``SECONDS`` lines only, in the order of the inputs' sorted names (``bare_order="sorted"``,
+  ``lfproc dataset build``) or in the inputs' order (``bare_order="inputs"``, ``lfproc merge``);
+* Debevec's HDRShop image list (``memorial.hdr_image_list.txt`` of the Memorial bracket): an
+  optional first line holding the number of images, then ``NAME 1/SHUTTER_SPEED F_STOP
+  [GAIN_DB [ND_FILTERS]]`` lines. Recognised by its lines of 3 to 5 fields, or by a comment
+  naming ``1/shutter_speed`` (then 2-field lines are ``NAME 1/t`` too). The second field is
+  the *inverse* exposure time: ``memorial0061.png 0.03125 8 0 0`` is 32 s. The aperture,
+  gain and ND filter must be the same on every line (lfproc merges exposure times only);
+  the image count must match the lines;
+* JSON (``.json``): ``{"NAME": SECONDS, ...}`` or a list of seconds.
+
+Names are matched to the inputs' file names, or to the file names without their suffix when
+that is unique (the Memorial list names ``.ppm`` files, usually shipped as ``.png``). Errors
+name the file and line and what is missing or extra.
 """
 
 from __future__ import annotations
@@ -176,23 +191,9 @@ def _match_names(path: Path, by_name: dict[str, float], names: list[str]) -> lis
 def read_exposure_file(path: str | os.PathLike, inputs, *, bare_order: str = "sorted") -> list[float]:
     """Exposure times (s) of ``inputs`` (paths, in bracket order) from an exposure file.
 
-    Forms (``#`` starts a comment):
-
-    * ``NAME SECONDS`` lines (``img_1.jpg 1/8``; seconds as a number or a fraction);
-    * ``SECONDS`` lines only, in the order of the inputs' sorted names (``bare_order="sorted"``,
-      ``lfproc dataset build``) or in the inputs' order (``bare_order="inputs"``, ``lfproc merge``);
-    * Debevec's HDRShop image list (``memorial.hdr_image_list.txt`` of the Memorial bracket): an
-      optional first line holding the number of images, then ``NAME 1/SHUTTER_SPEED F_STOP
-      [GAIN_DB [ND_FILTERS]]`` lines. Recognised by its lines of 3 to 5 fields, or by a comment
-      naming ``1/shutter_speed`` (then 2-field lines are ``NAME 1/t`` too). The second field is
-      the *inverse* exposure time: ``memorial0061.png 0.03125 8 0 0`` is 32 s. The aperture,
-      gain and ND filter must be the same on every line (lfproc merges exposure times only);
-      the image count must match the lines;
-    * JSON (``.json``): ``{"NAME": SECONDS, ...}`` or a list of seconds.
-
-    Names are matched to the inputs' file names, or to the file names without their suffix when
-    that is unique (the Memorial list names ``.ppm`` files, usually shipped as ``.png``). Errors
-    name the file and line and what is missing or extra.
+    Forms: ``NAME SECONDS`` lines, bare ``SECONDS`` lines, Debevec's HDRShop image list or JSON
+    (see "Exposure files" in the module documentation). Errors name the file and line and what
+    is missing or extra.
 
     Parameters
     ----------
@@ -218,11 +219,12 @@ def read_exposure_file(path: str | os.PathLike, inputs, *, bare_order: str = "so
 
     Examples
     --------
+    >>> from pathlib import Path
     >>> from lfproc.dataset import read_exposure_file
-    >>> _ = open("exposures.txt", "w").write("# name seconds\\nb.jpg 1/8\\na.jpg 2\\n")
+    >>> _ = Path("exposures.txt").write_text("# name seconds\\nb.jpg 1/8\\na.jpg 2\\n")
     >>> read_exposure_file("exposures.txt", ["a.jpg", "b.jpg"])
     [2.0, 0.125]
-    >>> _ = open("list.txt", "w").write("memorial0061.png 0.03125 8 0 0\\nmemorial0062.png 0.0625 8 0 0\\n")
+    >>> _ = Path("list.txt").write_text("memorial0061.png 0.03125 8 0 0\\nmemorial0062.png 0.0625 8 0 0\\n")
     >>> read_exposure_file("list.txt", ["memorial0061.png", "memorial0062.png"])    # HDRShop: 1/t
     [32.0, 16.0]
     """
@@ -340,11 +342,11 @@ def find_scenes(scenes_dir: str | os.PathLike) -> list[Scene]:
 
     Examples
     --------
-    >>> import os
+    >>> from pathlib import Path
     >>> from lfproc.dataset import find_scenes
     >>> for name in ("scenes/b/img_1.jpg", "scenes/b/img_2.jpg", "scenes/a/view.exr", "scenes/a/truth.exr"):
-    ...     os.makedirs(os.path.dirname(name), exist_ok=True)
-    ...     open(name, "wb").close()
+    ...     Path(name).parent.mkdir(parents=True, exist_ok=True)
+    ...     Path(name).touch()
     >>> [(s.name, [p.name for p in s.inputs]) for s in find_scenes("scenes")]
     [('a', ['view.exr']), ('b', ['img_1.jpg', 'img_2.jpg'])]
     """
@@ -413,16 +415,16 @@ def process_scene(
 
     Examples
     --------
-    >>> import os
+    >>> from pathlib import Path
     >>> import numpy as np
     >>> import lfproc
     >>> from lfproc.dataset import find_scenes, process_scene
-    >>> os.makedirs("scenes/room")
+    >>> Path("scenes/room").mkdir(parents=True)
     >>> radiance = np.geomspace(0.05, 20, 16 * 16 * 3, dtype=np.float32).reshape(1, 1, 16, 16, 3)
     >>> for i, t in enumerate([0.05, 0.5]):       # a two-exposure bracket, clipping at 1
     ...     shot = lfproc.LightField(np.minimum(radiance * t, 1), saturation_level=1.0)
     ...     _ = lfproc.write_lightfield(shot, f"scenes/room/shot_{i}.exr")
-    >>> _ = open("scenes/room/exposures.txt", "w").write("shot_0.exr 1/20\\nshot_1.exr 0.5\\n")
+    >>> _ = Path("scenes/room/exposures.txt").write_text("shot_0.exr 1/20\\nshot_1.exr 0.5\\n")
     >>> row = process_scene(find_scenes("scenes")[0], "dataset")
     >>> row["method"], row["exposures_s"], row["hdr"]
     ('debevec', [0.05, 0.5], 'scenes/room/hdr.exr')

@@ -599,7 +599,8 @@ def write_response(
     >>> g = np.log(np.arange(1, 257) / 128)        # a linear camera: f^-1(z) = z / 128
     >>> write_response("response.csv", g)
     [PosixPath('response.csv')]
-    >>> print("".join(open("response.csv").readlines()[:3]))
+    >>> from pathlib import Path
+    >>> print("\\n".join(Path("response.csv").read_text().splitlines()[:3]))
     code,Y,ln_Y
     0,0.0078125,-4.85203026
     1,0.015625,-4.15888308
