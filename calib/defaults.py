@@ -60,7 +60,8 @@ def paper_profile(level: str) -> CameraProfile:
         dark_current_e_per_s=dark,
         isos=_iso_table(PAPER_ISOS, adc_bits=PAPER_ADC_BITS, full_well_e=PAPER_FULL_WELL_E, read_noise_e=read,
                         dark_current_e_per_s=dark, black_level_dn=PAPER_BLACK_DN),
-        source={"kind": "nominal", "reference": "Miandji et al., Compressive HDR Light Field Imaging Using a Single Multi-ISO Sensor, IEEE TCI 2021, Table VI"},
+        source={"kind": "nominal", "reference": "Miandji et al., Compressive HDR Light Field Imaging Using a Single "
+                                                "Multi-ISO Sensor, IEEE TCI 2021, Table VI"},
     )
 
 
@@ -89,7 +90,8 @@ def illum_profile() -> CameraProfile:
         dark_current_e_per_s=1.0,
         isos=_iso_table(isos, adc_bits=10, full_well_e=4500.0, read_noise_e=2.5, dark_current_e_per_s=1.0,
                         black_level_dn=64.0),
-        source={"kind": "nominal", "reference": "Lytro Illum frame metadata (levels, CFA), as decoded by Dansereau et al., CVPR 2013; other figures typical"},
+        source={"kind": "nominal", "reference": "Lytro Illum frame metadata (levels, CFA), as decoded by Dansereau "
+                                                "et al., CVPR 2013; other figures typical"},
     )
 
 

@@ -9,9 +9,9 @@ Layouts lfproc reads and writes:
   lfproc version, angular shape, view index, units, colour space, exposure, ISO, source
   and free attributes) and ``lfproc_version``.
 * **A folder of views** ``view_RR_CC.<ext>`` with ext ``exr``, ``png``, ``tif``/``tiff``
-  or ``hdr`` (the layout of ``shared/data/lightfields``). 8/16-bit views are sRGB
-  decoded to linear. lfproc also writes ``lightfield.json`` (the same metadata) and, when the
-  light field has one, the centre view's disparity ``disparity.pfm`` next to them; folders
+  or ``hdr``; ``RR`` and ``CC`` are the 1-based angular row and column (:func:`view_name`).
+  8/16-bit views are sRGB decoded to linear. lfproc also writes ``lightfield.json`` (the same
+  metadata) and, when the light field has one, the centre view's disparity ``disparity.pfm`` next to them; folders
   without them get defaults. Any name that is not ``.exr`` or an image suffix is a folder
   (``out``, ``out.views``). Writing 8/16-bit views clips values above 1 and warns
   (:class:`~lfproc.errors.SaturationWarning`).
