@@ -1,7 +1,8 @@
 """Measure a camera profile from bias, dark and flat frames (or an EMVA 1288 data set).
 
-Per ISO (hdr-and-calibration.md section 2.4; every figure also per CFA position when
-the frames have a CFA):
+Per ISO, following EMVA Standard 1288 (release 3.1, 2016, and release 4.0 Linear, 2021) and
+Janesick's photon transfer method (J. R. Janesick, "Photon Transfer", SPIE Press, 2007); every
+figure also per CFA position when the frames have a CFA:
 
 1. **Black level / bias frame**: master bias = mean of the bias frames; black level =
    its mean (minus the dark signal of the bias exposure, when the dark current is known).
@@ -87,7 +88,7 @@ _BLACK_CLIP_FRACTION = 1e-3
 class CalibrationResult:
     """What :func:`calibrate` measured.
 
-    Attributes
+    Parameters
     ----------
     profile : CameraProfile
         The measured profile (master bias frames in ``bias_frames``).
@@ -103,10 +104,23 @@ class CalibrationResult:
     hot_pixels : dict
         ISO -> boolean hot-pixel mask (H, W).
     notes : list of str
+        Remarks on the measurement (e.g. figures taken from a fallback).
     source : dict
+        The input (path, kind, frame counts) and the options used.
     iso_keys : dict
         Key of ``figures`` -> the ISO the profile stores it under (``{"default": 100}`` for EMVA
         data); each figure dict also holds it as ``"iso"``.
+
+    Examples
+    --------
+    >>> from lfproc.calib import calibrate, simulate_frames
+    >>> manifest = simulate_frames("paper-medium", "frames", isos=[100, 400], size=(64, 64), random_state=0)
+    >>> result = calibrate(manifest)
+    >>> sorted(result.figures), result.profile.iso_values, result.iso("400")
+    (['100', '400'], [100, 400], 400)
+    >>> fig = result.profile.iso_figures(400)        # paper-medium: 0.819 DN/e-, 2 e-, black 64
+    >>> round(fig.gain_dn_per_e, 2), round(fig.read_noise_e), round(fig.black_level_dn)
+    (0.81, 2, 64)
     """
 
     profile: CameraProfile
@@ -716,12 +730,29 @@ def find_calibration_input(path: str | os.PathLike) -> Path:
     """The calibration input ``path`` names: the file itself, or, for a folder, the frame manifest
     (``manifest.json``, else ``manifest.csv``) or the one EMVA 1288 descriptor inside it.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A manifest, a descriptor, or a folder holding one.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path`` itself when it is a file, else the input found in the folder.
+
     Raises
     ------
     MissingFileError
         ``path`` does not exist.
     InputError
         A folder holding neither, or several descriptors and no manifest (they are named).
+
+    Examples
+    --------
+    >>> from lfproc.calib import find_calibration_input, simulate_frames
+    >>> _ = simulate_frames("paper-low", "emva", format="emva", size=(16, 16))
+    >>> find_calibration_input("emva")
+    PosixPath('emva/emva1288.txt')
     """
     path = Path(path)
     if not path.exists():
@@ -783,6 +814,7 @@ def calibrate(
     Returns
     -------
     CalibrationResult
+        The measured profile, every figure per ISO, the unknowns and the plot data.
 
     Raises
     ------

@@ -11,7 +11,8 @@ from lfproc.sensor import CameraProfile, IsoFigures, paper_gain_dn_per_e, save_p
 
 __all__ = ["paper_profile", "illum_profile", "build_all"]
 
-# The paper's simulated sensor (method.md section 2). The paper gives the noise levels
+# The paper's simulated sensor (Miandji et al., "Compressive HDR Light Field Imaging Using a
+# Single Multi-ISO Sensor", IEEE TCI 2021, section IV). The paper gives the noise levels
 # (Table VI) and the gain formula but not the ADC depth, full well or black level: lfproc
 # chooses a 12-bit ADC, a 20000 e- full well (as DeepULFCam's sensor model) and a 64 DN
 # black level so that read noise below black is kept, not clipped.
@@ -59,12 +60,17 @@ def paper_profile(level: str) -> CameraProfile:
         dark_current_e_per_s=dark,
         isos=_iso_table(PAPER_ISOS, adc_bits=PAPER_ADC_BITS, full_well_e=PAPER_FULL_WELL_E, read_noise_e=read,
                         dark_current_e_per_s=dark, black_level_dn=PAPER_BLACK_DN),
-        source={"kind": "nominal", "reference": "Miandji et al., IEEE TCI, Table VI; method.md section 2"},
+        source={"kind": "nominal", "reference": "Miandji et al., Compressive HDR Light Field Imaging Using a Single "
+                                                "Multi-ISO Sensor, IEEE TCI 2021, Table VI"},
     )
 
 
 def illum_profile() -> CameraProfile:
-    """A nominal Lytro Illum: 10-bit raw, black 64, white 1023, GRBG (lytro-format.md).
+    """A nominal Lytro Illum: 10-bit raw, black 64, white 1023, GRBG.
+
+    The levels and the mosaic are those an Illum's frame metadata records, as read by the
+    Light Field Toolbox (D. G. Dansereau, O. Pizarro and S. B. Williams, "Decoding, Calibration
+    and Rectification for Lenselet-Based Plenoptic Cameras", CVPR 2013).
 
     The Illum's full well, read noise and dark current are not published; the values here
     (4500 e-, 2.5 e-, 1 e-/s) are typical of 1.4 um-pixel CMOS sensors and are marked as
@@ -84,7 +90,8 @@ def illum_profile() -> CameraProfile:
         dark_current_e_per_s=1.0,
         isos=_iso_table(isos, adc_bits=10, full_well_e=4500.0, read_noise_e=2.5, dark_current_e_per_s=1.0,
                         black_level_dn=64.0),
-        source={"kind": "nominal", "reference": "lytro-format.md (levels, CFA); other figures typical"},
+        source={"kind": "nominal", "reference": "Lytro Illum frame metadata (levels, CFA), as decoded by Dansereau "
+                                                "et al., CVPR 2013; other figures typical"},
     )
 
 

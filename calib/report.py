@@ -332,10 +332,24 @@ def _plots(result: CalibrationResult, folder: Path) -> list[str]:
 def write_report(result: CalibrationResult, out_dir: str | os.PathLike, *, force: bool = False) -> list[Path]:
     """Write the calibration report folder (see the module documentation).
 
+    Parameters
+    ----------
+    result : CalibrationResult
+        What :func:`lfproc.calib.calibrate` measured.
+    out_dir : str or os.PathLike
+        The report folder, written atomically.
+    force : bool, default False
+        Replace an existing folder.
+
     Returns
     -------
     list of Path
-        The files written.
+        The files written: the plots the figures allow, ``summary.md`` and ``figures.json``.
+
+    Raises
+    ------
+    lfproc.errors.OutputExistsError
+        ``out_dir`` exists and ``force`` is false.
     """
     out_dir = Path(out_dir)
     with atomic_dir(out_dir, force=force) as tmp:

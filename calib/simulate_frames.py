@@ -98,9 +98,12 @@ def simulate_frames(
     Parameters
     ----------
     profile : CameraProfile, shipped name or JSON path
+        The camera whose frames are simulated.
     out_dir : str or Path
         Output folder (written atomically; refused if it exists unless ``force``).
     format : {"manifest", "emva"}
+        Bias, dark and flat frames as 16-bit PNGs with ``manifest.csv``/``manifest.json``, or an
+        EMVA 1288 data set (descriptor ``emva1288.txt`` and its frames).
     isos : sequence of float, optional
         ISOs to simulate (default: all the profile's ISOs; for ``"emva"``, its lowest ISO).
         ``"emva"`` takes one ISO.
@@ -116,6 +119,16 @@ def simulate_frames(
     -------
     Path
         The manifest (``manifest.csv``) or the descriptor (``emva1288.txt``).
+
+    Examples
+    --------
+    >>> from lfproc.calib import calibrate, simulate_frames
+    >>> descriptor = simulate_frames("paper-medium", "emva", format="emva", size=(32, 32), random_state=0)
+    >>> descriptor
+    PosixPath('emva/emva1288.txt')
+    >>> fig = calibrate(descriptor).profile.iso_figures(100)     # EMVA data are stored as ISO 100
+    >>> round(fig.gain_dn_per_e, 2), round(fig.black_level_dn)     # paper-medium: 0.20475 DN/e-, 64 DN
+    (0.2, 64)
     """
     profile = load_profile(profile)
     check_choice("format", format, ("manifest", "emva"))

@@ -135,6 +135,30 @@ class LightField(ReadOnlyState):
         Where the data came from (a path, ``"synth:layers"``...).
     attrs : mapping
         Further JSON-serialisable metadata (kept through files).
+
+    Raises
+    ------
+    lfproc.errors.ShapeError
+        ``data`` is not a 5-axis numeric array, or ``variance``/``disparity`` do not match it.
+    lfproc.errors.InputError
+        NaN, Inf or negative values, unknown ``units``, or a non-positive ``exposure_s``,
+        ``iso`` or ``saturation_level``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import lfproc
+    >>> data = np.arange(5 * 5 * 2 * 3 * 3, dtype=np.float32).reshape(5, 5, 2, 3, 3)
+    >>> lf = lfproc.LightField(data, units="e-/s")
+    >>> lf.views, lf.size, lf.channels, lf.centre_index
+    ((5, 5), (2, 3), 3, (2, 2))
+    >>> centre = lf.centre()        # an (H, W, C) read-only array, not a LightField
+    >>> centre.shape, bool(np.array_equal(centre, data[2, 2])), centre.flags.writeable
+    ((2, 3, 3), True, False)
+    >>> lf.central(3).views, lf.crop(0, 1, 2, 2).size
+    ((3, 3), (2, 2))
+    >>> lf.replace(units="relative").units
+    'relative'
     """
 
     data: np.ndarray

@@ -1,4 +1,8 @@
-"""Building an HDR light-field data set from folders of exposure brackets (method.md section 8).
+"""Building an HDR light-field data set from folders of exposure brackets.
+
+As the natural HDR light-field data set of Miandji et al., "Compressive HDR Light Field Imaging
+Using a Single Multi-ISO Sensor" (IEEE TCI 2021, section IV-A): Lytro Illum brackets of each
+scene, decoded and merged into one HDR light field per scene.
 
 Layout of ``SCENES_DIR``: one folder per scene holding its bracket (Lytro captures, or
 decoded light-field EXRs / view folders, or 2-D images: anything :func:`lfproc.bracket.read_bracket`
@@ -9,13 +13,8 @@ captures only those are the bracket; files named ``truth.*`` (the ground truth w
 
 Exposure times come from each input's metadata (EXIF ``ExposureTime``, lfproc's ``exposure_s``,
 Lytro metadata) unless the scene folder holds an **exposure file** (:data:`EXPOSURE_FILES`),
-which then gives them for every input of the bracket:
-
-* ``exposures.txt``: one line per input, ``NAME SECONDS`` (``img_1.jpg 1/8``; seconds as a
-  number or a fraction), or only ``SECONDS`` lines in the order of the inputs' sorted names;
-  ``#`` starts a comment; or Debevec's HDRShop image list (``NAME 1/t F_STOP ...`` lines, as
-  ``memorial.hdr_image_list.txt``; see :func:`read_exposure_file`);
-* ``exposures.json``: ``{"NAME": SECONDS, ...}`` or a list of seconds in that order.
+which then gives them for every input of the bracket: ``exposures.txt`` or ``exposures.json``
+(see "Exposure files" below).
 
 Layout of ``DATASET_DIR`` (every file written atomically)::
 
@@ -32,6 +31,26 @@ written as a whole (temporary folder, then rename) before the done-record, so an
 run leaves either a finished scene or none. A failed scene is reported and does not stop the
 others. A new run removes the hidden temporaries a killed run left (those whose process is gone:
 :func:`lfproc.io.clean_stale`).
+
+Exposure files
+--------------
+The forms :func:`read_exposure_file` reads (``#`` starts a comment):
+
+* ``NAME SECONDS`` lines (``img_1.jpg 1/8``; seconds as a number or a fraction);
+* ``SECONDS`` lines only, in the order of the inputs' sorted names (``bare_order="sorted"``,
+  ``lfproc dataset build``) or in the inputs' order (``bare_order="inputs"``, ``lfproc merge``);
+* Debevec's HDRShop image list (``memorial.hdr_image_list.txt`` of the Memorial bracket): an
+  optional first line holding the number of images, then ``NAME 1/SHUTTER_SPEED F_STOP
+  [GAIN_DB [ND_FILTERS]]`` lines. Recognised by its lines of 3 to 5 fields, or by a comment
+  naming ``1/shutter_speed`` (then 2-field lines are ``NAME 1/t`` too). The second field is
+  the *inverse* exposure time: ``memorial0061.png 0.03125 8 0 0`` is 32 s. The aperture,
+  gain and ND filter must be the same on every line (lfproc merges exposure times only);
+  the image count must match the lines;
+* JSON (``.json``): ``{"NAME": SECONDS, ...}`` or a list of seconds.
+
+Names are matched to the inputs' file names, or to the file names without their suffix when
+that is unique (the Memorial list names ``.ppm`` files, usually shipped as ``.png``). Errors
+name the file and line and what is missing or extra.
 """
 
 from __future__ import annotations
@@ -84,7 +103,24 @@ MANIFEST_FIELDS = ("scene", "method", "exposures_s", "dynamic_range_stops", "sat
 
 @dataclass(frozen=True)
 class Scene:
-    """One scene folder: its name, bracket inputs and optional calibration data."""
+    """One scene folder: its name, bracket inputs and optional calibration data.
+
+    Made by :func:`find_scenes`.
+
+    Parameters
+    ----------
+    name : str
+        The scene's name (its folder's name).
+    folder : pathlib.Path
+        The scene folder.
+    inputs : tuple of pathlib.Path
+        The bracket, sorted by name: the Lytro captures when there are any, else every image,
+        light-field file and folder of views (``truth.*`` and hidden files left out).
+    caldata : pathlib.Path, optional
+        Lytro calibration data (a file or folder whose name starts with ``caldata``).
+    exposure_file : pathlib.Path, optional
+        ``exposures.txt`` or ``exposures.json`` when the folder holds one.
+    """
 
     name: str
     folder: Path
@@ -155,23 +191,42 @@ def _match_names(path: Path, by_name: dict[str, float], names: list[str]) -> lis
 def read_exposure_file(path: str | os.PathLike, inputs, *, bare_order: str = "sorted") -> list[float]:
     """Exposure times (s) of ``inputs`` (paths, in bracket order) from an exposure file.
 
-    Forms (``#`` starts a comment):
+    Forms: ``NAME SECONDS`` lines, bare ``SECONDS`` lines, Debevec's HDRShop image list or JSON
+    (see "Exposure files" in the module documentation). Errors name the file and line and what
+    is missing or extra.
 
-    * ``NAME SECONDS`` lines (``img_1.jpg 1/8``; seconds as a number or a fraction);
-    * ``SECONDS`` lines only, in the order of the inputs' sorted names (``bare_order="sorted"``,
-      ``lfproc dataset build``) or in the inputs' order (``bare_order="inputs"``, ``lfproc merge``);
-    * Debevec's HDRShop image list (``memorial.hdr_image_list.txt`` of the Memorial bracket): an
-      optional first line holding the number of images, then ``NAME 1/SHUTTER_SPEED F_STOP
-      [GAIN_DB [ND_FILTERS]]`` lines. Recognised by its lines of 3 to 5 fields, or by a comment
-      naming ``1/shutter_speed`` (then 2-field lines are ``NAME 1/t`` too). The second field is
-      the *inverse* exposure time: ``memorial0061.png 0.03125 8 0 0`` is 32 s. The aperture,
-      gain and ND filter must be the same on every line (lfproc merges exposure times only);
-      the image count must match the lines;
-    * JSON (``.json``): ``{"NAME": SECONDS, ...}`` or a list of seconds.
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The exposure file (``.txt`` or ``.json``).
+    inputs : sequence of str or os.PathLike
+        The bracket's inputs, in bracket order.
+    bare_order : {"sorted", "inputs"}, default "sorted"
+        The order of bare ``SECONDS`` lines (see above).
 
-    Names are matched to the inputs' file names, or to the file names without their suffix when
-    that is unique (the Memorial list names ``.ppm`` files, usually shipped as ``.png``). Errors
-    name the file and line and what is missing or extra.
+    Returns
+    -------
+    list of float
+        One exposure time in seconds per input, in the order of ``inputs``.
+
+    Raises
+    ------
+    MissingFileError
+        No such file.
+    InputError
+        A malformed line, a missing or extra name, a count that does not match, or different
+        apertures, gains or filters in an HDRShop list.
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> from lfproc.dataset import read_exposure_file
+    >>> _ = Path("exposures.txt").write_text("# name seconds\\nb.jpg 1/8\\na.jpg 2\\n")
+    >>> read_exposure_file("exposures.txt", ["a.jpg", "b.jpg"])
+    [2.0, 0.125]
+    >>> _ = Path("list.txt").write_text("memorial0061.png 0.03125 8 0 0\\nmemorial0062.png 0.0625 8 0 0\\n")
+    >>> read_exposure_file("list.txt", ["memorial0061.png", "memorial0062.png"])    # HDRShop: 1/t
+    [32.0, 16.0]
     """
     path = Path(path)
     if bare_order not in ("sorted", "inputs"):
@@ -266,7 +321,35 @@ def _check_exposures(scene: Scene) -> None:
 
 
 def find_scenes(scenes_dir: str | os.PathLike) -> list[Scene]:
-    """The scene folders of ``scenes_dir`` (sorted by name; hidden folders ignored)."""
+    """The scene folders of ``scenes_dir`` (sorted by name; hidden folders ignored).
+
+    Parameters
+    ----------
+    scenes_dir : str or os.PathLike
+        A folder holding one folder per scene.
+
+    Returns
+    -------
+    list of Scene
+        One per scene folder, sorted by name.
+
+    Raises
+    ------
+    MissingFileError
+        No such folder.
+    InputError
+        No scene folder in it.
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> from lfproc.dataset import find_scenes
+    >>> for name in ("scenes/b/img_1.jpg", "scenes/b/img_2.jpg", "scenes/a/view.exr", "scenes/a/truth.exr"):
+    ...     Path(name).parent.mkdir(parents=True, exist_ok=True)
+    ...     Path(name).touch()
+    >>> [(s.name, [p.name for p in s.inputs]) for s in find_scenes("scenes")]
+    [('a', ['view.exr']), ('b', ['img_1.jpg', 'img_2.jpg'])]
+    """
     scenes_dir = Path(scenes_dir)
     if not scenes_dir.is_dir():
         raise MissingFileError(f"{scenes_dir}: no such scenes folder")
@@ -304,6 +387,50 @@ def process_scene(
     Writes ``scenes/<name>/`` (atomically, as a whole) and then ``done/<name>.json``. lfproc's
     warnings raised while merging (:class:`lfproc.errors.SaturationWarning`...) are recorded
     in the row's ``warnings`` (``"Category: message"`` strings) instead of being emitted.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene (from :func:`find_scenes`).
+    out_dir : str or os.PathLike
+        The data-set folder.
+    method : {"ml", "debevec"}, optional
+        The merge (default: chosen by :func:`lfproc.hdr.merge_files`).
+    profile : CameraProfile or str, optional
+        Camera profile of the inputs.
+    n_threads : int, default 1
+        Threads of the merge.
+
+    Returns
+    -------
+    dict
+        The manifest row: ``scene``, ``method``, ``exposures_s``, ``dynamic_range_stops``,
+        ``saturated_fraction``, ``views``, ``size``, ``units``, the output paths (relative to
+        ``out_dir``), ``sources`` and their ``sha256``, ``seconds`` and ``warnings``.
+
+    Raises
+    ------
+    InputError
+        Fewer than two inputs, missing exposure times, or a bracket the merge refuses.
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> import numpy as np
+    >>> import lfproc
+    >>> from lfproc.dataset import find_scenes, process_scene
+    >>> Path("scenes/room").mkdir(parents=True)
+    >>> radiance = np.geomspace(0.05, 20, 16 * 16 * 3, dtype=np.float32).reshape(1, 1, 16, 16, 3)
+    >>> for i, t in enumerate([0.05, 0.5]):       # a two-exposure bracket, clipping at 1
+    ...     shot = lfproc.LightField(np.minimum(radiance * t, 1), saturation_level=1.0)
+    ...     _ = lfproc.write_lightfield(shot, f"scenes/room/shot_{i}.exr")
+    >>> _ = Path("scenes/room/exposures.txt").write_text("shot_0.exr 1/20\\nshot_1.exr 0.5\\n")
+    >>> row = process_scene(find_scenes("scenes")[0], "dataset")
+    >>> row["method"], row["exposures_s"], row["hdr"]
+    ('debevec', [0.05, 0.5], 'scenes/room/hdr.exr')
+    >>> hdr = lfproc.read_lightfield("dataset/scenes/room/hdr.exr")
+    >>> bool(np.allclose(hdr.data, radiance, rtol=1e-4))
+    True
     """
     out_dir = Path(out_dir)
     start = time.perf_counter()
@@ -389,7 +516,23 @@ def _write_manifest(out_dir: Path, scenes: list[Scene]) -> list[dict[str, Any]]:
 
 
 def read_manifest(dataset_dir: str | os.PathLike) -> list[dict[str, Any]]:
-    """The rows of a data set's ``manifest.json``."""
+    """The rows of a data set's ``manifest.json``.
+
+    Parameters
+    ----------
+    dataset_dir : str or os.PathLike
+        A folder written by :func:`build_dataset`.
+
+    Returns
+    -------
+    list of dict
+        One row per finished scene (see :func:`process_scene`).
+
+    Raises
+    ------
+    MissingFileError
+        The folder has no ``manifest.json``.
+    """
     path = Path(dataset_dir) / "manifest.json"
     if not path.is_file():
         raise MissingFileError(f"{path}: no manifest; run lfproc dataset build first")
@@ -423,7 +566,8 @@ def build_dataset(
         One folder per scene.
     out_dir : path
         Data-set folder (created if missing; finished scenes in it are skipped).
-    method, profile : merge options (see :func:`lfproc.bracket.merge_files`).
+    method, profile : str or CameraProfile, optional
+        Merge options (see :func:`lfproc.hdr.merge_files`).
     scheduler : str, optional
         Address of a running Dask scheduler (``tcp://host:8786``); default: a local cluster of
         ``workers`` processes with one thread each. ``"synchronous"`` runs the scenes one

@@ -84,8 +84,27 @@ def _ratio(value) -> float | None:
 def read_exif_exposure(path: str | os.PathLike) -> dict[str, float | None]:
     """Exposure time (s), ISO, exposure bias (EV) and f-number from a file's EXIF (Pillow).
 
-    Returns a dict with ``exposure_s``, ``iso``, ``exposure_bias_ev``, ``f_number``; a value
-    the file does not hold is None. Files Pillow cannot open give all None.
+    Parameters
+    ----------
+    path : str or os.PathLike
+        An image file (JPEG, TIFF, PNG... anything Pillow opens).
+
+    Returns
+    -------
+    dict
+        ``exposure_s``, ``iso``, ``exposure_bias_ev`` and ``f_number`` (floats); a value the file
+        does not hold (or a non-positive exposure or ISO) is None. Files Pillow cannot open
+        give all None.
+
+    Examples
+    --------
+    >>> from PIL import Image
+    >>> from lfproc.hdr import read_exif_exposure
+    >>> exif = Image.Exif()
+    >>> exif[33434], exif[34855], exif[33437] = 0.008, 200, 2.8   # ExposureTime, ISOSpeedRatings, FNumber
+    >>> Image.new("RGB", (8, 8)).save("shot.jpg", exif=exif)
+    >>> read_exif_exposure("shot.jpg")
+    {'exposure_s': 0.008, 'iso': 200.0, 'exposure_bias_ev': None, 'f_number': 2.8}
     """
     from PIL import ExifTags, Image, UnidentifiedImageError
 
@@ -295,8 +314,44 @@ def merge_files(
     ``nonfinite`` and ``negative`` are the value policies of light-field inputs (:func:`read_bracket`).
     ``max_iter`` is the ML merge's fixed-point updates (the keyword ``n_iter`` is deprecated).
 
-    Returns the merged light field (``attrs["sources"]`` are the file paths) and the merge
-    information (see :func:`lfproc.merge.merge_lightfields`), plus ``method``.
+    Parameters
+    ----------
+    paths : sequence of str or os.PathLike
+        The bracket: images, light fields or Lytro captures (all of one kind), at least two.
+    method : {"ml", "debevec"}, optional
+        The merge (default: chosen as above).
+    profile : CameraProfile or str, optional
+        Camera profile of linear raw inputs (``ml`` needs one).
+    exposures_s : sequence of float, optional
+        Exposure times in seconds, one per file (default: from the files' metadata or EXIF).
+    isos : float or sequence of float, optional
+        ISO of every file, or one for all (default: from the files).
+    white_db : str or os.PathLike, optional
+        White-image database for Lytro captures (:func:`lfproc.lytro.build_white_db`).
+    max_iter : int, default 2
+        Fixed-point updates of the ML merge.
+    random_state : int, Generator or None, default 0
+        Seed of the response recovery's pixel sampling.
+    n_threads : int, optional
+        Worker threads (default: the available cores).
+    option_names : dict, optional
+        Parameter name -> name used in messages.
+    nonfinite, negative : str
+        Value policies of light-field inputs (see :func:`lfproc.lightfield.clean_nonfinite`).
+
+    Returns
+    -------
+    lf : LightField
+        The merged light field (``attrs["sources"]`` are the file paths).
+    info : dict
+        The merge information (see :func:`lfproc.hdr.merge_lightfields`), plus ``method``.
+
+    Raises
+    ------
+    lfproc.errors.InputError
+        A parameter that has no effect, mixed or missing exposures, too few files.
+    lfproc.errors.MissingFileError, lfproc.errors.FileFormatError
+        A file is missing or unreadable.
     """
     if method is not None:
         check_choice("method", method, MERGE_METHODS)
@@ -352,6 +407,28 @@ def camera_response(x, kind: str = "camera") -> np.ndarray:
     (reaching 1 at ``x = 2``: one stop of highlight roll-off) followed by the sRGB encoding;
     measured consumer-camera responses (e.g. the DoRF database of Grossberg & Nayar) share
     that shape: sRGB-like in the shadows, compressed in the highlights.
+
+    Parameters
+    ----------
+    x : array_like
+        Linear exposure (1 = the exposure that reads 1 in sRGB); negative values read as 0.
+    kind : {"camera", "srgb"}, default "camera"
+        The curve.
+
+    Returns
+    -------
+    ndarray
+        Codes in [0, 1], float64, the shape of ``x``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.hdr import camera_response
+    >>> x = np.array([0.0, 0.18, 1.0, 2.0, 4.0])
+    >>> [round(float(v), 4) for v in camera_response(x)]          # one stop of shoulder above x = 1
+    [0.0, 0.4359, 0.8124, 1.0, 1.0]
+    >>> [round(float(v), 4) for v in camera_response(x, "srgb")]
+    [0.0, 0.4614, 1.0, 1.0, 1.0]
     """
     check_choice("response", kind, CAMERA_RESPONSES)
     x = np.clip(np.asarray(x, dtype=np.float64), 0, None)
@@ -490,7 +567,43 @@ def write_response(
     written together (:func:`lfproc.io.atomic_outputs`): all or none; an existing one is
     replaced only with ``force``.
 
-    Returns the written paths.
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Output ``.csv`` or ``.json`` file.
+    response : ndarray of shape (256,) or (256, C)
+        ``g(z)``, the log inverse response of each code.
+    plot : str or os.PathLike, optional
+        A ``.png`` plot of ``g``.
+    metadata : dict, optional
+        Extra JSON fields (``.json`` only); ``title`` also titles the plot.
+    force : bool, default False
+        Replace existing files.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The paths written.
+
+    Raises
+    ------
+    lfproc.errors.InputError
+        A bad suffix or response shape.
+    lfproc.errors.OutputExistsError
+        An output exists and ``force`` is false.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.hdr import write_response
+    >>> g = np.log(np.arange(1, 257) / 128)        # a linear camera: f^-1(z) = z / 128
+    >>> write_response("response.csv", g)
+    [PosixPath('response.csv')]
+    >>> from pathlib import Path
+    >>> print("\\n".join(Path("response.csv").read_text().splitlines()[:3]))
+    code,Y,ln_Y
+    0,0.0078125,-4.85203026
+    1,0.015625,-4.15888308
     """
     path = Path(path)
     text = format_response(response, suffix=path.suffix, metadata=metadata, where=str(path))

@@ -1,4 +1,4 @@
-"""HDR merging of exposure brackets (method.md section 8; hdr-and-calibration.md section 1).
+"""HDR merging of exposure brackets (how Miandji et al., IEEE TCI 2021, section IV-A, build their HDR data set).
 
 Two estimators, both vectorised over samples of any shape (2-D images ``(H, W[, C])`` or
 light fields ``(V, U, H, W, C)``: every view and pixel is merged on its own, all views share
@@ -33,6 +33,38 @@ exposure** is filled with the radiance of the saturation level in the shortest e
 standard deviation 1) and it is flagged in ``info["saturated_everywhere"]``. A pixel
 **black in every exposure** (no weighted sample and not saturated) gets the longest exposure's
 value (0 for clipped linear data) and is flagged in ``info["dark_everywhere"]``.
+
+Noise-aware merge of 8-bit codes
+--------------------------------
+The ML estimator of :func:`merge_ml` needs the sensor's gain and read noise (a profile and
+an ISO); a JPEG has neither. :func:`merge_ml_codes8` measures the noise on the bracket itself:
+
+1. the codes are linearised with the response ``x = exp(g(z))`` (recovered with
+   :func:`recover_response` unless given), each exposure giving ``X_i = x_i / t_i``;
+2. a first estimate ``E0`` is the hat-weighted mean of the ``X_i`` (linear domain);
+3. the variance ``V(x)`` of a linearised code around the exposure ``x`` it should read is
+   measured on the bracket: for every sample of a pixel with at least two usable exposures,
+   the squared leave-one-out residual ``(x_i - t_i E_-i)^2`` (``E_-i``: the hat-weighted mean
+   of the pixel's other exposures), binned by the code that ``t_i E_-i`` predicts and averaged
+   per code and channel (smoothed over 9 codes; on at most 200 000 pixels, a regular
+   subsample of larger images). It holds whatever noise the camera's
+   pipeline leaves (photon and read noise, quantisation, film grain, JPEG) and the error of
+   the recovered response; it is never below the quantisation ``(dx/dz)^2 / 12``;
+4. the estimate is the inverse-variance mean ``E = sum_i w_i X_i / sum_i w_i`` with
+   ``w_i = t_i^2 / V(t_i E)``: like :func:`merge_ml`, the variance is evaluated at the
+   current *estimate*, never at the sample's own code: starting from ``E0``, ``max_iter``
+   fixed-point updates (all are run; the keyword ``n_iter`` is deprecated) (at least one; the error changed by under 10 % between 1 and 4
+   updates on the brackets of ``benchmarks/merge_8bit.py``). Weights taken at the observed
+   code, ``t_i^2 / V(z_i)``, favour the samples that noise pushed down, since ``V`` grows
+   with ``x``: on a noisy 16-exposure bracket of a real photograph (``tests/hdr/test_merge.py``)
+   that mean had a log error of 0.21 against 0.075 now, and 0.61-0.96 of the Debevec merge.
+   Its variance is ``1 / sum_i w_i``.
+
+Codes 0 and ``>= saturation_code`` get weight 0 (clipped), and so does every longer exposure
+of a pixel and channel clipped in a shorter one. Samples with no usable code are filled as
+in :func:`merge_debevec` and flagged. The weights are tabulated scaled to a largest value of 1
+(``t_i^2`` alone spans 30 stops for a bracket of 1/1000 s to 30 s): float32 when their range
+allows, float64 otherwise; no cast can overflow.
 
 References
 ----------
@@ -401,7 +433,51 @@ def merge_with_variances(
     ``v / t`` and are flagged as saturated everywhere when that value is at least
     ``saturation_value``, else as dark everywhere.
 
-    Returns radiance (input units per second), its variance, and info as :func:`merge_ml`.
+    Parameters
+    ----------
+    values : ndarray of shape (N, ...) or sequence of N arrays
+        Linear values of the N exposures (any sample shape, the same for all).
+    variances : ndarray of shape (N, ...) or sequence of N arrays
+        Variance of every value, in the values' units squared.
+    exposures_s : sequence of N floats
+        Exposure times in seconds (or relative exposures).
+    unusable_variance : float, default 1e6
+        Samples with a variance at or above it (or non-finite values) get weight 0.
+    saturation_value : float, default 0.5
+        An unusable sample at or above this value counts as saturated: longer exposures of the
+        sample are not used either, and a sample with no usable exposure is flagged as
+        saturated everywhere.
+    chunk_size, n_threads : int
+        As for :func:`merge_ml`.
+
+    Returns
+    -------
+    radiance : ndarray, float32, sample shape
+        Input units per second.
+    variance : ndarray, float32, sample shape
+        ``1 / sum_i w_i`` (``value^2`` where no exposure was usable).
+    info : dict
+        Masks and counts as :func:`merge_ml` (``saturated_everywhere``, ``dark_everywhere``...),
+        ``method``, ``weights``, ``fill``, ``exposures_s``.
+
+    Raises
+    ------
+    lfproc.errors.ShapeError
+        ``values`` and ``variances`` differ in shape.
+    lfproc.errors.InputError
+        Exposure times that are not one positive number per exposure.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.hdr import merge_with_variances
+    >>> values = np.array([[0.1, 0.2], [0.4, 1.0]])      # 2 exposures (rows) of 2 samples
+    >>> variances = np.array([[1e-4, 1e-4], [4e-4, 1e9]])  # the second sample saturates at 4 s
+    >>> x, var, info = merge_with_variances(values, variances, exposures_s=[1.0, 4.0])
+    >>> [round(float(v), 4) for v in x], info["saturated_everywhere_count"]
+    ([0.1, 0.2], 0)
+    >>> [round(float(v) * 1e5, 3) for v in var]    # 1 / (1 / 1e-4 + 4^2 / 4e-4), and 1e-4
+    [2.0, 10.0]
     """
     vals = _as_stack(values, "values")
     var_in = _as_stack(variances, "variances")
@@ -457,7 +533,25 @@ def merge_with_variances(
 # -- Debevec & Malik ------------------------------------------------------------------------
 
 def hat_weight(z: np.ndarray) -> np.ndarray:
-    """Debevec & Malik's hat weight of normalised codes ``z`` in [0, 1]: ``min(z, 1 - z)``, 0 outside."""
+    """Debevec & Malik's hat weight of normalised codes ``z`` in [0, 1]: ``min(z, 1 - z)``, 0 outside.
+
+    Parameters
+    ----------
+    z : array_like
+        Codes divided by their largest value; any shape.
+
+    Returns
+    -------
+    ndarray
+        Weights in [0, 0.5], float32, the shape of ``z``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.hdr import hat_weight
+    >>> [round(float(w), 3) for w in hat_weight(np.array([-0.1, 0.0, 0.25, 0.5, 0.9, 1.2]))]
+    [0.0, 0.0, 0.25, 0.5, 0.1, 0.0]
+    """
     z = np.asarray(z, dtype=np.float32)
     return np.clip(np.minimum(z, 1 - z), 0, None)
 
@@ -672,6 +766,17 @@ def merge_debevec(
         input, ``exp(g)`` per second with ``g(128) = 0``.
     info : dict
         Masks and counts as for :func:`merge_ml`, ``response`` (the ``g`` used, 8-bit only).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.hdr import merge_debevec
+    >>> radiance = np.geomspace(0.01, 100, 12).reshape(3, 4)     # 4 decades
+    >>> t = np.array([0.01, 0.1, 1.0])
+    >>> bracket = np.clip(radiance * t[:, None, None], 0, 1)      # linear, clipping at 1
+    >>> merged, info = merge_debevec(bracket, exposures_s=t, white_level=1.0)
+    >>> bool(np.allclose(merged, radiance, rtol=1e-4)), info["saturated_everywhere_count"]
+    (True, 1)
     """
     stack = _as_stack(images, "images")
     n = stack.shape[0]
@@ -844,34 +949,25 @@ def merge_ml_codes8(
     """Noise-aware (inverse-variance) merge of non-linear 8-bit codes through a camera response.
 
     The ML estimator of :func:`merge_ml` needs the sensor's gain and read noise (a profile and
-    an ISO); a JPEG has neither. Here the noise is measured on the bracket itself:
+    an ISO); a JPEG has neither: the code variance is measured on the bracket itself (see
+    "Noise-aware merge of 8-bit codes" in the module documentation).
 
-    1. the codes are linearised with the response ``x = exp(g(z))`` (recovered with
-       :func:`recover_response` unless given), each exposure giving ``X_i = x_i / t_i``;
-    2. a first estimate ``E0`` is the hat-weighted mean of the ``X_i`` (linear domain);
-    3. the variance ``V(x)`` of a linearised code around the exposure ``x`` it should read is
-       measured on the bracket: for every sample of a pixel with at least two usable exposures,
-       the squared leave-one-out residual ``(x_i - t_i E_-i)^2`` (``E_-i``: the hat-weighted mean
-       of the pixel's other exposures), binned by the code that ``t_i E_-i`` predicts and averaged
-       per code and channel (smoothed over 9 codes; on at most 200 000 pixels, a regular
-       subsample of larger images). It holds whatever noise the camera's
-       pipeline leaves (photon and read noise, quantisation, film grain, JPEG) and the error of
-       the recovered response; it is never below the quantisation ``(dx/dz)^2 / 12``;
-    4. the estimate is the inverse-variance mean ``E = sum_i w_i X_i / sum_i w_i`` with
-       ``w_i = t_i^2 / V(t_i E)``: like :func:`merge_ml`, the variance is evaluated at the
-       current *estimate*, never at the sample's own code: starting from ``E0``, ``max_iter``
-       fixed-point updates (all are run; the keyword ``n_iter`` is deprecated) (at least one; the error changed by under 10 % between 1 and 4
-       updates on the brackets of ``benchmarks/merge_8bit.py``). Weights taken at the observed
-       code, ``t_i^2 / V(z_i)``, favour the samples that noise pushed down, since ``V`` grows
-       with ``x``: on a noisy 16-exposure bracket of a real photograph (``tests/hdr/test_merge.py``)
-       that mean had a log error of 0.21 against 0.075 now, and 0.61-0.96 of the Debevec merge.
-       Its variance is ``1 / sum_i w_i``.
-
-    Codes 0 and ``>= saturation_code`` get weight 0 (clipped), and so does every longer exposure
-    of a pixel and channel clipped in a shorter one. Samples with no usable code are filled as
-    in :func:`merge_debevec` and flagged. The weights are tabulated scaled to a largest value of 1
-    (``t_i^2`` alone spans 30 stops for a bracket of 1/1000 s to 30 s): float32 when their range
-    allows, float64 otherwise; no cast can overflow.
+    Parameters
+    ----------
+    images : ndarray of shape (N, ...), uint8, or sequence of N arrays
+        Non-linear 8-bit codes of the N exposures (channels last when ``response`` has several).
+    exposures_s : sequence of N floats
+        Exposure times in seconds (or relative exposures).
+    response : None, "linear" or ndarray of shape (256,) or (256, C)
+        ``g(z) = ln f^-1(z)``, as for :func:`merge_debevec` (None: recovered).
+    max_iter : int, default 2
+        Fixed-point updates of the weights at the current estimate (>= 0).
+    n_samples, smoothness, random_state
+        Response recovery options (:func:`recover_response`).
+    saturation_code : int, default 254
+        Codes at or above it are clipped (1..255).
+    chunk_size, n_threads : int
+        As for :func:`merge_ml`.
 
     Returns
     -------

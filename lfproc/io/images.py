@@ -42,14 +42,61 @@ Transfer = Literal["auto", "srgb", "linear"]
 
 
 def srgb_decode(values: np.ndarray) -> np.ndarray:
-    """sRGB-encoded values in [0, 1] to linear (IEC 61966-2-1, via colour-science)."""
+    """sRGB-encoded values in [0, 1] to linear (IEC 61966-2-1, via colour-science).
+
+    Parameters
+    ----------
+    values : array_like
+        sRGB-encoded values, nominally in [0, 1]; any shape.
+
+    Returns
+    -------
+    ndarray
+        Linear values, float32, the shape of ``values``.
+
+    See Also
+    --------
+    srgb_encode : the inverse.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.io import srgb_decode, srgb_encode
+    >>> [round(float(x), 4) for x in srgb_decode(np.array([0.0, 0.5, 1.0]))]
+    [0.0, 0.214, 1.0]
+    >>> x = np.linspace(0, 1, 11)
+    >>> bool(np.allclose(srgb_decode(srgb_encode(x)), x, atol=1e-5))
+    True
+    """
     import colour
 
     return np.asarray(colour.cctf_decoding(values, function="sRGB"), dtype=np.float32)
 
 
 def srgb_encode(values: np.ndarray) -> np.ndarray:
-    """Linear values to sRGB encoding (values are clipped to [0, 1] first)."""
+    """Linear values to sRGB encoding (IEC 61966-2-1, via colour-science).
+
+    Parameters
+    ----------
+    values : array_like
+        Linear values, any shape; clipped to [0, 1] before encoding.
+
+    Returns
+    -------
+    ndarray
+        sRGB-encoded values in [0, 1], float32, the shape of ``values``.
+
+    See Also
+    --------
+    srgb_decode : the inverse.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.io import srgb_encode
+    >>> [round(float(x), 4) for x in srgb_encode(np.array([-1.0, 0.0031308, 0.214, 1.0, 4.0]))]
+    [0.0, 0.0404, 0.5, 1.0, 1.0]
+    """
     import colour
 
     return np.asarray(colour.cctf_encoding(np.clip(values, 0, 1), function="sRGB"), dtype=np.float32)
@@ -65,7 +112,37 @@ def _require_file(path: Path) -> None:
 # -- OpenEXR ---------------------------------------------------------------------------
 
 def exr_parts(path: str | os.PathLike) -> list[dict[str, Any]]:
-    """Describe the parts of an OpenEXR file: name, view, channels, size (header only)."""
+    """Describe the parts of an OpenEXR file: name, view, channels, size (header only).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        An OpenEXR file (single- or multi-part). Only the headers are read.
+
+    Returns
+    -------
+    list of dict
+        One dict per part, in file order, with keys ``index`` (int), ``name`` (str, ``""`` when
+        the part has none), ``view`` (the part's ``view`` attribute or None), ``multiView``
+        (list of view names of a single-part multi-view file, or None), ``channels`` (sorted
+        channel names, or None) and ``size`` (``[height, width]`` of the data window).
+
+    Raises
+    ------
+    lfproc.errors.MissingFileError
+        ``path`` does not exist.
+    lfproc.errors.FileFormatError
+        ``path`` is a folder or not a readable OpenEXR file.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import lfproc
+    >>> from lfproc.io import exr_parts
+    >>> _ = lfproc.write_image("grey.exr", np.full((4, 6, 3), 0.5, np.float32))
+    >>> [(p["index"], p["channels"], p["size"]) for p in exr_parts("grey.exr")]
+    [(0, ['B', 'G', 'R'], [4, 6])]
+    """
     path = Path(path)
     _require_file(path)
     f = open_exr(path, header_only=True)
@@ -321,18 +398,48 @@ def read_image(
 
     Parameters
     ----------
-    path : path to ``.exr``, ``.hdr``, ``.png``, ``.tif(f)`` or ``.jpg``.
-    part : OpenEXR part index or name (default: the first part with R,G,B or Y channels).
-    view : OpenEXR view name (multi-part ``view`` attribute, or single-part ``multiView``).
-    transfer : how 8/16-bit values are decoded: ``"srgb"`` (default for ``"auto"``) or ``"linear"``.
-    nonfinite : NaN/Inf policy, see :func:`lfproc.lightfield.clean_nonfinite` (default: refuse).
-    negative : negative-value policy (default ``"clip"``: lossy EXR compression leaves tiny negatives;
-        the number clipped is reported in the metadata as ``clipped_negative``).
+    path : str or os.PathLike
+        An ``.exr``, ``.hdr``/``.pic``, ``.png``, ``.tif``/``.tiff`` or ``.jpg``/``.jpeg`` file.
+    part : int or str, optional
+        OpenEXR part index or name (default: the first part with R,G,B or Y channels).
+    view : str, optional
+        OpenEXR view name (multi-part ``view`` attribute, or single-part ``multiView``).
+    transfer : {"auto", "srgb", "linear"}, default "auto"
+        How 8/16-bit values are decoded: ``"srgb"`` (what ``"auto"`` means) or ``"linear"``
+        (values divided by the maximum code). Float formats are linear already.
+    nonfinite : {"raise", "zero", "clip"}, default "raise"
+        NaN/Inf policy, see :func:`lfproc.lightfield.clean_nonfinite`.
+    negative : {"clip", "raise", "keep"}, default "clip"
+        Negative-value policy (lossy EXR compression leaves tiny negatives; the number clipped
+        is reported in the metadata as ``clipped_negative``).
 
     Returns
     -------
-    image : ndarray of shape (H, W, C), float32, linear
-    meta : dict (``format``, ``transfer``, ``saturation_level`` for integer formats, EXR part details...)
+    image : ndarray of shape (H, W, C), float32
+        Linear values; C is 3 (RGB) or 1 (grey).
+    meta : dict
+        ``format``, ``transfer``, ``saturation_level`` (1.0 for integer formats), EXR part
+        details, ``clipped_negative`` and ``replaced_nonfinite`` counts.
+
+    Raises
+    ------
+    lfproc.errors.MissingFileError
+        ``path`` does not exist.
+    lfproc.errors.FileFormatError
+        ``path`` is a folder, has an unknown suffix or cannot be decoded.
+    lfproc.errors.InputError
+        Non-finite or negative values under the ``"raise"`` policy, or a bad ``transfer``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import lfproc
+    >>> _ = lfproc.write_image("ramp.png", np.linspace(0, 1, 12, dtype=np.float32).reshape(3, 4, 1))
+    >>> image, meta = lfproc.read_image("ramp.png")
+    >>> image.shape, image.dtype, meta["transfer"]
+    ((3, 4, 1), dtype('float32'), 'srgb')
+    >>> float(image.max())
+    1.0
     """
     path = Path(path)
     _require_file(path)
@@ -362,8 +469,51 @@ def write_image(
     """Write ``(H, W, C)`` linear data atomically; the format follows the suffix.
 
     EXR: float32 or half, ZIP (lossless) compression, ``attributes`` added to the header.
-    ``.hdr``: Radiance RGBE. PNG/TIFF: ``bit_depth`` 8 or 16 (default 16 for TIFF, 8 for
-    PNG), values clipped to [0, 1] and sRGB-encoded unless ``transfer="linear"``.
+    ``.hdr``: Radiance RGBE. PNG/TIFF/JPEG: ``bit_depth`` 8 or 16 (default 16 for TIFF, 8 for
+    PNG and JPEG), values clipped to [0, 1] and sRGB-encoded unless ``transfer="linear"``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Output file; the suffix (``.exr``, ``.hdr``/``.pic``, ``.png``, ``.tif``/``.tiff``,
+        ``.jpg``/``.jpeg``) picks the format.
+    image : array_like of shape (H, W), (H, W, 1) or (H, W, 3)
+        Linear values (grey or RGB).
+    force : bool, default False
+        Overwrite an existing file.
+    dtype : {"float32", "half"}, default "float32"
+        EXR sample type.
+    bit_depth : {8, 16}, optional
+        Integer formats' depth (JPEG: 8 only).
+    transfer : {"srgb", "linear"}, default "srgb"
+        Encoding of integer formats.
+    attributes : dict, optional
+        Extra EXR header attributes.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    lfproc.errors.OutputExistsError
+        ``path`` exists and ``force`` is false.
+    lfproc.errors.InputError
+        A bad shape, suffix, ``dtype`` or ``bit_depth``, or a missing output folder.
+    lfproc.errors.FileFormatError
+        OpenCV could not write the file.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import lfproc
+    >>> image = np.random.default_rng(0).random((5, 7, 3), dtype=np.float32) * 100
+    >>> lfproc.write_image("hdr.exr", image)
+    PosixPath('hdr.exr')
+    >>> back, meta = lfproc.read_image("hdr.exr")
+    >>> back.shape, bool(np.array_equal(back, image))
+    ((5, 7, 3), True)
     """
     import cv2
 

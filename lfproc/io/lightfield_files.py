@@ -9,9 +9,9 @@ Layouts lfproc reads and writes:
   lfproc version, angular shape, view index, units, colour space, exposure, ISO, source
   and free attributes) and ``lfproc_version``.
 * **A folder of views** ``view_RR_CC.<ext>`` with ext ``exr``, ``png``, ``tif``/``tiff``
-  or ``hdr`` (the layout of ``shared/data/lightfields``). 8/16-bit views are sRGB
-  decoded to linear. lfproc also writes ``lightfield.json`` (the same metadata) and, when the
-  light field has one, the centre view's disparity ``disparity.pfm`` next to them; folders
+  or ``hdr``; ``RR`` and ``CC`` are the 1-based angular row and column (:func:`view_name`).
+  8/16-bit views are sRGB decoded to linear. lfproc also writes ``lightfield.json`` (the same
+  metadata) and, when the light field has one, the centre view's disparity ``disparity.pfm`` next to them; folders
   without them get defaults. Any name that is not ``.exr`` or an image suffix is a folder
   (``out``, ``out.views``). Writing 8/16-bit views clips values above 1 and warns
   (:class:`~lfproc.errors.SaturationWarning`).
@@ -48,12 +48,52 @@ _VIEW_RE = re.compile(r"^view_(\d{2,})_(\d{2,})$")
 
 
 def view_name(v: int, u: int) -> str:
-    """File or part name of view ``(v, u)`` (0-based indices): ``view_RR_CC`` from 01."""
+    """File or part name of view ``(v, u)`` (0-based indices): ``view_RR_CC`` from 01.
+
+    Parameters
+    ----------
+    v, u : int
+        0-based angular row and column.
+
+    Returns
+    -------
+    str
+        ``view_RR_CC`` with 1-based, zero-padded (at least two digits) row and column.
+
+    See Also
+    --------
+    parse_view_name : the inverse.
+
+    Examples
+    --------
+    >>> from lfproc.io import parse_view_name, view_name
+    >>> view_name(0, 4), view_name(11, 2)
+    ('view_01_05', 'view_12_03')
+    >>> parse_view_name(view_name(11, 2))
+    (11, 2)
+    """
     return f"view_{v + 1:02d}_{u + 1:02d}"
 
 
 def parse_view_name(stem: str) -> tuple[int, int] | None:
-    """0-based ``(v, u)`` from ``view_RR_CC``, or None when the name is not a view name."""
+    """0-based ``(v, u)`` from ``view_RR_CC``, or None when the name is not a view name.
+
+    Parameters
+    ----------
+    stem : str
+        A file name without its suffix (or an EXR part name).
+
+    Returns
+    -------
+    tuple of int or None
+        ``(v, u)``, 0-based; None for any other name (including ``view_00_..``).
+
+    Examples
+    --------
+    >>> from lfproc.io import parse_view_name
+    >>> parse_view_name("view_03_05"), parse_view_name("view_00_01"), parse_view_name("centre")
+    ((2, 4), None, None)
+    """
     m = _VIEW_RE.match(stem)
     if not m:
         return None
@@ -253,14 +293,43 @@ def read_lightfield(
 
     Parameters
     ----------
-    path : file or folder (see the module documentation for the layouts).
-    nonfinite, negative : value policies (see :func:`lfproc.lightfield.clean_nonfinite`).
-    transfer : decoding of 8/16-bit views (``"auto"`` = sRGB).
-    part : for a single multi-part EXR image, which part to read.
+    path : str or os.PathLike
+        An lfproc multi-part EXR, a folder of ``view_RR_CC`` files (with or without
+        ``lightfield.json``) or a single image (read as a 1 x 1 light field); see the module
+        documentation for the layouts.
+    nonfinite : {"raise", "zero", "clip"}, default "raise"
+        NaN/Inf policy (see :func:`lfproc.lightfield.clean_nonfinite`).
+    negative : {"clip", "raise", "keep"}, default "clip"
+        Negative-value policy.
+    transfer : {"auto", "srgb", "linear"}, default "auto"
+        Decoding of 8/16-bit views (``"auto"`` = sRGB).
+    part : int or str, optional
+        For a single multi-part EXR image, which part to read.
 
     Returns
     -------
     LightField
+        Data, variance, disparity and metadata as stored.
+
+    Raises
+    ------
+    lfproc.errors.MissingFileError
+        ``path`` does not exist.
+    lfproc.errors.FileFormatError
+        Not a light field or image, or a malformed one.
+    lfproc.errors.InputError
+        Values refused by the ``nonfinite``/``negative`` policies.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import lfproc
+    >>> lf = lfproc.LightField(np.random.default_rng(0).random((3, 3, 4, 5, 3)), units="cd/m2")
+    >>> lfproc.write_lightfield(lf, "lf.exr")
+    PosixPath('lf.exr')
+    >>> back = lfproc.read_lightfield("lf.exr")
+    >>> back.shape, back.units, bool(np.array_equal(back.data, lf.data))
+    ((3, 3, 4, 5, 3), 'cd/m2', True)
     """
     path = Path(path)
     if not path.exists():
@@ -338,7 +407,54 @@ def write_lightfield(
     ``view_RR_CC`` files in ``folder_format`` (``exr``, ``png`` (8-bit), ``png16``, ``tiff``
     (16-bit) or ``hdr``) plus ``lightfield.json``. 8/16-bit views are clipped to [0, 1]
     and sRGB-encoded (``transfer="linear"`` keeps them linear). float32 EXR round-trips
-    bit-exactly.
+    bit-exactly. A path with an image suffix other than ``.exr`` holds a 1 x 1 light field.
+
+    Parameters
+    ----------
+    lf : LightField
+        The light field (its variance, disparity and metadata are written too).
+    path : str or os.PathLike
+        ``*.exr`` (one multi-part file), an image file (one view) or a folder name.
+    force : bool, default False
+        Replace an existing file or folder.
+    dtype : {"float32", "half"}, default "float32"
+        EXR sample type.
+    folder_format : {"exr", "png", "png16", "tiff", "hdr"}, default "exr"
+        Format of the views in a folder.
+    transfer : {"srgb", "linear"}, default "srgb"
+        Encoding of 8/16-bit views.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    lfproc.errors.OutputExistsError
+        ``path`` exists and ``force`` is false.
+    lfproc.errors.InputError
+        ``lf`` is not a LightField, a bad ``folder_format`` or ``dtype``, or several views
+        for a single-image path.
+
+    Warns
+    -----
+    lfproc.errors.SaturationWarning
+        Values above 1 are clipped by an 8/16-bit format.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import lfproc
+    >>> lf = lfproc.LightField(np.random.default_rng(1).random((2, 2, 3, 4, 3)) * 0.9)
+    >>> lfproc.write_lightfield(lf, "views", folder_format="png16")
+    PosixPath('views')
+    >>> import os
+    >>> sorted(os.listdir("views"))
+    ['lightfield.json', 'view_01_01.png', 'view_01_02.png', 'view_02_01.png', 'view_02_02.png']
+    >>> back = lfproc.read_lightfield("views")
+    >>> back.views, float(np.abs(back.data - lf.data).max()) < 1e-3
+    ((2, 2), True)
     """
     if not isinstance(lf, LightField):
         raise InputError(f"write_lightfield: expected a LightField, got {type(lf).__name__}")

@@ -52,9 +52,9 @@ CAMERA_MODELS = {"ILLUM": "B01", "B01": "B01", "F01": "F01"}
 @short_repr
 @dataclass(frozen=True)
 class LytroCapture:
-    """A Lytro raw capture (lenslet image) and its metadata.
+    """A Lytro raw capture (lenslet image) and its metadata, as :func:`read_capture` returns it.
 
-    Attributes
+    Parameters
     ----------
     raw : ndarray of shape (H, W), uint16
         Raw counts (DN), row-major from the top-left pixel.
@@ -95,6 +95,20 @@ class LytroCapture:
         ``image.limitExposureBias`` in EV.
     sha1_verified : bool or None
         For containers: whether every section's SHA-1 was checked (None for ``.RAW`` files).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.lytro import read_capture
+    >>> from lfproc.lytro.container import illum_metadata, write_lfr
+    >>> raw = np.random.default_rng(0).integers(64, 1024, size=(8, 12), dtype=np.uint16)
+    >>> meta = illum_metadata(height=8, width=12, exposure_s=0.01, iso=200)
+    >>> _ = write_lfr("tiny.LFR", raw=raw, metadata=meta, serial="B5000000042")
+    >>> cap = read_capture("tiny.LFR")
+    >>> cap.shape, cap.camera_model, cap.serial, cap.cfa_pattern, cap.iso, cap.exposure_s
+    ((8, 12), 'B01', 'B5000000042', 'GRBG', 200.0, 0.01)
+    >>> cap.black_level_2x2().tolist(), cap.white_level, bool(np.array_equal(cap.raw, raw))
+    ([[64.0, 64.0], [64.0, 64.0]], 1023.0, True)
     """
 
     raw: np.ndarray = field(repr=False, compare=False)
@@ -448,6 +462,7 @@ def read_capture(path: str | os.PathLike, *, verify: bool = True) -> LytroCaptur
     Returns
     -------
     LytroCapture
+        The raw image (uint16 DN) and its metadata; see :class:`LytroCapture` for an example.
 
     Raises
     ------
@@ -472,6 +487,42 @@ def describe_lytro(path: str | os.PathLike) -> dict[str, Any]:
 
     Raw captures also get raw statistics. Processed LFPs without a raw frame report the
     metadata they carry (camera fields are None when the file has no frame metadata).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A Lytro container (``.LFR``, ``.lfp``) or an unpacked ``.RAW`` with its metadata.
+
+    Returns
+    -------
+    dict
+        JSON-ready figures: ``kind`` (``"lytro"``), ``path``, ``file_kind`` (``"lfp"`` or
+        ``"raw"``), ``sections``, ``sha1_verified``, ``embedded_images``, ``has_raw``, ``holds``,
+        the camera fields (``camera_model``, ``serial``, ``zoom_step``, ``focus_step``,
+        ``exposure_s``, ``iso``, levels, ``cfa_pattern``, ``ccm``, ``white_balance``...) and for
+        raw captures ``height``, ``width``, ``raw_min_dn``, ``raw_max_dn``, ``raw_mean_dn`` and
+        ``saturated_fraction``.
+
+    Raises
+    ------
+    MissingFileError
+        No such file.
+    LfpFormatError, ChecksumError
+        As :func:`read_capture`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.lytro import describe_lytro
+    >>> from lfproc.lytro.container import illum_metadata, write_lfr
+    >>> raw = np.full((8, 12), 1023, dtype=np.uint16)
+    >>> raw[:4] = 100
+    >>> _ = write_lfr("tiny.LFR", raw=raw, metadata=illum_metadata(height=8, width=12))
+    >>> info = describe_lytro("tiny.LFR")
+    >>> info["file_kind"], info["has_raw"], info["camera_model"], (info["height"], info["width"])
+    ('lfp', True, 'B01', (8, 12))
+    >>> info["raw_min_dn"], info["raw_max_dn"], info["saturated_fraction"]
+    (100, 1023, 0.5)
     """
     path = Path(path)
     if not path.is_file():

@@ -305,7 +305,29 @@ def _parse_json(data: bytes, what: str) -> dict[str, Any]:
 
 
 def is_lfp(path: str | os.PathLike) -> bool:
-    """Whether the file at ``path`` starts with the LFP magic bytes."""
+    """Whether the file at ``path`` starts with the LFP magic bytes.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Any path.
+
+    Returns
+    -------
+    bool
+        True for a Lytro LFP/LFR container (Illum ``.LFR``, F01 ``.lfp``, calibration
+        ``data.C.N`` archives); False otherwise, also for an unreadable or missing file.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.lytro import is_lfp
+    >>> from lfproc.lytro.container import illum_metadata, write_lfr
+    >>> raw = np.random.default_rng(0).integers(64, 1024, size=(8, 12), dtype=np.uint16)
+    >>> _ = write_lfr("tiny.LFR", raw=raw, metadata=illum_metadata(height=8, width=12))
+    >>> is_lfp("tiny.LFR"), is_lfp("missing.LFR")
+    (True, False)
+    """
     try:
         with open(path, "rb") as fh:
             return fh.read(len(LFP_MAGIC)) == LFP_MAGIC

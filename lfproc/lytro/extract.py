@@ -257,13 +257,46 @@ def extract_lfp(path: str | os.PathLike, out_dir: str | os.PathLike, *, force: b
                 verify: bool = True) -> dict[str, Any]:
     """Write what a Lytro container holds into ``out_dir`` (see the module documentation).
 
-    Returns the content of ``extracted.json``. ``out_dir`` is written atomically and only
-    replaced with ``force``.
+    One file per section, named by its kind, plus ``table_of_contents.json`` and ``extracted.json``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A Lytro LFP/LFR container.
+    out_dir : str or os.PathLike
+        Output folder, written atomically.
+    force : bool, default False
+        Replace an existing ``out_dir``.
+    verify : bool, default True
+        Check every section's SHA-1.
+
+    Returns
+    -------
+    dict
+        The content of ``extracted.json``: ``source``, ``sha1_verified``,
+        ``raw_lenslet_image``, ``holds`` (a summary), ``files`` (one entry per file written,
+        with its ``kind`` and table-of-contents ``path``) and ``missing`` (sections referenced
+        but absent).
 
     Raises
     ------
     MissingFileError, LfpFormatError, ChecksumError
         As :func:`lfproc.lytro.container.read_lfp`.
+    OutputExistsError
+        ``out_dir`` exists and ``force`` is false.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.lytro import extract_lfp
+    >>> from lfproc.lytro.container import illum_metadata, write_lfr
+    >>> raw = np.random.default_rng(0).integers(64, 1024, size=(8, 12), dtype=np.uint16)
+    >>> _ = write_lfr("tiny.LFR", raw=raw, metadata=illum_metadata(height=8, width=12))
+    >>> out = extract_lfp("tiny.LFR", "tiny")
+    >>> out["raw_lenslet_image"], out["missing"]
+    (True, [])
+    >>> sorted(f["file"] for f in out["files"] if f["kind"] in ("metadata", "raw_lenslet", "thumbnail"))
+    ['metadata.json', 'raw_lenslet.bin', 'thumbnail_00.jpg']
     """
     import cv2
 

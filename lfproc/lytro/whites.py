@@ -214,7 +214,29 @@ def build_white_db(caldata: str | os.PathLike, out_dir: str | os.PathLike, *, fo
 
 
 def load_white_db(db_dir: str | os.PathLike) -> WhiteDatabase:
-    """Load a database written by :func:`build_white_db`."""
+    """Load a database written by :func:`build_white_db`.
+
+    Parameters
+    ----------
+    db_dir : str or os.PathLike
+        The database folder (holds ``whites.json`` and one ``.npz`` per white image).
+
+    Returns
+    -------
+    WhiteDatabase
+        Its ``entries`` (one :class:`WhiteEntry` per white image: serial, zoom and focus
+        steps, levels, lenslet grid...), the frames ``skipped`` when it was built, and the
+        ``index`` as stored.
+
+    Raises
+    ------
+    MissingFileError
+        No such folder, or no index in it.
+    FileFormatError
+        The index is not a white-image database's, or an entry is malformed.
+    UnsafeFileError
+        An entry names a file outside the folder.
+    """
     db_dir = Path(db_dir)
     index_path = db_dir / INDEX_NAME
     if not db_dir.is_dir():

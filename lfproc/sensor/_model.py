@@ -1,4 +1,4 @@
-"""The sensor model of the paper (eqs. 3-7; method.md sections 2-3): exposure and calibration.
+"""The sensor model of Miandji et al. (eqs. 3-7): exposure and calibration.
 
 Forward (:func:`expose`), per pixel, exposure time ``t`` (s), irradiance ``E`` in
 electrons per second (after mask, CFA and quantum efficiency), ISO gain
@@ -33,6 +33,10 @@ measured profile has no map that fits the image (the fixed pattern is then uncor
 and acts as one more noise term of known variance).
 
 Both take scalar or per-pixel ISO maps, so one call models a multi-ISO sensor.
+
+Reference: E. Miandji, H.-N. Nguyen, S. Hajisharif, J. Unger and C. Guillemot, "Compressive
+HDR Light Field Imaging Using a Single Multi-ISO Sensor", IEEE Transactions on Computational
+Imaging, 2021 (section III-B, the noise model and calibration of multi-ISO sensors).
 """
 
 from __future__ import annotations
@@ -53,7 +57,37 @@ __all__ = ["expose", "calibrated_observation", "Observation", "iso_maps", "fixed
 
 def iso_maps(profile, iso, shape: tuple[int, ...]) -> dict[str, np.ndarray]:
     """Per-pixel gain (DN/e-), read noise (e-), dark current (e-/s), black level (DN),
-    full well (e-) and saturation code (DN) for a scalar ISO or an ISO map of ``shape``."""
+    full well (e-) and saturation code (DN) for a scalar ISO or an ISO map of ``shape``.
+
+    Parameters
+    ----------
+    profile : CameraProfile or str
+        A profile or a shipped profile's name or a profile file (see :func:`load_profile`).
+    iso : float or array_like
+        One ISO, or an ISO per pixel broadcastable to ``shape``; every value must be in the
+        profile.
+    shape : tuple of int
+        Shape of the maps.
+
+    Returns
+    -------
+    dict of str to ndarray
+        float64 maps of ``shape``: ``gain_dn_per_e``, ``read_noise_e``,
+        ``dark_current_e_per_s``, ``black_level_dn``, ``full_well_e``, ``saturation_dn``.
+
+    Raises
+    ------
+    lfproc.errors.ProfileError
+        An ISO is not in the profile, or one of its figures is unknown.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.sensor import iso_maps
+    >>> m = iso_maps("paper-medium", np.array([[100, 400]]), (1, 2))
+    >>> m["gain_dn_per_e"].tolist(), m["read_noise_e"].tolist(), m["saturation_dn"].tolist()
+    ([[0.20475, 0.819]], [[2.0, 2.0]], [[4095.0, 4095.0]])
+    """
     profile = load_profile(profile)
     iso_arr = np.broadcast_to(np.asarray(iso, dtype=np.float64), shape)
     values, inverse = np.unique(iso_arr, return_inverse=True)
@@ -72,6 +106,32 @@ def fixed_pattern(profile, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarr
     """The sensor's PRNU gain map (mean 1) and DSNU offset map (electrons) for ``shape``.
 
     Drawn from ``profile.fixed_pattern_seed``, so a profile always gives the same maps.
+
+    Parameters
+    ----------
+    profile : CameraProfile or str
+        A profile, a shipped profile's name or a profile file.
+    shape : tuple of int
+        ``(H, W)`` of the sensor image.
+
+    Returns
+    -------
+    prnu : ndarray of shape (H, W), float64
+        Per-pixel gain, ``max(1 + prnu * N(0, 1), 0)``; ones when the profile's ``prnu`` is 0.
+    dsnu : ndarray of shape (H, W), float64
+        Per-pixel offset in electrons, ``dsnu_e * N(0, 1)``; zeros when ``dsnu_e`` is 0.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> import numpy as np
+    >>> from lfproc.sensor import fixed_pattern, load_profile
+    >>> profile = dataclasses.replace(load_profile("paper-medium"), prnu=0.01, dsnu_e=2.0)
+    >>> gain, offset = fixed_pattern(profile, (64, 64))
+    >>> round(float(gain.mean()), 2), round(float(gain.std()), 2), round(float(offset.std()), 1)
+    (1.0, 0.01, 2.0)
+    >>> bool(np.array_equal(fixed_pattern(profile, (64, 64))[0], gain))   # the same sensor, the same maps
+    True
     """
     profile = load_profile(profile)
     rng = np.random.default_rng(profile.fixed_pattern_seed)
@@ -86,11 +146,21 @@ def fixed_pattern(profile, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarr
 class FixedPattern:
     """Fixed-pattern maps of one sensor image and how well they are known (all ``(H, W)``).
 
-    ``gain`` (PRNU, the signal is divided by it; ones where not corrected), ``offset_e``
-    (DSNU in electrons, subtracted; zeros where not corrected), ``gain_var`` and
-    ``offset_var_e2``: the variance of the true map around the one used (0 where exact), and
-    ``gain_source`` / ``offset_source``: where the maps come from (``none``, ``simulated``,
-    ``flat_field``, ``bias_frames``, ``uncorrected``, possibly with the reason).
+    Made by :func:`fixed_pattern_correction`; the arrays are stored read-only, float64.
+
+    Parameters
+    ----------
+    gain : array_like of shape (H, W)
+        PRNU gain map; the signal is divided by it (ones where not corrected).
+    offset_e : array_like of shape (H, W)
+        DSNU offset in electrons, subtracted (zeros where not corrected).
+    gain_var : array_like of shape (H, W)
+        Variance of the true gain around ``gain`` (0 where exact).
+    offset_var_e2 : array_like of shape (H, W)
+        Variance of the true offset around ``offset_e``, electrons squared (0 where exact).
+    gain_source, offset_source : str, default "none"
+        Where the maps come from (``none``, ``simulated``, ``flat_field``, ``bias_frames``,
+        ``uncorrected``, possibly with the reason).
     """
 
     gain: np.ndarray
@@ -186,6 +256,7 @@ def fixed_pattern_correction(profile, shape: tuple[int, int], iso=None) -> Fixed
     Returns
     -------
     FixedPattern
+        The maps (read-only, float64) and where they come from.
     """
     return _fixed_pattern_maps(load_profile(profile), shape, iso, simulate=False)
 
@@ -227,7 +298,31 @@ def expose(
 
     Returns
     -------
-    ndarray of shape (H, W), uint16 (DN, black level included)
+    ndarray of shape (H, W), uint16
+        Sensor codes (DN, black level included), in ``[0, white_level_dn]``.
+
+    Raises
+    ------
+    lfproc.errors.ShapeError
+        ``irradiance_e_per_s`` is not 2-D.
+    lfproc.errors.InputError
+        Negative or non-finite irradiance, ``exposure_s <= 0`` or ``gamma < 1``.
+    lfproc.errors.ProfileError
+        An ISO is not in the profile.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.sensor import calibrated_observation, expose
+    >>> E = np.full((64, 64), 1000.0)        # 1000 e-/s on every pixel
+    >>> dn = expose(E, exposure_s=0.01, iso=400, profile="paper-medium", random_state=0)
+    >>> dn.shape, dn.dtype
+    ((64, 64), dtype('uint16'))
+    >>> obs = calibrated_observation(dn, exposure_s=0.01, iso=400, profile="paper-medium")
+    >>> round(float(obs.radiance.mean()) / 1000, 2)    # the irradiance, recovered on average
+    1.0
+    >>> bool(abs(obs.radiance.std() / np.sqrt(obs.variance.mean()) - 1) < 0.05)   # the noise, predicted
+    True
     """
     profile = load_profile(profile)
     t = check_positive("exposure_s", exposure_s)
@@ -266,9 +361,27 @@ class Observation(ReadOnlyState):
     """Calibrated observations of a sensor image (all arrays ``(H, W)``, or ``(S, H, W)`` for
     the shots of a capture).
 
-    ``radiance`` (T, e-/s), ``variance`` (of T, (e-/s)^2), ``weight`` (1/std(T), 0 where
-    unusable), ``saturated`` and ``black_clipped`` masks. The arrays are read-only
-    (float32 and bool; see :func:`lfproc._util.frozen_array`).
+    Made by :func:`calibrated_observation`. The arrays are stored read-only (float32 and
+    bool; see :func:`lfproc._util.frozen_array`); ``saturated_fraction`` and
+    ``black_clipped_fraction`` are the masks' means.
+
+    Parameters
+    ----------
+    radiance : array_like
+        Radiance estimate ``T`` in e-/s.
+    variance : array_like
+        Variance of ``T``, (e-/s)^2; the shape of ``radiance``.
+    weight : array_like
+        ``1 / std(T)``, 0 where the pixel is unusable.
+    saturated, black_clipped : array_like of bool
+        Pixels at the saturation code, and pixels clipped at code 0.
+
+    Raises
+    ------
+    lfproc.errors.ShapeError
+        An array's shape differs from ``radiance``'s.
+    lfproc.errors.InputError
+        A mask is not boolean.
     """
 
     radiance: np.ndarray
@@ -375,7 +488,7 @@ def calibrated_observation(
     radiance_estimate: np.ndarray | None = None,
     correct_fixed_pattern: "bool | FixedPattern" = True,
 ) -> Observation:
-    """Radiance estimate ``T``, its variance and weights from sensor codes (method.md section 3).
+    """Radiance estimate ``T``, its variance and weights from sensor codes (Miandji et al. 2021, eqs. 5-7).
 
     Parameters
     ----------
@@ -401,6 +514,26 @@ def calibrated_observation(
     Returns
     -------
     Observation
+        Radiance (e-/s), variance, weights and the saturated/black-clipped masks, of ``dn``'s
+        shape.
+
+    Raises
+    ------
+    lfproc.errors.InputError
+        Bad codes, ``exposure_s <= 0``, ``gamma < 1`` or an unknown ``variance_from``.
+    lfproc.errors.ProfileError
+        An ISO is not in the profile.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.sensor import calibrated_observation
+    >>> dn = np.array([[64, 72, 4095]])     # black, a little signal, saturated (paper-medium: 12 bit, black 64)
+    >>> obs = calibrated_observation(dn, exposure_s=0.01, iso=400, profile="paper-medium")
+    >>> obs.saturated.tolist(), [round(float(x)) for x in obs.radiance[0, :2]]
+    ([[False, False, True]], [-1, 976])
+    >>> float(obs.weight[0, 2])
+    0.0
     """
     profile = load_profile(profile)
     t = check_positive("exposure_s", exposure_s)

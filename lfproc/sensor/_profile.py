@@ -17,7 +17,11 @@ field that is wrong.
 
 Shipped profiles (``load_profile(NAME)``): ``illum`` (a nominal Lytro Illum) and
 ``paper-none``, ``paper-low``, ``paper-medium``, ``paper-high`` (the simulated sensor of
-the paper, Table VI noise levels; method.md section 2).
+the paper, Table VI noise levels: E. Miandji, H.-N. Nguyen, S. Hajisharif, J. Unger and
+C. Guillemot, "Compressive HDR Light Field Imaging Using a Single Multi-ISO Sensor", IEEE
+Transactions on Computational Imaging, 2021). Their 12-bit ADC, 20000 e- full well and 64 DN
+black level are lfproc's choice (the paper does not give them); the gain is the paper's
+``h = ISO / 100 * (2^12 - 1) / FWD``.
 """
 
 from __future__ import annotations
@@ -86,13 +90,66 @@ def _upgrade_source(source: dict[str, Any]) -> dict[str, Any]:
 
 
 def paper_gain_dn_per_e(iso: float, *, adc_bits: int, full_well_e: float) -> float:
-    """The paper's theoretical gain ``h = (ISO / 100) * (2^bits - 1) / FWD`` in DN per electron."""
+    """The paper's theoretical gain ``h = (ISO / 100) * (2^bits - 1) / FWD`` in DN per electron.
+
+    At ISO 100 the full well fills the ADC's range; each doubling of the ISO doubles the gain
+    (Miandji et al., IEEE TCI 2021).
+
+    Parameters
+    ----------
+    iso : float
+        ISO setting.
+    adc_bits : int
+        ADC resolution in bits.
+    full_well_e : float
+        Full-well depth in electrons.
+
+    Returns
+    -------
+    float
+        Gain in DN per electron.
+
+    Examples
+    --------
+    >>> from lfproc.sensor import paper_gain_dn_per_e
+    >>> paper_gain_dn_per_e(100, adc_bits=12, full_well_e=20000)
+    0.20475
+    >>> paper_gain_dn_per_e(800, adc_bits=12, full_well_e=20000)
+    1.638
+    """
     return (float(iso) / 100.0) * (2**adc_bits - 1) / float(full_well_e)
 
 
 @dataclass(frozen=True)
 class IsoFigures:
-    """Figures of one ISO setting. ``None`` means unknown (see the profile's ``unknown``)."""
+    """Figures of one ISO setting. ``None`` means unknown (see the profile's ``unknown``).
+
+    Parameters
+    ----------
+    gain_dn_per_e : float or None
+        System gain ``h`` in DN per electron.
+    read_noise_e : float or None
+        Read-noise standard deviation in electrons.
+    read_noise_dn : float or None, optional
+        The same in DN (``h * read_noise_e`` for a consistent profile).
+    dark_current_e_per_s : float or None, optional
+        Dark current in electrons per second (default: the profile's).
+    black_level_dn : float or None, optional
+        Black level of this ISO in DN (default: the profile's).
+    full_well_e : float or None, optional
+        Full well in electrons (default: the profile's).
+    dsnu_dn : float or None, optional
+        Dark-signal non-uniformity measured at this ISO, DN.
+    prnu : float or None, optional
+        Photo-response non-uniformity measured at this ISO (relative).
+
+    Examples
+    --------
+    >>> from lfproc.sensor import load_profile
+    >>> figures = load_profile("paper-medium").iso_figures(100)
+    >>> figures.gain_dn_per_e, figures.read_noise_e, figures.black_level_dn
+    (0.20475, 2.0, 64.0)
+    """
 
     gain_dn_per_e: float | None
     read_noise_e: float | None
@@ -446,7 +503,27 @@ def _check_number(value, name: str, *, integer: bool = False, low=None, high=Non
 def describe_profile(profile: CameraProfile) -> dict[str, Any]:
     """The profile as one JSON-ready dict: its JSON form, the bias frames' shapes and the
     saturation code of every ISO (:meth:`CameraProfile.saturation_dn`, ``None`` when unknown).
-    ``lfproc profile show`` and ``lfproc info`` print it."""
+    ``lfproc profile show`` and ``lfproc info`` print it.
+
+    Parameters
+    ----------
+    profile : CameraProfile
+        The profile to describe.
+
+    Returns
+    -------
+    dict
+        ``kind`` (``"camera_profile"``), the fields of :meth:`CameraProfile.to_json`,
+        ``bias_frames`` (ISO as str -> frame shape), ``flat_field`` (its shape or None) and
+        ``saturation_dn`` (ISO as str -> code or None).
+
+    Examples
+    --------
+    >>> from lfproc.sensor import describe_profile, load_profile
+    >>> doc = describe_profile(load_profile("paper-medium"))
+    >>> doc["kind"], doc["adc_bits"], doc["cfa_pattern"], doc["saturation_dn"]["800"]
+    ('camera_profile', 12, 'RGGB', 4095.0)
+    """
     doc = profile.to_json()
     doc = {"kind": "camera_profile", **doc}
     doc["bias_frames"] = {str(iso): list(frame.shape) for iso, frame in sorted(profile.bias_frames.items())}
@@ -461,7 +538,27 @@ def describe_profile(profile: CameraProfile) -> dict[str, Any]:
 
 
 def is_profile_file(path: str | os.PathLike) -> bool:
-    """True when ``path`` is a JSON file whose ``schema`` is a camera profile's."""
+    """True when ``path`` is a JSON file whose ``schema`` is a camera profile's.
+
+    Only the first 4 KiB are read; the profile is not validated (:func:`load_profile` does).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Any path.
+
+    Returns
+    -------
+    bool
+        False for a missing file, a folder, another suffix or another JSON document.
+
+    Examples
+    --------
+    >>> from lfproc.sensor import is_profile_file, load_profile, save_profile
+    >>> _ = save_profile(load_profile("illum"), "illum.json")
+    >>> is_profile_file("illum.json"), is_profile_file("missing.json")
+    (True, False)
+    """
     path = Path(path)
     if not path.is_file() or path.suffix.lower() != ".json":
         return False
@@ -474,7 +571,41 @@ def is_profile_file(path: str | os.PathLike) -> bool:
 
 
 def load_profile(name_or_path: str | os.PathLike | CameraProfile) -> CameraProfile:
-    """Load a shipped profile by name (see :data:`SHIPPED_PROFILES`) or a profile JSON file."""
+    """Load a shipped profile by name (see :data:`SHIPPED_PROFILES`) or a profile JSON file.
+
+    Parameters
+    ----------
+    name_or_path : str, os.PathLike or CameraProfile
+        A shipped profile's name (``illum``, ``paper-none``, ``paper-low``, ``paper-medium``,
+        ``paper-high``), a profile JSON file (with its bias and flat-field sidecars), or a
+        profile, returned as is.
+
+    Returns
+    -------
+    CameraProfile
+        The validated profile.
+
+    Raises
+    ------
+    lfproc.errors.MissingFileError
+        Neither a shipped name nor an existing file.
+    lfproc.errors.FileFormatError
+        The file is not JSON.
+    lfproc.errors.ProfileError
+        The JSON or a sidecar does not hold a valid profile (the message names the field).
+
+    Examples
+    --------
+    >>> from lfproc.sensor import load_profile
+    >>> p = load_profile("paper-medium")
+    >>> p.adc_bits, p.white_level_dn, p.black_level_dn, p.full_well_e, p.cfa_pattern
+    (12, 4095.0, 64.0, 20000.0, 'RGGB')
+    >>> p.iso_values
+    [100, 200, 400, 800, 1600, 3200, 6400]
+    >>> fig = p.iso_figures(400)
+    >>> fig.gain_dn_per_e, fig.read_noise_e, fig.dark_current_e_per_s
+    (0.819, 2.0, 1.0)
+    """
     if isinstance(name_or_path, CameraProfile):
         return name_or_path
     text = str(name_or_path)
@@ -600,7 +731,37 @@ def _read_flat_sidecar(path: Path, sidecar: Any) -> np.ndarray:
 
 def save_profile(profile: CameraProfile, path: str | os.PathLike, *, force: bool = False) -> Path:
     """Write a profile as JSON, its bias frames in a sidecar ``<stem>.bias.npz`` and its flat-field
-    map in ``<stem>.flat.npz``: all of them or none (:func:`lfproc.io.atomic_outputs`)."""
+    map in ``<stem>.flat.npz``: all of them or none (:func:`lfproc.io.atomic_outputs`).
+
+    Parameters
+    ----------
+    profile : CameraProfile
+        The profile.
+    path : str or os.PathLike
+        The JSON file (the sidecars go next to it).
+    force : bool, default False
+        Replace existing outputs.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    lfproc.errors.OutputExistsError
+        An output exists and ``force`` is false.
+
+    Examples
+    --------
+    >>> from lfproc.sensor import load_profile, save_profile
+    >>> profile = load_profile("paper-high")
+    >>> save_profile(profile, "camera.json")
+    PosixPath('camera.json')
+    >>> back = load_profile("camera.json")
+    >>> back.name, back.iso_figures(200) == profile.iso_figures(200)
+    ('paper-high', True)
+    """
     path = Path(path)
     doc = profile.to_json()
     outputs = profile_outputs(profile, path)

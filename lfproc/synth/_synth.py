@@ -593,7 +593,44 @@ def render_layers(layers: Sequence[Layer], *, size: tuple[int, int], views: int 
 
 def scene_layers(scene: str = "layers", *, size: tuple[int, int] = (256, 256), views: int | tuple[int, int] = 5,
                  baseline_px: float = 1.0, textures: Sequence[Any] | None = None, random_state=None) -> list[Layer]:
-    """The layers of a synthetic scene, back to front (see :func:`synthesize` for the parameters)."""
+    """The layers of a synthetic scene, back to front (what :func:`synthesize` renders).
+
+    Parameters
+    ----------
+    scene : {"layers", "lamps", "window", "checker"}
+        Scene kind.
+    size : (H, W)
+        Size of each view in pixels (each at least 16).
+    views : int or (V, U)
+        Odd number of angular rows and columns; with ``baseline_px`` it sets the layers'
+        margin.
+    baseline_px : float
+        Largest absolute disparity, pixels per view step (>= 0).
+    textures : sequence of paths or arrays, optional
+        Images used instead of procedural textures (see :func:`synthesize`).
+    random_state : None, int or numpy Generator
+        Seed of the layout and textures (the same as :func:`synthesize`'s gives its layers).
+
+    Returns
+    -------
+    list of Layer
+        Back to front; each with its radiance and alpha rasters (centre-view coordinates plus
+        a margin), disparity, optional highlight and name.
+
+    Raises
+    ------
+    InputError
+        Unknown scene, bad size, views or baseline.
+
+    Examples
+    --------
+    >>> from lfproc.synth import scene_layers
+    >>> layers = scene_layers("layers", size=(32, 32), random_state=0)
+    >>> [layer.disparity_px for layer in layers]
+    [-1.0, -0.5, 0.0, 0.5, 0.75, 1.0]
+    >>> layers[0].radiance.shape, layers[0].alpha.shape        # 32 + 2 * 4 margin pixels
+    ((40, 40, 3), (40, 40))
+    """
     builder = _builder(scene)
     h, w = _check_size(size)
     nviews = _check_views(views)
@@ -604,7 +641,33 @@ def scene_layers(scene: str = "layers", *, size: tuple[int, int] = (256, 256), v
 
 
 def check_scene(scene: str) -> str:
-    """Validate a scene name; the error lists the valid ones."""
+    """Validate a scene name; the error lists the valid ones.
+
+    Parameters
+    ----------
+    scene : str
+        A scene name.
+
+    Returns
+    -------
+    str
+        ``scene``, when it is one of :data:`SCENES`.
+
+    Raises
+    ------
+    InputError
+        Any other name.
+
+    Examples
+    --------
+    >>> from lfproc.synth import check_scene
+    >>> check_scene("lamps")
+    'lamps'
+    >>> check_scene("sunset")
+    Traceback (most recent call last):
+    ...
+    lfproc.errors.InputError: scene: expected one of layers, lamps, window, checker; got 'sunset'
+    """
     if scene not in SCENES:
         raise InputError(f"scene: expected one of {', '.join(SCENES)}; got {scene!r}")
     return scene
@@ -656,10 +719,18 @@ def synthesize(scene: str = "layers", *, size: tuple[int, int] = (256, 256), vie
 
     Examples
     --------
+    >>> import numpy as np
+    >>> from lfproc.synth import synthesize
     >>> lf = synthesize("lamps", size=(64, 64), views=3, random_state=0)
-    >>> lf.shape
-    (3, 3, 64, 64, 3)
-    >>> lf.dynamic_range_stops() > 16
+    >>> lf.shape, lf.units, lf.source
+    ((3, 3, 64, 64, 3), 'relative', 'synth:lamps')
+    >>> bool(lf.dynamic_range_stops() > 16)
+    True
+    >>> lf5 = synthesize("layers", size=(32, 32), views=5, random_state=0)
+    >>> lf5.attrs["layer_disparities_px"], lf5.disparity.shape
+    ([-1.0, -0.5, 0.0, 0.5, 0.75, 1.0], (32, 32))
+    >>> lf3 = synthesize("layers", size=(32, 32), views=3, random_state=0)
+    >>> bool(np.array_equal(lf3.centre(), lf5.centre()))    # the centre view does not depend on the views
     True
     """
     _builder(scene)
