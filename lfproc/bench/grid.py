@@ -1,4 +1,8 @@
-"""The bench's grid: presets, cells and jobs (method.md section 7).
+"""The bench's grid: presets, cells and jobs.
+
+The settings are the experiments of Miandji, Nguyen, Hajisharif, Unger and Guillemot,
+"Compressive HDR light field imaging using a single multi-ISO sensor", IEEE TCI 2021, section
+IV.
 
 A **cell** is one row of ``results.csv``: one scene, one acquisition (``method``, ISO
 pattern, shots, ISO set, noise level, relative exposure) and, for the per-shot baselines,
@@ -48,7 +52,7 @@ __all__ = ["METHODS", "NOISE_LEVELS", "ISO_SETS", "PATTERNS", "PRESETS", "Preset
 METHODS = ("joint", "dual-iso", "individual-iso", "bracketing", "bracketing-joint")
 PATTERNS = ("random", "row", "block", "dual")
 NOISE_LEVELS = ("none", "low", "medium", "high")
-#: The paper's three ISO sets (method.md section 7); every one is in the shipped paper-* profiles.
+#: The paper's three ISO sets (Miandji et al., IEEE TCI 2021, section IV-B); every one is in the shipped paper-* profiles.
 ISO_SETS = ((100, 400, 800, 1600), (100, 800, 1600, 3200), (100, 1600, 3200, 6400))
 SHOTS = (1, 2, 3)
 BRACKETING_SHOTS = (2, 3, 4)

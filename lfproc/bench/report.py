@@ -1,7 +1,7 @@
 """The bench report: tables laid out like the paper's Tables I-IV, the claims, the plots.
 
 Every figure in report.md is computed from the rows of results.csv; the paper's own numbers
-(method.md section 7) appear beside them for orientation only -- the paper used PU2 and
+(Miandji et al., IEEE TCI 2021, Tables I-IV) appear beside them for orientation only -- the paper used PU2 and
 HDR-VDP-2 on its own scenes, lfproc scores PU21 (and PU2 with its own peak convention) on the
 scenes given, so the columns are not expected to agree.
 
@@ -44,7 +44,7 @@ from .._shared.deps import require
 
 __all__ = ["write_report", "claims", "PAPER", "PLOTS", "REPORT_FILES", "mean_metric"]
 
-#: The paper's Table I-IV numbers (method.md section 7): PU2-PSNR (dB) and PU2-SSIM by shots.
+#: The paper's Table I-IV numbers (Miandji et al., IEEE TCI 2021): PU2-PSNR (dB) and PU2-SSIM by shots.
 PAPER = {
     ("joint", "random"): {"psnr": (31.09, 32.84, 32.38), "ssim": (0.9072, 0.9409, 0.9445)},
     ("joint", "row"): {"psnr": (31.55, 32.73, 32.79), "ssim": (0.9106, 0.9407, 0.9444)},

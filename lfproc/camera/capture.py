@@ -568,7 +568,7 @@ def load_capture(path: str | os.PathLike) -> Capture:
 # -- calibrated observations --------------------------------------------------------------
 
 def observations(capture: Capture, *, warn_saturation: bool = True, **options) -> Observation:
-    """Radiance estimates ``T`` (e-/s), their variance and weights for every shot (method.md section 3).
+    """Radiance estimates ``T`` (e-/s), their variance and weights for every shot (paper eqs. 5-7).
 
     Parameters
     ----------

@@ -1,4 +1,8 @@
-"""Per-pixel ISO layouts of a multi-ISO sensor (method.md section 7).
+"""Per-pixel ISO layouts of a multi-ISO sensor.
+
+The random, row and block patterns of Miandji, Nguyen, Hajisharif, Unger and Guillemot,
+"Compressive HDR light field imaging using a single multi-ISO sensor", IEEE TCI 2021, section
+IV-B.
 
 Patterns (:func:`iso_pattern`): ``random`` (i.i.d. per pixel), ``row`` (rows alternate ISO
 in 2-row units, so a Bayer quad shares one ISO, as in Magic Lantern's dual ISO), ``block``

@@ -1,4 +1,7 @@
-"""The projection operator ``Phi`` of the coded-mask camera (method.md section 1).
+"""The projection operator ``Phi`` of the coded-mask camera.
+
+The camera model of Miandji, Nguyen, Hajisharif, Unger and Guillemot, "Compressive HDR light
+field imaging using a single multi-ISO sensor", IEEE TCI 2021, section III-A.
 
 One shot ``s`` maps a light field ``L`` of shape ``(V, U, H, W, C)`` to one sensor image:
 

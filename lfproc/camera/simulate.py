@@ -1,4 +1,8 @@
-"""Simulated captures of the multi-ISO coded-mask camera (method.md sections 1, 2, 6, 7).
+"""Simulated captures of the multi-ISO coded-mask camera.
+
+The camera, its sensor model, baselines and settings are those of Miandji, Nguyen, Hajisharif,
+Unger and Guillemot, "Compressive HDR light field imaging using a single multi-ISO sensor", IEEE
+TCI 2021 (sections III and IV).
 
 :func:`simulate_capture` projects an HDR light field through the coded mask and the Bayer
 CFA (:mod:`lfproc.camera.projection`) and exposes each shot on a sensor with a per-pixel ISO map
@@ -33,7 +37,7 @@ lowest and the highest ISO of the set: (100, 1600) for the default set), or a fi
 or a single-channel integer image, values = ISO). The ISO map is the same in every shot (it
 is a property of the sensor); each shot has its own mask code.
 
-Baselines (method.md section 6): ``baseline="individual-iso"`` takes one shot per ISO of the
+Baselines (the paper's section III-B and Table IV): ``baseline="individual-iso"`` takes one shot per ISO of the
 set, each with one global ISO; ``baseline="bracketing"`` takes 2, 3 or 4 shots at the lowest
 ISO of the set with relative exposures ``[0.5, 8]``, ``[0.5, 2, 8]``, ``[0.5, 2, 4, 8]``
 (times ``exposure_s``).
@@ -85,7 +89,7 @@ __all__ = [
 ]
 
 BASELINES = ("individual-iso", "bracketing")
-#: Relative exposures of the bracketing baseline by number of shots (method.md section 6).
+#: Relative exposures of the bracketing baseline by number of shots (the paper's Table IV).
 BRACKETING_EXPOSURES = {2: (0.5, 8.0), 3: (0.5, 2.0, 8.0), 4: (0.5, 2.0, 4.0, 8.0)}
 #: ``--noise LEVEL`` -> shipped camera profile (paper Table VI noise levels).
 NOISE_PROFILES = {"none": "paper-none", "low": "paper-low", "medium": "paper-medium", "high": "paper-high"}

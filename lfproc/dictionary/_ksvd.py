@@ -2,7 +2,7 @@
 
 Written by hand: no maintained Python K-SVD exists (the PyPI ``ksvd`` package uses
 scikit-learn's OMP, which copies the Gram matrix per signal, and drops negative
-coefficients; reconstruction.md section 2.5).
+coefficients).
 
 Each iteration:
 

@@ -2,7 +2,7 @@
 
 Written by hand because no library does it at this size: scikit-learn's
 ``orthogonal_mp_gram`` loops over signals in Python and copies the ``K x K`` Gram matrix for
-each of them (reconstruction.md section 2.5), SPAMS's ``omp`` is order-recursive MP (a
+each of them, SPAMS's ``omp`` is order-recursive MP (a
 different selection rule).
 
 The algorithm is Batch-OMP of Rubinstein, Zibulevsky and Elad (2008): with the Gram matrix

@@ -1,6 +1,7 @@
 """The paper's baselines as reconstruction modes on top of :func:`lfproc.recon.reconstruct`.
 
-method.md section 6 compares the joint multi-ISO reconstruction with acquisitions that
+Miandji et al. ("Compressive HDR light field imaging using a single multi-ISO sensor",
+IEEE TCI 2021, section III-B) compare the joint multi-ISO reconstruction with acquisitions that
 reconstruct every shot on its own and merge the results:
 
 * **individual ISO** -- one single-ISO coded shot per ISO of the set
