@@ -157,7 +157,25 @@ def _verdict(parts: list[bool | None]) -> str:
 
 
 def claims(rows: list[dict]) -> list[dict[str, Any]]:
-    """The paper's claims decided on these rows (module notes): name, verdict, evidence text."""
+    """The paper's claims decided on these rows (module notes): name, verdict, evidence text.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Rows of results.csv (as read by :func:`csv.DictReader` or written by the bench).
+
+    Returns
+    -------
+    list of dict
+        One per claim: ``claim`` (text), ``verdict`` (``"holds"``, ``"does not hold"``,
+        ``"partly"`` or ``"not testable"``) and ``evidence`` (the numbers that decided it).
+
+    Examples
+    --------
+    >>> from lfproc.bench import claims
+    >>> [c["verdict"] for c in claims([])]  # no rows: nothing can be decided
+    ['not testable', 'not testable', 'not testable', 'not testable', 'not testable']
+    """
     out = []
     # 1. shots
     gains = {}
@@ -461,6 +479,24 @@ def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict,
     (:func:`lfproc.io.atomic_outputs`); with ``paths`` (file name -> path, e.g. the staged
     paths of a larger :func:`~lfproc.io.atomic_outputs` transaction) they are written there.
     ``bench_dir`` is where the cells (for the best/worst picture) are read.
+
+    Parameters
+    ----------
+    bench_dir : str or path-like
+        The bench directory (cells are read there; outputs go there without ``paths``).
+    rows : list of dict
+        Rows of results.csv.
+    meta : dict
+        The run's description (``preset``, ``preset_description``, ``scenes``, ``crop``,
+        ``mask_period``, ``recon``, ``exposure_s``, ``dictionary``, ``dictionary_patch``,
+        ``dictionary_atoms``, ``seed``, ``lfproc_version``, ...), as :func:`run_bench` writes it.
+    paths : dict of str to Path, optional
+        Where to write each of :data:`REPORT_FILES` instead of ``bench_dir``.
+
+    Returns
+    -------
+    pathlib.Path
+        The path of report.md.
     """
     if paths is None:
         out = Path(bench_dir)

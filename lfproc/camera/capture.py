@@ -339,7 +339,18 @@ def _member(name: str) -> zipfile.ZipInfo:
 
 
 def is_capture_file(path: str | os.PathLike) -> bool:
-    """True when ``path`` is a ZIP archive whose first member is the capture header."""
+    """True when ``path`` is a ZIP archive whose first member is the capture header.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file to test (only its first ZIP member name is read; a missing or non-ZIP
+        file gives False).
+
+    Returns
+    -------
+    bool
+    """
     return zip_first_member(path) == HEADER_NAME
 
 
@@ -681,7 +692,27 @@ def _warn_saturation(capture: Capture, *, stacklevel: int) -> None:
 
 
 def describe_capture(path: str | os.PathLike) -> dict[str, Any]:
-    """Figures of a capture file for ``lfproc info`` (first key ``kind = "capture"``)."""
+    """Figures of a capture file for ``lfproc info`` (first key ``kind = "capture"``).
+
+    Parameters
+    ----------
+    path : str or path-like
+        A capture file written by :meth:`Capture.save`.
+
+    Returns
+    -------
+    dict
+        ``kind``, ``path``, ``shots``, ``size`` ``[H, W]``, ``views`` ``[V, U]``,
+        ``sampling_rate_percent``, saturated and black-clipped fractions (overall and
+        ``per_iso``), ``isos``, ``exposures_s``, ``cfa_pattern``, ``gamma``, ``mask``,
+        ``iso_pattern``, ``profile``, ``radiance_scale``, ``dn_min``/``dn_max``,
+        ``ground_truth`` and ``parameters``.
+
+    Raises
+    ------
+    MissingFileError, FileFormatError
+        As :func:`load_capture`.
+    """
     capture = load_capture(path)
     obs = observations(capture, warn_saturation=False)  # the figures below report it
     per_iso = {}

@@ -490,10 +490,38 @@ def simulate_file(
     compression) say otherwise (:func:`lfproc.lightfield.clean_nonfinite`). The capture records
     the input's path and SHA-256 as its ground truth.
 
+    Parameters
+    ----------
+    input_path : str or path-like
+        The HDR light field to read (any format :func:`lfproc.io.read_lightfield` reads).
+    output_path : str or path-like
+        The capture file to write (``.npz``, see :meth:`Capture.save`).
+    force : bool, default False
+        Overwrite ``output_path`` when it exists.
+    nonfinite : {"raise", "zero", "clip"}, default "raise"
+        What to do with NaN/Inf input samples.
+    negative : {"raise", "clip"}, default "raise"
+        What to do with negative input samples.
+    dictionary : str, path-like, Dictionary or None, default "default"
+        The dictionary the capture is meant for (checked for the number of views only).
+    **options
+        Passed to :func:`simulate_capture` (``iso_pattern``, ``shots``, ``random_state``, ...).
+
     Returns
     -------
     capture : Capture
-    summary : dict (:func:`capture_summary`)
+        The simulated capture, as written.
+    summary : dict
+        Its figures (:func:`capture_summary`), with the output path.
+
+    Raises
+    ------
+    OutputExistsError
+        ``output_path`` exists and ``force`` is false.
+    MissingFileError, FileFormatError
+        The input cannot be read.
+    InputError
+        NaN/Inf or negative radiance refused, or an invalid option.
     """
     check_output(output_path, force=force)
     lf = read_lightfield(input_path, nonfinite=nonfinite, negative=negative)

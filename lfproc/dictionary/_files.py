@@ -192,7 +192,17 @@ class Dictionary(ReadOnlyState):
 
 
 def is_dictionary_file(path: str | os.PathLike) -> bool:
-    """True for a shipped name or a ZIP archive whose first member is the dictionary header."""
+    """True for a shipped name or a ZIP archive whose first member is the dictionary header.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A shipped dictionary name or a file (only its first ZIP member name is read).
+
+    Returns
+    -------
+    bool
+    """
     if str(path) in SHIPPED and not Path(path).exists():
         return True
     return zip_first_member(path) == HEADER_NAME
@@ -320,6 +330,18 @@ def dictionary_patch(source: "str | os.PathLike | Dictionary" = "default") -> tu
 
 def load_dictionary(source: str | os.PathLike | Dictionary = "default") -> Dictionary:
     """Read a dictionary: a :class:`Dictionary` (returned as is), a shipped name or a file path.
+
+    Parameters
+    ----------
+    source : str, path-like or Dictionary, default "default"
+        A shipped name (``"default"``, the one :func:`lfproc.reconstruct` uses; a file of that
+        name in the current directory takes precedence), the path of a ``.npz`` file written by
+        :func:`save_dictionary`, or a :class:`Dictionary`.
+
+    Returns
+    -------
+    Dictionary
+        Atoms ``(n, K)`` with unit-norm columns, ``n = V*U*P*P*C`` (the ``patch`` shape).
 
     Raises
     ------

@@ -115,7 +115,27 @@ class TrainingSignals:
 @short_repr
 @dataclass
 class KsvdResult:
-    """What :func:`ksvd` returns."""
+    """What :func:`ksvd` returns.
+
+    Parameters
+    ----------
+    atoms : ndarray of shape (n, K), float32
+        The learned dictionary, unit-norm columns.
+    errors : list of float
+        Relative squared error ``||X - D G||^2 / ||X||^2`` after each iteration's coding.
+    final_error : float
+        The same for the returned dictionary.
+    usage : ndarray of shape (K,)
+        Number of training signals using each atom (final coding).
+    iterations : int
+        Iterations run.
+    replaced : list of int, default []
+        Atoms replaced (unused or duplicated) in each iteration.
+    seconds : float, default 0.0
+        Wall-clock time of the run.
+    resumed_from : int, default 0
+        Iteration of the checkpoint the run resumed from (0: a fresh start).
+    """
 
     atoms: np.ndarray  #: (n, K) float32, unit-norm columns
     errors: list[float]  #: relative squared error ||X - D G||^2 / ||X||^2 after each iteration's coding

@@ -501,6 +501,38 @@ def log_luminance_error(result: Any, reference: Any, *, mask: Any = None, align:
     since a merged radiance map from 8-bit images has an arbitrary scale) or 0 with
     ``align="none"``. Luminance with :data:`PU21_LUMA` weights (RGB on the last axis; one
     channel as is). Result luminances below 1e-12 of the reference mean are clamped there.
+
+    Parameters
+    ----------
+    result, reference : array_like of the same shape
+        Linear images or light fields, RGB (or one channel) on the last axis.
+    mask : array_like of bool, optional
+        Samples to use, of the luminance's shape (the input's without the colour axis).
+    align : {"gain", "none"}, default "gain"
+        Fit one gain (a constant log offset) first, or not.
+
+    Returns
+    -------
+    float
+        RMS error in natural-log units (``/ ln 2`` for stops).
+
+    Raises
+    ------
+    ShapeError
+        Shapes differ, or a mask of another shape.
+    InputError
+        No sample of positive reference luminance in the mask.
+
+    Examples
+    --------
+    >>> import math
+    >>> import numpy as np
+    >>> from lfproc.metrics import log_luminance_error
+    >>> ref = np.linspace(0.1, 10.0, 300).reshape(10, 10, 3)
+    >>> round(log_luminance_error(4 * ref, ref), 6)  # a gain is fitted away
+    0.0
+    >>> round(log_luminance_error(4 * ref, ref, align="none") / math.log(2), 6)  # two stops
+    2.0
     """
     check_choice("align", align, ("gain", "none"))
     res, ref = _check_pair(result, reference)
@@ -819,7 +851,26 @@ def align_result(result: LightField, reference: LightField, align: str = "none")
       whose reference luminance lies between its 1st and 99th percentiles of positive values
       (clipped and black samples left out), for any units (HDR comparisons of relative data).
 
-    Returns the (new) result and ``{"align": mode, "gain": factor applied}``.
+    Parameters
+    ----------
+    result, reference : LightField
+    align : {"none", "exposure", "gain"}, default "none"
+
+    Returns
+    -------
+    aligned : LightField
+        ``result`` (``"none"``) or a new light field scaled to the reference (data, variance and
+        saturation level; the reference's units, exposure and ISO; ``attrs["evaluate_alignment"]``).
+    info : dict
+        ``{"align": mode, "gain": factor applied}``.
+
+    Raises
+    ------
+    InputError
+        A mismatch of units or exposures with ``"none"``, missing exposures with ``"exposure"``,
+        too few usable pixels with ``"gain"``.
+    ShapeError
+        Shapes differ (``"gain"``).
     """
     check_choice("align", align, ALIGN_MODES)
     for name, lf in (("result", result), ("reference", reference)):

@@ -130,7 +130,32 @@ def write_capture_preview(capture, output: str | os.PathLike, *, kind: str = "ca
     """Write :func:`render_capture_preview` of a capture (object or file) to a PNG/JPEG/TIFF.
 
     Goes through :func:`lfproc.preview.write_preview` (the capture kinds are registered
-    there). Returns a summary (``output``, ``kind``, ``size`` of the picture, ``shots``, ``isos``).
+    there).
+
+    Parameters
+    ----------
+    capture : Capture or str or path-like
+        A capture, or a capture file (read with :func:`lfproc.camera.load_capture`).
+    output : str or path-like
+        The picture to write (``.png``, ``.jpg``, ``.tif``).
+    kind : {"capture", "sensor", "iso", "mask"}, default "capture"
+        See :func:`render_capture_preview`.
+    force : bool, default False
+        Overwrite an existing ``output``.
+    shot : int, default 0
+        Which shot to show.
+
+    Returns
+    -------
+    dict
+        ``output`` (path), ``kind``, ``size`` ``[height, width]`` of the picture, ``shots``, ``isos``.
+
+    Raises
+    ------
+    OutputExistsError
+        ``output`` exists and ``force`` is false.
+    InputError
+        An unknown kind.
     """
     check_choice("--kind (capture previews)", kind, PREVIEW_KINDS)
     check_output(output, force=force)

@@ -62,11 +62,38 @@ def reinhard_parameters(image: np.ndarray, *, key: float = 0.18, white_percentil
                         exposure_ev: float = 0.0) -> dict[str, float]:
     """Statistics of the Reinhard global operator for ``image`` (linear, last axis colour).
 
+    Parameters
+    ----------
+    image : ndarray
+        Linear image or light field, colour on the last axis (RGB or one channel).
+    key : float, default 0.18
+        The grey the log-average luminance maps to, in (0, 1).
+    white_percentile : float, default 99.9
+        Percentile of the scaled luminance mapped to white, in (0, 100].
+    exposure_ev : float, default 0.0
+        Extra exposure in stops.
+
     Returns
     -------
-    dict with ``log_average`` (``exp(mean(log L))`` over the positive luminances ``L``),
-    ``scale`` (``key * 2**exposure_ev / log_average``: scene luminance to the operator's
-    ``L_s``) and ``white`` (``L_white``: the ``white_percentile`` of ``L_s``, mapped to 1).
+    dict
+        ``log_average`` (``exp(mean(log L))`` over the positive luminances ``L``),
+        ``scale`` (``key * 2**exposure_ev / log_average``: scene luminance to the operator's
+        ``L_s``) and ``white`` (``L_white``: the ``white_percentile`` of ``L_s``, mapped to 1).
+        A black image gives ``{"log_average": 0.0, "scale": 0.0, "white": 1.0}``.
+
+    Raises
+    ------
+    InputError
+        ``key``, ``white_percentile`` or ``exposure_ev`` out of range.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.preview import reinhard_parameters
+    >>> grey = np.full((4, 4, 3), 2.0, dtype=np.float32)  # luminance 2 everywhere
+    >>> p = reinhard_parameters(grey)
+    >>> round(p["log_average"], 6), round(p["scale"], 6), round(p["white"], 6)
+    (2.0, 0.09, 0.18)
     """
     if not (0 < key < 1):
         raise InputError(f"key: expected a number in (0, 1) (0.18 is middle grey), got {key!r}")
@@ -178,7 +205,24 @@ SHEET_MAX_PIXELS = 1_200_000
 
 def sheet_tile_size(lf: LightField, max_pixels: int | None = SHEET_MAX_PIXELS) -> tuple[int, int]:
     """Size (h, w) of one tile of the contact sheet: the view size, downscaled by one factor
-    (at most 1) so that all ``V * U`` tiles hold at most ``max_pixels`` pixels (``None``: full size)."""
+    (at most 1) so that all ``V * U`` tiles hold at most ``max_pixels`` pixels (``None``: full size).
+
+    Parameters
+    ----------
+    lf : LightField
+    max_pixels : int or None, default SHEET_MAX_PIXELS
+        Pixel budget of all tiles together.
+
+    Returns
+    -------
+    tuple of 2 int
+        ``(h, w)``, each at least 1.
+
+    Raises
+    ------
+    InputError
+        ``max_pixels`` is not a positive integer.
+    """
     nv, nu = lf.views
     h, w = lf.size
     if max_pixels is None:
@@ -240,7 +284,17 @@ def _preview_sheet(lf: LightField, *, exposure_ev: float = 0.0, exposure_from: L
 
 
 def epi_stretch(lf: LightField) -> int:
-    """Rows (or columns) each view gets in an EPI preview: EPIs about a quarter of the view tall."""
+    """Rows (or columns) each view gets in an EPI preview: EPIs about a quarter of the view tall.
+
+    Parameters
+    ----------
+    lf : LightField
+
+    Returns
+    -------
+    int
+        ``max(1, ceil(min(H, W) / (4 * max(V, U))))``.
+    """
     h, w = lf.size
     return max(1, math.ceil(min(h, w) / (4 * max(lf.views))))
 
@@ -374,7 +428,24 @@ PREVIEWS: dict[str, PreviewKind] = {}
 
 def register_preview(kind: str, render: Callable[..., np.ndarray], *, accepts: type = LightField,
                      description: str = "") -> None:
-    """Add a preview kind (e.g. a capture's sensor image): ``render(obj, **options) -> uint8 (H, W, 3)``."""
+    """Add a preview kind (e.g. a capture's sensor image): ``render(obj, **options) -> uint8 (H, W, 3)``.
+
+    Parameters
+    ----------
+    kind : str
+        The new kind's name.
+    render : callable
+        ``render(obj, **options)`` returning a uint8 RGB array of shape ``(H, W, 3)``.
+    accepts : type, default LightField
+        The input type the kind renders.
+    description : str, default ""
+        One line for ``lfproc preview --help``.
+
+    Raises
+    ------
+    InputError
+        ``kind`` is already registered.
+    """
     if kind in PREVIEWS:
         raise InputError(f"preview kind {kind!r} is already registered")
     PREVIEWS[kind] = PreviewKind(accepts=accepts, render=render, description=description)
@@ -387,7 +458,26 @@ register_preview("histogram", _preview_histogram, description="histogram of log2
 
 
 def preview_kinds(input_type: type | None = None) -> list[str]:
-    """Preview kinds (those accepting inputs of ``input_type`` when given)."""
+    """Preview kinds (those accepting inputs of ``input_type`` when given).
+
+    Parameters
+    ----------
+    input_type : type, optional
+        Keep the kinds whose renderer accepts this type (e.g. :class:`lfproc.LightField` or
+        :class:`lfproc.camera.Capture`); None: every registered kind.
+
+    Returns
+    -------
+    list of str
+        Kinds in registration order.
+
+    Examples
+    --------
+    >>> from lfproc import LightField
+    >>> from lfproc.preview import preview_kinds
+    >>> preview_kinds(LightField)
+    ['centre', 'sheet', 'epi', 'histogram']
+    """
     return [k for k, p in PREVIEWS.items() if input_type is None or issubclass(input_type, p.accepts)]
 
 
@@ -432,7 +522,44 @@ def write_preview(obj: Any, path: str | os.PathLike, *, kind: str = "centre", fo
                   **options) -> Path:
     """Render a preview and write it atomically (PNG with lfproc version and kind in text chunks; JPEG, TIFF).
 
-    Raises :class:`lfproc.errors.OutputExistsError` when ``path`` exists and ``force`` is false.
+    Parameters
+    ----------
+    obj : LightField (or the input type a registered kind accepts)
+    path : str or path-like
+        The picture to write; the suffix picks the format (``.png``, ``.jpg``/``.jpeg``,
+        ``.tif``/``.tiff``).
+    kind : str, default "centre"
+        A kind of :func:`preview_kinds` (see :func:`render_preview`).
+    force : bool, default False
+        Overwrite an existing ``path``.
+    **options
+        Passed to the renderer (:func:`render_preview`).
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    OutputExistsError
+        ``path`` exists and ``force`` is false.
+    InputError
+        An unknown kind, an input the kind does not accept, or an unknown suffix.
+
+    Examples
+    --------
+    >>> import os
+    >>> from lfproc.synth import synthesize
+    >>> from lfproc.preview import write_preview
+    >>> lf = synthesize("lamps", size=(24, 24), views=3, random_state=0)
+    >>> path = write_preview(lf, "centre.png")
+    >>> path.name, os.path.getsize(path) > 0
+    ('centre.png', True)
+    >>> from PIL import Image
+    >>> with Image.open(path) as im:
+    ...     print(im.size, im.mode)  # (width, height) of the centre view
+    (24, 24) RGB
     """
     text = {"lfproc_preview": kind,
             "lfproc_options": repr(sorted((k, _describe_option(v)) for k, v in options.items()))}
@@ -573,6 +700,28 @@ def render_error_map(result: Any, reference: Any, *, view: tuple[int, int] | Non
 def write_error_map(result: Any, reference: Any, path: str | os.PathLike, *, force: bool = False,
                     **options) -> Path:
     """Write :func:`render_error_map` atomically to a PNG (or JPEG/TIFF); refuses an existing
-    ``path`` unless ``force``. ``options`` go to :func:`render_error_map`."""
+    ``path`` unless ``force``. ``options`` go to :func:`render_error_map`.
+
+    Parameters
+    ----------
+    result, reference : LightField
+        The light fields compared (as :func:`render_error_map`).
+    path : str or path-like
+        The picture to write; the suffix picks the format.
+    force : bool, default False
+        Overwrite an existing ``path``.
+    **options
+        Passed to :func:`render_error_map`.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    OutputExistsError
+        ``path`` exists and ``force`` is false.
+    """
     return _write_picture(path, lambda: render_error_map(result, reference, **options),
                           {"lfproc_preview": "error-map"}, what="an error-map", force=force)

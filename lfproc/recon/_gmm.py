@@ -191,6 +191,15 @@ def load_patch_model(model: str | os.PathLike | PatchModel = "default") -> Patch
     The file is untrusted: its header is checked (types, ranges) and every array's shape and
     dtype are checked against it before any data is read (:mod:`lfproc._untrusted`).
 
+    Parameters
+    ----------
+    model : str, path-like or PatchModel, default "default"
+        ``"default"``, a path, or a :class:`PatchModel` (returned as is).
+
+    Returns
+    -------
+    PatchModel
+
     Raises
     ------
     MissingFileError

@@ -78,7 +78,23 @@ _ML_UPDATES = 6
 
 
 def split_shots(capture) -> list:
-    """One single-shot :class:`~lfproc.camera.capture.Capture` per shot of ``capture`` (nothing copied in place)."""
+    """One single-shot :class:`~lfproc.camera.capture.Capture` per shot of ``capture`` (nothing copied in place).
+
+    Parameters
+    ----------
+    capture : Capture
+
+    Returns
+    -------
+    list of Capture
+        ``capture.shots`` captures of one shot each (its DN, ISO map, exposure, mask code and
+        bias); ``parameters["split_from_shot"]`` records the shot.
+
+    Raises
+    ------
+    InputError
+        ``capture`` is not a :class:`~lfproc.camera.capture.Capture`.
+    """
     if not isinstance(capture, Capture):
         raise InputError(f"split_shots: expected a Capture, got {type(capture).__name__}")
     out = []

@@ -125,7 +125,29 @@ class _Settings:
 
 
 def patch_count(size: tuple[int, int], patch: int, stride: int) -> int:
-    """Number of patches :func:`reconstruct` solves for a sensor of ``size``."""
+    """Number of patches :func:`reconstruct` solves for a sensor of ``size``.
+
+    The grid steps by ``stride`` and adds a last patch flush with the bottom/right edge.
+
+    Parameters
+    ----------
+    size : tuple of 2 int
+        Sensor size ``(H, W)`` in pixels.
+    patch : int
+        Patch side ``P`` in pixels.
+    stride : int
+        Step between patches in pixels.
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    >>> from lfproc.recon import patch_count
+    >>> patch_count((24, 24), 8, 4), patch_count((25, 25), 8, 4)
+    (25, 36)
+    """
     tops, lefts = patch_grid(size, patch, stride)
     return len(tops) * len(lefts)
 
