@@ -157,24 +157,18 @@ def _verdict(parts: list[bool | None]) -> str:
 
 
 def claims(rows: list[dict]) -> list[dict[str, Any]]:
-    """The paper's claims decided on these rows (module notes): name, verdict, evidence text.
+    """The paper's claims decided on these rows (module notes).
 
     Parameters
     ----------
     rows : list of dict
-        Rows of results.csv (as read by :func:`csv.DictReader` or written by the bench).
+        Rows of results.csv.
 
     Returns
     -------
     list of dict
-        One per claim: ``claim`` (text), ``verdict`` (``"holds"``, ``"does not hold"``,
-        ``"partly"`` or ``"not testable"``) and ``evidence`` (the numbers that decided it).
-
-    Examples
-    --------
-    >>> from lfproc.bench import claims
-    >>> [c["verdict"] for c in claims([])]  # no rows: nothing can be decided
-    ['not testable', 'not testable', 'not testable', 'not testable', 'not testable']
+        One per claim: ``claim`` (text), ``verdict`` (``"holds"``, ``"partly"``, ``"does not
+        hold"`` or ``"not testable"``) and ``evidence`` (the numbers that decided it).
     """
     out = []
     # 1. shots

@@ -521,6 +521,28 @@ def load_capture(path: str | os.PathLike) -> Capture:
     FileFormatError
         Not a capture file, another schema version, a field or array that is missing, of the
         wrong type or shape, or larger than the file can hold.
+
+    Examples
+    --------
+    A round trip through :meth:`Capture.save`:
+
+    >>> import numpy as np
+    >>> from lfproc.synth import synthesize
+    >>> from lfproc.camera import load_capture, simulate_capture
+    >>> from lfproc.camera.capture import noise_floor
+    >>> lf = synthesize("window", size=(24, 24), views=5, random_state=0)
+    >>> capture = simulate_capture(lf, shots=2, mask_period=4, random_state=0)
+    >>> capture.save("capture.npz").name
+    'capture.npz'
+    >>> back = load_capture("capture.npz")
+    >>> bool(np.array_equal(back.dn, capture.dn)), bool(np.array_equal(back.iso, capture.iso))
+    (True, True)
+    >>> back.exposures_s == capture.exposures_s, back.radiance_scale == capture.radiance_scale
+    (True, True)
+    >>> back.dn.flags.writeable  # the arrays read are read-only
+    False
+    >>> bool(noise_floor(back) == noise_floor(capture) > 0)  # radiance of one read-noise sigma
+    True
     """
     path = Path(path)
     if not path.exists():

@@ -696,22 +696,17 @@ def reconstruct(
     capture : Capture or path of a capture file
     dictionary : Dictionary, ``"default"`` (the shipped one) or path of a dictionary file
     settings : ReconstructionSettings, optional
-        Every option that decides the result (the fields below from ``solver`` to ``variance``,
-        except the execution options ``workers``, ``scheduler``, ``progress_bar`` and
+        Every option below that decides the result (not ``workers``, ``scheduler``, ``progress_bar``,
         ``threads``). Give either ``settings`` or its fields as keywords (``**options``), not both.
-    solver : {"admm", "fista", "omp"}
+    solver : {"admm", "fista", "omp"}, default "admm"
         ``admm`` (default; Woodbury solve, one ``m x m`` system per patch), ``fista`` (step
         ``1/L``), ``omp`` (greedy, ``n_nonzero_coefs`` atoms: the fast mode).
-    stride : int
-        Patch spacing in pixels (1 .. patch size; 4 as the paper). Any stride works with the
-        Bayer CFA: patch operators carry their CFA phase.
-    mu : float
-        l1 weight (module notes): with ``scale="universal"`` (default 0.5, measured)
-        ``mu sqrt(2 ln K) s_p`` against the chi-square data term, ``s_p`` the rms of the weighted
-        atoms' norms (the noise level of their correlations with the data); with
-        ``scale="noise"`` ``mu / c_p`` against the chi-square data term averaged over the measurements; with
-        ``scale="patch"`` relative to a patch of unit norm with weights of mean square one
-        (the paper's 1e-4: :data:`PAPER`). Ignored by ``omp``.
+    stride : int, default 4
+        Patch spacing in pixels (1 .. patch size; 4 as the paper; patch operators carry their CFA phase).
+    mu : float, default 0.5
+        l1 weight, whose meaning depends on ``scale`` (module notes, "Scale handling"): with
+        ``"universal"`` ``mu sqrt(2 ln K) s_p``, ``s_p`` the rms of the weighted atoms' norms; with
+        ``"patch"`` relative to a unit-norm patch (the paper's 1e-4: :data:`PAPER`). Not for ``omp``.
     max_iter : int, optional
         Iteration limit (default 100 for ADMM, 1000 for FISTA). Ignored by ``omp``.
     tol : float, optional
@@ -720,12 +715,11 @@ def reconstruct(
     n_nonzero_coefs : int, optional
         Atoms per patch for ``omp`` (default: the dictionary's training sparsity). The keyword
         ``sparsity`` is deprecated.
-    scale : {"universal", "noise", "patch", "global"}
-        How HDR scale is handled (module notes): the chi-square data term with the l1 weight at
-        its noise level (``"universal"``, default), the chi-square data term with the l1 weight
-        relative to the patch's norm (``"noise"``, the previous default), per-patch codes and data
-        term (``"patch"``, the first implementation's), or one scale for the capture.
-    block_patches : int
+    scale : {"universal", "noise", "patch", "global"}, default "universal"
+        How HDR scale is handled (module notes): chi-square data term, l1 weight at its noise level
+        (``"universal"``) or relative to the patch's norm (``"noise"``); per-patch codes and data
+        term (``"patch"``); one scale for the capture (``"global"``).
+    block_patches : int, default 512
         About this many patches per block, the unit of work (memory is bounded by a block).
         The output depends on it only through float rounding in the batched products.
     workers : int, optional
@@ -736,25 +730,22 @@ def reconstruct(
     progress_bar : bool, optional
         Show patches/s and the remaining time (None: when stderr is a terminal).
     threads : int, optional
-        In this process: blocks solved at once, each on one BLAS thread (default: the
-        number of CPUs available). The output does not depend on it.
-    overlap : {"scale-window-fit", "scale-window", "scale", "window", "mean"}
+        Blocks solved at once here, one BLAS thread each (default: the CPUs); the output is the same.
+    overlap : {"scale-window-fit", "scale-window", "scale", "window", "mean"}, default "scale-window-fit"
         How overlapping patch estimates are combined (module notes); ``"mean"`` is the paper's.
-    debias : int
+    debias : int, default 0
         Refit each ADMM/FISTA code by least squares on its ``debias`` largest atoms (0: off, the
         default: measured to lose quality on noisy captures, README).
-    variance : {"local", "measurement"}
-        The signal in the photon-noise variance of every measurement, hence its weight: from its
-        neighbours (``"local"``, the default: :func:`lfproc.camera.capture.local_signal`) or its own
-        value (``"measurement"``, the plug-in, which biases the fit low; module notes).
+    variance : {"local", "measurement"}, default "local"
+        The signal in each measurement's photon-noise variance (its weight): from its neighbours
+        (:func:`lfproc.camera.capture.local_signal`) or its own value (a plug-in biased low).
 
     Returns
     -------
     LightField
-        ``(V, U, H, W, 3)`` in the units of the light field the capture was simulated from
-        (the capture's ``radiance_scale`` is divided out), or ``e-/s`` for a real capture.
-        ``attrs["reconstruction"]`` records the lfproc version, every parameter and figures
-        (patches, iterations, seconds...). Negative estimates are clipped to zero.
+        ``(V, U, H, W, 3)`` in the units of the light field the capture was simulated from (the
+        ``radiance_scale`` divided out), or ``e-/s`` for a real capture; negatives clipped to zero.
+        ``attrs["reconstruction"]``: lfproc version, every parameter, figures (patches, seconds...).
 
     Raises
     ------
@@ -767,6 +758,16 @@ def reconstruct(
         whose measurements all have weight zero.
     FileFormatError, MissingFileError
         Unreadable capture or dictionary files.
+
+    Examples
+    --------
+    >>> from lfproc import evaluate, reconstruct, simulate_capture
+    >>> from lfproc.synth import synthesize
+    >>> truth = synthesize("window", size=(24, 24), views=5, random_state=0)
+    >>> capture = simulate_capture(truth, shots=2, mask_period=4, random_state=0)
+    >>> result = reconstruct(capture, progress_bar=False)  # the shipped dictionary, ADMM
+    >>> result.shape, result.units, bool(10 < evaluate(result, truth)["pu21_psnr_db"] < 40)
+    ((5, 5, 24, 24, 3), 'relative', True)
     """
     started = time.perf_counter()
     settings = resolve_options(ReconstructionSettings, settings, options, func_name="reconstruct",
