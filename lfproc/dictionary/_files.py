@@ -343,6 +343,15 @@ def load_dictionary(source: str | os.PathLike | Dictionary = "default") -> Dicti
     Dictionary
         Atoms ``(n, K)`` with unit-norm columns, ``n = V*U*P*P*C`` (the ``patch`` shape).
 
+    Examples
+    --------
+    >>> from lfproc.dictionary import load_dictionary
+    >>> d = load_dictionary("default")  # shipped with lfproc
+    >>> d.patch, d.atoms.shape, d.atoms.dtype, d.sparsity
+    ((5, 5, 8, 8, 3), (4800, 2560), dtype('float32'), 10)
+    >>> load_dictionary(d) is d
+    True
+
     Raises
     ------
     MissingFileError

@@ -206,6 +206,17 @@ def pu21_encode(luminance_cd_m2: Any, *, variant: Pu21Variant = "banding_glare")
     ------
     InputError
         Unknown variant, non-numeric or non-finite input.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.metrics import pu21_decode, pu21_encode
+    >>> np.round(pu21_encode([0.005, 1.0, 100.0, 10000.0]), 1).tolist()
+    [0.0, 36.5, 256.4, 595.4]
+    >>> np.round(pu21_encode([1e-4, 1e5]), 1).tolist()  # clamped to [0.005, 10000] cd/m^2
+    [0.0, 595.4]
+    >>> np.round(pu21_decode(pu21_encode([0.1, 42.0, 5000.0])), 6).tolist()  # the inverse
+    [0.1, 42.0, 5000.0]
     """
     p1, p2, p3, p4, p5, p6, p7 = _pu21_params(variant)
     arr = _as_float64(luminance_cd_m2, "luminance_cd_m2")
@@ -439,6 +450,46 @@ _SHARED_PARAMS_DOC = """
 def pu21_psnr(result: Any, reference: Any, *, peak_luminance: float | None = 1000.0,
               channel_axis: int | None = None, variant: Pu21Variant = "banding_glare") -> float:
     """PU21-PSNR in dB on luminance (peak 256, ``pu21_metric.m``); ``inf`` for identical images.
+
+    ``20 log10(256 / RMSE(P_result, P_reference))`` with ``P`` the PU21 encoding
+    (:func:`pu21_encode`) of the scaled luminance (Mantiuk and Azimi, PCS 2021).
+
+    Parameters
+    ----------
+    result, reference : array_like of the same shape
+        Linear values: luminance of shape (..., H, W), or colour of shape (..., H, W, C) with
+        ``channel_axis=-1``.
+    peak_luminance : float or None, default 1000
+        Display peak in cd/m^2; both arrays are multiplied by ``peak_luminance / max(reference)``.
+        ``None``: the values already are absolute cd/m^2.
+    channel_axis : int or None, default None
+        Axis holding 1 or 3 channels (converted with :data:`PU21_LUMA`); ``None`` for luminance.
+    variant : {"banding_glare", "banding", "peaks", "peaks_glare"}, default "banding_glare"
+        PU21 parameter set.
+
+    Returns
+    -------
+    float
+        dB; ``inf`` when the encoded images are identical.
+
+    Raises
+    ------
+    ShapeError, InputError
+        Shapes that differ, non-finite values, a reference without a positive maximum.
+
+    Examples
+    --------
+    >>> import math
+    >>> import numpy as np
+    >>> from lfproc.metrics import pu21_encode, pu21_psnr
+    >>> ref = np.random.default_rng(0).uniform(0.01, 1.0, (16, 16, 3))
+    >>> pu21_psnr(ref, ref, channel_axis=-1)
+    inf
+    >>> a, b = np.full((4, 4), 100.0), np.full((4, 4), 1.0)  # cd/m^2: PU21 256.4 and 36.5
+    >>> round(pu21_psnr(a, b, peak_luminance=None), 3)
+    1.323
+    >>> round(20 * math.log10(256 / float(pu21_encode(100.0) - pu21_encode(1.0))), 3)
+    1.323
     """
     y_res, y_ref, _ = _scaled_luminance(result, reference, peak_luminance, channel_axis)
     mse = np.mean(np.square(pu21_encode(y_res, variant=variant) - pu21_encode(y_ref, variant=variant)))
@@ -584,7 +635,7 @@ def _relative_error(res: np.ndarray, ref: np.ndarray, eps: float) -> np.ndarray:
     return err
 
 
-for _f in (pu21_psnr, pu21_ssim, pu2_psnr, log_psnr):
+for _f in (pu21_ssim, pu2_psnr, log_psnr):
     _f.__doc__ = (_f.__doc__ or "").rstrip() + "\n" + _SHARED_PARAMS_DOC
 del _f
 
@@ -682,12 +733,10 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
         Linear radiance in the same units and of the same shape (for example
         ``(V, U, H, W, 3)`` or ``(H, W, 3)``).
     noise_floor : float or None
-        Reference luminance (in the data's units, before any scaling) at or below which a
-        sample is left out of ``stops_by_decade`` and ``zeros_above_floor``. ``None``
-        (default) is 0: every sample with a positive reference luminance counts.
+        Reference luminance (data units, before any scaling) at or below which a sample is left
+        out of ``stops_by_decade`` and ``zeros_above_floor``; ``None`` (default): 0.
     mask : array_like of bool, shape (H, W) or the luminance shape (e.g. (V, U, H, W)), optional
-        Samples to include in every figure (an (H, W) mask applies to every view).
-        Default: all samples.
+        Samples to include in every figure (an (H, W) mask applies to every view; default all).
     peak_luminance : float or None, default 1000
         Display peak in cd/m^2; both luminances are multiplied by
         ``peak_luminance / max(reference)`` (the maximum over every sample and channel, as
@@ -734,6 +783,15 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
         Different shapes, no colour axis, a mask of another shape, an empty mask.
     InputError
         Non-finite values, a negative noise floor, a reference without a positive maximum.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.metrics import hdr_figures
+    >>> ref = np.random.default_rng(0).uniform(0.01, 1.0, (16, 16, 3))
+    >>> f = hdr_figures(2 * ref, ref)  # one stop too bright everywhere
+    >>> f["max_decade_stops"], f["zeros_above_floor"], f["highlight_energy"], f["samples"]
+    (1.0, 0.0, 2.0, 256)
     """
     y_res = _figure_luminance(result, "result")
     y_ref = _figure_luminance(reference, "reference")
@@ -798,6 +856,24 @@ def error_stops(result: Any, reference: Any, *, view: tuple[int, int] | None = N
         Positive where the result is too bright; ``nan`` where the reference luminance is
         ``<= 0`` (no defined error), ``-inf`` where the result is ``<= 0`` and the reference
         is not (a lost sample).
+
+    Raises
+    ------
+    ShapeError
+        Shapes that differ or have no colour axis.
+    InputError
+        A view outside the light field.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.metrics import error_stops
+    >>> ref = np.ones((2, 2, 3))
+    >>> res = ref.copy()
+    >>> res[0, 0] = 2.0  # one stop too bright
+    >>> res[1, 1] = 0.0  # lost
+    >>> error_stops(res, ref).tolist()
+    [[1.0, 0.0], [0.0, -inf]]
     """
     y_res = _figure_luminance(result, "result")
     y_ref = _figure_luminance(reference, "reference")
@@ -1151,6 +1227,17 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
     InputError
         Different units, all-black reference, scales more than ``scale_tolerance_stops`` apart,
         ``peak_luminance=None`` with data not in cd/m2.
+
+    Examples
+    --------
+    >>> from lfproc.metrics import evaluate
+    >>> from lfproc.synth import synthesize
+    >>> truth = synthesize("window", size=(24, 24), views=3, random_state=0)
+    >>> evaluate(truth, truth)["pu21_psnr_db"], evaluate(truth, truth)["angular_shape"]
+    (inf, [3, 3])
+    >>> r = evaluate(truth.replace(data=2 * truth.data), truth, align="gain")  # a gain is fitted
+    >>> r["pu21_psnr_db"], round(r["gain"], 6)
+    (inf, 0.5)
     """
     result, alignment = align_result(result, reference, align)
     _check_lightfields(result, reference, scale_tolerance_stops)

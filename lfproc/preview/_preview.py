@@ -152,6 +152,23 @@ def tonemap(image: np.ndarray, *, key: float = 0.18, white_percentile: float = 9
     -------
     ndarray of the shape of ``image``, float32 in [0, 1].
 
+    Raises
+    ------
+    InputError
+        An unknown encoding, or ``key``/``white_percentile``/``exposure_ev`` out of range.
+
+    Examples
+    --------
+    Three grey pixels a decade apart (log-average 1); the brightest is the white point:
+
+    >>> import numpy as np
+    >>> from lfproc.preview import tonemap
+    >>> grey = np.array([0.1, 1.0, 10.0], dtype=np.float32)[:, None] * np.ones(3, dtype=np.float32)
+    >>> np.round(tonemap(grey, white_percentile=100, encoding="linear")[:, 0].astype(float), 4).tolist()
+    [0.0178, 0.161, 1.0]
+    >>> np.round(tonemap(grey, white_percentile=100)[:, 0].astype(float), 4).tolist()  # sRGB-encoded
+    [0.1418, 0.4379, 1.0]
+
     References
     ----------
     .. [1] E. Reinhard, M. Stark, P. Shirley, J. Ferwerda, "Photographic tone reproduction
