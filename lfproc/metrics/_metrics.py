@@ -322,12 +322,24 @@ def metric_luminance(values: np.ndarray, *, channel_axis: int | None = -1) -> np
     ----------
     values : ndarray
         Linear values; with ``channel_axis`` set, that axis holds 1 or 3 channels (RGB).
-    channel_axis : int or None
+    channel_axis : int or None, default -1
         ``None``: ``values`` already are luminance and are returned as float64.
 
     Returns
     -------
     ndarray without the channel axis, float64.
+
+    Raises
+    ------
+    ShapeError
+        The channel axis holds neither 1 nor 3 channels.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.metrics import metric_luminance
+    >>> np.round(metric_luminance(np.array([[1.0, 1.0, 1.0], [1.0, 0.0, 0.0]])), 6).tolist()  # white, red
+    [1.0, 0.212656]
     """
     arr = np.asarray(values)
     if channel_axis is None:
@@ -403,6 +415,27 @@ def psnr(result: Any, reference: Any, *, data_range: float) -> float:
     result, reference : array_like of the same shape
     data_range : float
         The peak value (required: no guess from the dtype).
+
+    Returns
+    -------
+    float
+        dB.
+
+    Raises
+    ------
+    ShapeError
+        Shapes that differ.
+    InputError
+        A non-positive ``data_range`` or non-finite values.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.metrics import psnr
+    >>> psnr(np.zeros(4), np.full(4, 0.1), data_range=1.0)  # RMSE 0.1 of the range
+    20.0
+    >>> psnr(np.ones(4), np.ones(4), data_range=1.0)
+    inf
     """
     data_range = check_positive("data_range", data_range)
     res, ref = _check_pair(result, reference)

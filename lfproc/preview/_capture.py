@@ -156,6 +156,18 @@ def write_capture_preview(capture, output: str | os.PathLike, *, kind: str = "ca
         ``output`` exists and ``force`` is false.
     InputError
         An unknown kind.
+
+    Examples
+    --------
+    >>> import os
+    >>> from lfproc.camera import simulate_capture
+    >>> from lfproc.preview import write_capture_preview
+    >>> from lfproc.synth import synthesize
+    >>> capture = simulate_capture(synthesize("window", size=(24, 24), views=5, random_state=0),
+    ...                            shots=2, mask_period=4, random_state=0)
+    >>> summary = write_capture_preview(capture, "sensor.png", kind="sensor")
+    >>> summary["output"], summary["shots"], summary["isos"], os.path.isfile("sensor.png")
+    ('sensor.png', 2, [100, 400, 800, 1600], True)
     """
     check_choice("--kind (capture previews)", kind, PREVIEW_KINDS)
     check_output(output, force=force)

@@ -94,6 +94,16 @@ def split_shots(capture) -> list:
     ------
     InputError
         ``capture`` is not a :class:`~lfproc.camera.capture.Capture`.
+
+    Examples
+    --------
+    >>> from lfproc.camera import simulate_capture
+    >>> from lfproc.recon import split_shots
+    >>> from lfproc.synth import synthesize
+    >>> lf = synthesize("window", size=(24, 24), views=5, random_state=0)
+    >>> capture = simulate_capture(lf, baseline="individual-iso", mask_period=4, random_state=0)
+    >>> [(s.shots, s.isos) for s in split_shots(capture)]  # one global ISO per shot
+    [(1, [100.0]), (1, [400.0]), (1, [800.0]), (1, [1600.0])]
     """
     if not isinstance(capture, Capture):
         raise InputError(f"split_shots: expected a Capture, got {type(capture).__name__}")
