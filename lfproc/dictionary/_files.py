@@ -221,13 +221,37 @@ def save_dictionary(dictionary: Dictionary, path: str | os.PathLike, *, dtype="f
     Parameters
     ----------
     dictionary : Dictionary
-    path : path of the ``.npz`` file
-    dtype : {"float16", "float32"}
+    path : str or path-like
+        The ``.npz`` file to write.
+    dtype : {"float16", "float32"}, default "float16"
         Storage precision of the atoms (float16 halves the file; atoms are renormalised on load).
-    force : bool
+    force : bool, default False
         Overwrite an existing file.
 
     The archive is byte-identical for equal dictionaries (fixed member timestamps).
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    InputError
+        Not a Dictionary, or another dtype.
+    OutputExistsError
+        ``path`` exists and ``force`` is false.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.dictionary import dct_dictionary, load_dictionary, save_dictionary
+    >>> d = dct_dictionary((3, 3, 4, 4, 3), 600)
+    >>> save_dictionary(d, "dct.npz", dtype="float32").name
+    'dct.npz'
+    >>> back = load_dictionary("dct.npz")
+    >>> back.patch, back.atoms.shape, bool(np.array_equal(back.atoms, d.atoms))
+    ((3, 3, 4, 4, 3), (432, 600), True)
     """
     if not isinstance(dictionary, Dictionary):
         raise InputError(f"save_dictionary: expected a Dictionary, got {type(dictionary).__name__}")

@@ -535,6 +535,16 @@ def pu21_ssim(result: Any, reference: Any, *, peak_luminance: float | None = 100
 
     Arrays with more than two (luminance) axes are taken as a stack of 2-D images over the
     last two axes; the mean SSIM of the images is returned. Images must be at least 11x11.
+
+    Returns
+    -------
+    float
+        Mean SSIM, at most 1 (identical images).
+
+    Raises
+    ------
+    ShapeError
+        Shapes that differ, fewer than two axes, or images smaller than 11 x 11.
     """
     y_res, y_ref, _ = _scaled_luminance(result, reference, peak_luminance, channel_axis)
     if y_ref.ndim < 2:
@@ -549,6 +559,11 @@ def pu2_psnr(result: Any, reference: Any, *, peak_luminance: float | None = 1000
 
     After scaling the peak is ``pu2_encode(peak_luminance)`` (419.6 for 1000 cd/m^2); see the
     module notes for why this convention.
+
+    Returns
+    -------
+    float
+        dB; ``inf`` for identical images.
     """
     y_res, y_ref, display_peak = _scaled_luminance(result, reference, peak_luminance, channel_axis)
     mse = np.mean(np.square(pu2_encode(y_res) - pu2_encode(y_ref)))
@@ -571,6 +586,19 @@ def log_psnr(result: Any, reference: Any, *, peak_luminance: float | None = 1000
     (``peak_luminance``), so the peak is the number of decades the display spans above
     PU21's black level (5.30 for 1000 cd/m^2). A uniform error of ``d`` decades gives
     ``20 log10(peak / d)``.
+
+    Returns
+    -------
+    float
+        dB; ``inf`` for identical images.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.metrics import log_psnr
+    >>> ref = np.random.default_rng(0).uniform(0.1, 1.0, (16, 16))
+    >>> round(log_psnr(10 * ref, ref), 2)  # one decade everywhere: 20 log10(5.30 / 1)
+    14.49
     """
     y_res, y_ref, display_peak = _scaled_luminance(result, reference, peak_luminance, channel_axis)
     mse = np.mean(np.square(_log_luminance(y_res) - _log_luminance(y_ref)))
@@ -650,6 +678,17 @@ def mean_relative_error(result: Any, reference: Any, *, epsilon_relative: float 
         Linear radiance in the same units.
     epsilon_relative : float, default 1e-3
         Regulariser relative to the reference peak (positive).
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    ShapeError
+        Shapes that differ.
+    InputError
+        A non-positive ``epsilon_relative`` or a reference without a positive peak.
     """
     epsilon_relative = check_positive("epsilon_relative", epsilon_relative)
     res, ref = _check_pair(result, reference)
@@ -668,9 +707,14 @@ def _relative_error(res: np.ndarray, ref: np.ndarray, eps: float) -> np.ndarray:
     return err
 
 
-for _f in (pu21_ssim, pu2_psnr, log_psnr):
-    _f.__doc__ = (_f.__doc__ or "").rstrip() + "\n" + _SHARED_PARAMS_DOC
-del _f
+_VARIANT_DOC = """    variant : {"banding_glare", "banding", "peaks", "peaks_glare"}, default "banding_glare"
+        PU21 parameter set.
+"""
+for _f, _extra in ((pu21_ssim, _VARIANT_DOC), (pu2_psnr, ""), (log_psnr, "")):
+    # the shared Parameters go before the docstring's own sections (Returns, Raises, Examples)
+    _head, _sep, _tail = (_f.__doc__ or "").partition("\n    Returns\n")
+    _f.__doc__ = _head.rstrip() + "\n" + _SHARED_PARAMS_DOC + _extra + _sep + _tail
+del _f, _extra, _head, _sep, _tail
 
 
 # -- figures a user sees: error in stops per decade, zeros, highlight energy, detail -------------

@@ -517,6 +517,26 @@ def render_preview(obj: Any, kind: str = "centre", **options) -> np.ndarray:
         and white point) from the reference instead of ``obj``, so a result and its truth
         rendered with the same ``exposure_from`` are shown at one exposure (the histogram
         shares the reference's range of stops).
+
+    Returns
+    -------
+    ndarray of shape (H, W, 3), uint8
+
+    Raises
+    ------
+    InputError
+        An unknown kind, or an input the kind does not accept.
+    ShapeError
+        A renderer that does not return uint8 ``(H, W, 3)``.
+
+    Examples
+    --------
+    >>> from lfproc.preview import render_preview
+    >>> from lfproc.synth import synthesize
+    >>> lf = synthesize("lamps", size=(24, 32), views=3, random_state=0)
+    >>> centre = render_preview(lf)  # the tone-mapped centre view
+    >>> centre.shape, centre.dtype
+    ((24, 32, 3), dtype('uint8'))
     """
     if kind not in PREVIEWS:
         raise InputError(f"preview kind: expected one of {', '.join(PREVIEWS)}; got {kind!r}")

@@ -220,9 +220,20 @@ def merge_reconstructions(
         ``reconstruct(shot)`` of every shot, in shot order.
     shots : sequence of Capture
         The single-shot captures (:func:`split_shots`).
-    merge : {"debevec", "ml"}
-    guard_px : int
+    merge : {"debevec", "ml"}, default "debevec"
+        Debevec-Malik hat weights, or the noise-aware maximum-likelihood merge.
+    guard_px : int, default 1
         Radius of the saturation guard (0: only the saturated pixels themselves).
+
+    Returns
+    -------
+    LightField
+        ``(V, U, H, W, 3)`` in the units of the light field the captures were simulated from.
+
+    Raises
+    ------
+    InputError
+        An unknown merge, not one reconstruction per shot, fewer than two shots, a bad ``guard_px``.
     """
     check_choice("merge", merge, MERGES)
     if len(reconstructions) != len(shots) or len(shots) < 2:
