@@ -338,6 +338,11 @@ def run_bench(
     dict
         ``cells``, ``computed``, ``cached``, ``failed`` (cell label -> error), ``seconds``,
         ``results`` (path), ``report`` (path or None), ``rows``.
+
+    Raises
+    ------
+    InputError
+        No scenes, a bad worker count or seed, an unknown preset.
     """
     started = time.perf_counter()
     preset = get_preset(preset)

@@ -620,6 +620,11 @@ def observations(capture: Capture, *, warn_saturation: bool = True, **options) -
     Observation
         With arrays of shape ``(S, H, W)``: ``radiance`` (T), ``variance``, ``weight``
         (``1/std(T)``, 0 where saturated or black-clipped), ``saturated``, ``black_clipped``.
+
+    Raises
+    ------
+    InputError
+        Not a capture, or ``radiance_estimate`` with ``variance_from="local"``.
     """
     if not isinstance(capture, Capture):
         raise InputError(f"observations: expected a Capture, got {type(capture).__name__}")
@@ -897,11 +902,15 @@ def capture_from_raw(
     -------
     Capture
 
+    Raises
+    ------
+    InputError, ShapeError
+        No images, images of other sizes or CFA layouts, a named layout without ``isos``, a bad mask.
+
     Warns
     -----
     LfprocWarning
-        When a raw file's black level differs from the profile's by more than 2 DN (the
-        profile is probably for another camera or mode).
+        A raw file's black level differs from the profile's by more than 2 DN (another camera or mode?).
     """
     import warnings
 

@@ -573,6 +573,11 @@ def build_operator(mask: MaskCode, *, views: tuple[int, int], size: tuple[int, i
     -------
     ProjectionOperator
         With ``period = lcm(mask period, 2)`` per axis when the mask is periodic.
+
+    Raises
+    ------
+    ShapeError
+        A mask that does not have 3 colours.
     """
     if mask.channels != 3:
         raise ShapeError(f"a Bayer CFA needs a 3-colour mask, this one has {mask.channels} colours")

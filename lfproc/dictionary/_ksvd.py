@@ -404,6 +404,12 @@ def ksvd(
     Returns
     -------
     KsvdResult
+
+    Raises
+    ------
+    InputError
+        Sizes out of range (more atoms than signals, a sparsity above ``min(n, K)``), or a
+        checkpoint without an integer seed.
     """
     signals = TrainingSignals(signals)
     n_sig, n = signals.shape

@@ -197,6 +197,11 @@ def train_dictionary(
     Returns
     -------
     Dictionary
+
+    Raises
+    ------
+    InputError
+        No light fields, a bad seed, or ``sources`` of another length.
     """
     p = get_preset(preset)
     sizes = resolve_options(TrainingSizes, sizes, size_overrides, func_name="train_dictionary", argument="sizes")
@@ -327,6 +332,11 @@ def evaluate_dictionary(dictionary, lightfields: Sequence[Any], *, n_nonzero_coe
         ``relative_error`` (``||L_hat - L|| / ||L||``), ``pu21_psnr_db`` and, with
         ``compare_dct``, ``dct_relative_error`` and ``dct_pu21_psnr_db``: means over the
         light fields; ``lightfields``: the same per light field.
+
+    Raises
+    ------
+    InputError
+        No light fields, or ``n_nonzero_coefs`` out of range.
     """
     d = load_dictionary(dictionary)
     if not lightfields:

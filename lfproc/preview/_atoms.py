@@ -34,6 +34,11 @@ def render_atoms(dictionary: Dictionary, *, count: int = 32, zoom: int = 8, colu
     Returns
     -------
     ndarray of shape (H, W, 3), uint8
+
+    Raises
+    ------
+    InputError
+        Not a Dictionary.
     """
     if not isinstance(dictionary, Dictionary):
         raise InputError(f"atoms preview: expected a Dictionary, got {type(dictionary).__name__}")

@@ -46,12 +46,19 @@ def render_capture_preview(capture: Capture, kind: str = "capture", *, shot: int
         ISO map a legend of its ISOs.
     shot : int
         Which shot to show.
-    zoom : int
+    zoom : int, default 32
         Side of the zoomed crop in pixels.
+    dpi : int, default 100
+        Resolution of the matplotlib figure (the picture's size in pixels scales with it).
 
     Returns
     -------
     ndarray of shape (H, W, 3), uint8
+
+    Raises
+    ------
+    InputError
+        An unknown kind or a shot out of range.
     """
     require("matplotlib", purpose="capture previews")
     import matplotlib

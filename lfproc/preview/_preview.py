@@ -673,6 +673,13 @@ def render_error_map(result: Any, reference: Any, *, view: tuple[int, int] | Non
     Returns
     -------
     ndarray (H', W', 3), uint8
+
+    Raises
+    ------
+    ShapeError
+        Light fields of other shapes, or a mask that is not boolean of shape (H, W) or (V, U, H, W).
+    InputError
+        A non-positive ``limit_stops``.
     """
     require("matplotlib", purpose="error maps")
     import matplotlib

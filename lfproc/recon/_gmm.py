@@ -272,6 +272,11 @@ def train_patch_model(images, *, patch: int = 8, margin: int = 2, components: in
     Returns
     -------
     PatchModel
+
+    Raises
+    ------
+    ShapeError
+        A training image that is not ``(H, W, 3)`` larger than ``E`` pixels.
     """
     rng = check_random_state(random_state)
     e = patch + 2 * margin

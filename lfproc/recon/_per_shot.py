@@ -156,6 +156,11 @@ def reexpose(lf: LightField, shot, *, transmittance: float | None = None,
     Returns
     -------
     ndarray of shape (V, U, H, W, C)
+
+    Raises
+    ------
+    InputError
+        ``shot`` is not a single shot of one global ISO.
     """
     isos = np.unique(shot.iso)
     if shot.shots != 1 or isos.size != 1:
