@@ -667,8 +667,10 @@ def render_error_map(result: Any, reference: Any, *, view: tuple[int, int] | Non
     limit_stops : float, optional
         Half-range of the colour bar in stops (default: the 99th percentile of the absolute
         error shown, rounded up to a quarter stop, from 0.25 to 8).
-    cmap : str
+    cmap : str, default "RdBu_r"
         A diverging matplotlib colour map.
+    dpi : int, default 100
+        Resolution of the matplotlib figure.
 
     Returns
     -------
