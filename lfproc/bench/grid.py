@@ -85,7 +85,8 @@ class Preset:
     mask_period : int or None
         Mask tiling period in pixels (None: no tiling).
     recon : dict, default {}
-        Options passed to :func:`lfproc.recon.reconstruct`.
+        Reconstruction options (``method`` and the method's options), overridden by the
+        ``recon_options`` of :func:`lfproc.bench.run_bench`.
     exposure_s : float, default 0.004
         Exposure time of a shot in seconds.
     """

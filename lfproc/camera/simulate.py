@@ -516,7 +516,7 @@ def simulate_file(
     dictionary : str, path-like, Dictionary or None, default "default"
         The dictionary the capture is meant for (checked for the number of views only).
     **options
-        Passed to :func:`simulate_capture` (``iso_pattern``, ``shots``, ``random_state``, ...).
+        Passed to :func:`simulate_capture` (``iso_pattern_kind``, ``shots``, ``random_state``, ...).
 
     Returns
     -------
