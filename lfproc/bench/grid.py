@@ -52,7 +52,8 @@ __all__ = ["METHODS", "NOISE_LEVELS", "ISO_SETS", "PATTERNS", "PRESETS", "Preset
 METHODS = ("joint", "dual-iso", "individual-iso", "bracketing", "bracketing-joint")
 PATTERNS = ("random", "row", "block", "dual")
 NOISE_LEVELS = ("none", "low", "medium", "high")
-#: The paper's three ISO sets (Miandji et al., IEEE TCI 2021, section IV-B); every one is in the shipped paper-* profiles.
+#: The paper's three ISO sets (Miandji et al., IEEE TCI 2021, section IV-B); every one is in the
+#: shipped paper-* profiles.
 ISO_SETS = ((100, 400, 800, 1600), (100, 800, 1600, 3200), (100, 1600, 3200, 6400))
 SHOTS = (1, 2, 3)
 BRACKETING_SHOTS = (2, 3, 4)

@@ -101,7 +101,8 @@ VARIANCES = ("local", "measurement")
 DEFAULTS = {"stride": 4, "mu": 0.5, "tol": {"admm": 1e-3, "fista": 2.0**-15, "omp": None},
             "max_iter": {"admm": 100, "fista": 1000, "omp": None},
             "block_patches": 512, "scale": "universal", "overlap": "scale-window-fit", "variance": "local"}
-#: The paper's settings (Miandji et al., IEEE TCI 2021, eq. 9: mu 1e-4 on patches of unit norm, tolerance 2^-15, plain averages;
+#: The paper's settings (Miandji et al., IEEE TCI 2021, eq. 9: mu 1e-4 on patches of unit norm,
+#: tolerance 2^-15, plain averages;
 #: the paper weighs measurements by their noise model, which its text does not detail: the plug-in here).
 PAPER = {"stride": 4, "mu": 1e-4, "tol": 2.0**-15, "max_iter": 300, "scale": "patch", "overlap": "mean",
          "variance": "measurement"}
