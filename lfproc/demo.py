@@ -48,7 +48,33 @@ __all__ = ["run_demo", "DemoConfig", "STAGES"]
 
 @dataclass(frozen=True)
 class DemoConfig:
-    """Parameters of the demo (all recorded in the report)."""
+    """Parameters of the demo (all recorded in the report).
+
+    Parameters
+    ----------
+    scene : str, default "layers"
+        Synthetic scene (:func:`lfproc.synth.synthesize`).
+    size : tuple of 2 int, default (96, 96)
+        View size ``(H, W)`` in pixels.
+    views : int, default 5
+        Views per angular axis (odd).
+    baseline_px : float, default 1.0
+        Largest disparity of the scene, pixels per view step.
+    seed : int, default 7
+        Seed of every random draw (scene, noise, camera, frames).
+    exposures_ev : tuple of float, default (-2, -1, 0, 1, 2)
+        Exposures of the virtual Lytro Illum bracket, in EV.
+    noise : {"none", "low", "medium", "high"}, default "medium"
+        Noise level of the sensor (the shipped ``paper-<noise>`` profile).
+    isos : tuple of int, default (100, 400, 800, 1600)
+        ISO set calibrated and used by the coded capture.
+    exposure_s : float, default 0.004
+        Exposure time of a coded shot in seconds.
+    shots : int, default 2
+        Shots of the coded capture.
+    peak_luminance : float, default 1000.0
+        Display peak in cd/m^2 of the PU21 metrics.
+    """
 
     scene: str = "layers"
     size: tuple[int, int] = (96, 96)
@@ -442,7 +468,29 @@ def run_demo(out_dir: str | os.PathLike = "lfproc-demo", *, config: DemoConfig |
     """Run every stage into ``out_dir``; return the report as a dict.
 
     ``out_dir`` appears complete or not at all (built in a temporary sibling and renamed);
-    an existing ``out_dir`` is only replaced with ``force``.
+    an existing ``out_dir`` is only replaced with ``force``. The stages are :data:`STAGES`.
+
+    Parameters
+    ----------
+    out_dir : str or path-like, default "lfproc-demo"
+        The folder to create.
+    config : DemoConfig, optional
+        The demo's parameters (default: ``DemoConfig()``).
+    force : bool, default False
+        Replace an existing ``out_dir``.
+    log : callable, optional
+        Called with one line of text after each stage.
+
+    Returns
+    -------
+    dict
+        ``lfproc_version``, ``config``, ``total_seconds`` and ``stages`` (per stage: ``stage``,
+        ``doc``, ``seconds``, ``figures``, ``files``), as written to ``report.json``.
+
+    Raises
+    ------
+    OutputExistsError
+        ``out_dir`` exists and ``force`` is false.
     """
     config = config or DemoConfig()
     out_dir = check_output(out_dir, force=force)

@@ -26,7 +26,20 @@ __all__ = ["describe", "describe_lightfield"]
 
 
 def describe_lightfield(lf: LightField) -> dict[str, Any]:
-    """Figures of a light field: shape, value range, dynamic range, saturation, metadata."""
+    """Figures of a light field: shape, value range, dynamic range, saturation, metadata.
+
+    Parameters
+    ----------
+    lf : LightField
+
+    Returns
+    -------
+    dict
+        ``kind`` (``"image"`` for one view, else ``"lightfield"``), ``views``, ``size``,
+        ``channels``, ``min``/``max``/``mean``, ``dynamic_range_stops``, ``saturated_fraction``,
+        ``units``, ``colour_space``, ``exposure_s``, ``iso``, ``has_variance``,
+        ``has_disparity``, ``source`` and ``attrs``.
+    """
     data = lf.data
     kind = "image" if lf.views == (1, 1) else "lightfield"
     return {
@@ -73,7 +86,29 @@ def _describe_json(path: Path) -> dict[str, Any]:
 
 
 def describe(path: str | os.PathLike, **read_options) -> dict[str, Any]:
-    """Describe the file or folder at ``path`` (see the module documentation)."""
+    """Describe the file or folder at ``path`` (see the module documentation).
+
+    Parameters
+    ----------
+    path : str or path-like
+        A Lytro file (``.lfr``, ``.lfp``, ``.raw``), a coded capture, a camera profile
+        (``.json``), or a light field or image file or folder.
+    **read_options
+        Passed to :func:`lfproc.io.read_lightfield` for light fields and images.
+
+    Returns
+    -------
+    dict
+        JSON-serialisable figures whose first key is ``kind``; light fields as
+        :func:`describe_lightfield` plus ``path`` (and ``exr_parts`` for EXR files).
+
+    Raises
+    ------
+    MissingFileError
+        No such file or folder.
+    FileFormatError
+        A file lfproc does not read (for example JSON that is not a camera profile).
+    """
     path = Path(path)
     if not path.exists():
         raise MissingFileError(f"{path}: no such file or folder")

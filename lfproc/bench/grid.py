@@ -1,4 +1,8 @@
-"""The bench's grid: presets, cells and jobs (method.md section 7).
+"""The bench's grid: presets, cells and jobs.
+
+The settings are the experiments of Miandji, Nguyen, Hajisharif, Unger and Guillemot,
+"Compressive HDR light field imaging using a single multi-ISO sensor", IEEE TCI 2021, section
+IV.
 
 A **cell** is one row of ``results.csv``: one scene, one acquisition (``method``, ISO
 pattern, shots, ISO set, noise level, relative exposure) and, for the per-shot baselines,
@@ -48,7 +52,8 @@ __all__ = ["METHODS", "NOISE_LEVELS", "ISO_SETS", "PATTERNS", "PRESETS", "Preset
 METHODS = ("joint", "dual-iso", "individual-iso", "bracketing", "bracketing-joint")
 PATTERNS = ("random", "row", "block", "dual")
 NOISE_LEVELS = ("none", "low", "medium", "high")
-#: The paper's three ISO sets (method.md section 7); every one is in the shipped paper-* profiles.
+#: The paper's three ISO sets (Miandji et al., IEEE TCI 2021, section IV-B); every one is in the
+#: shipped paper-* profiles.
 ISO_SETS = ((100, 400, 800, 1600), (100, 800, 1600, 3200), (100, 1600, 3200, 6400))
 SHOTS = (1, 2, 3)
 BRACKETING_SHOTS = (2, 3, 4)
@@ -58,7 +63,34 @@ CELL_SCHEMA = 2  # 2: the ML merge of the per-shot baselines takes 6 fixed-point
 
 @dataclass(frozen=True)
 class Preset:
-    """Grid and settings of a bench preset (module notes)."""
+    """Grid and settings of a bench preset (module notes).
+
+    Parameters
+    ----------
+    name : str
+        ``"quick"`` or ``"paper"``.
+    description : str
+        One line for the report and ``--help``.
+    crop : tuple of 2 int or None
+        Central crop ``(H, W)`` of every scene's views, in pixels (None: full size).
+    noise_levels : tuple of str
+        Noise levels of the grid (``none``, ``low``, ``medium``, ``high``).
+    iso_sets : tuple of tuple of int
+        ISO sets of the grid; the first is the reference.
+    full_grid : bool
+        Every pattern x shots x ISO set x noise level (``paper``), or the reduced grid (``quick``).
+    exposures : tuple of float
+        Relative exposures of the saturation sweep.
+    baseline_noise : tuple of str
+        Noise levels at which the per-shot baselines run.
+    mask_period : int or None
+        Mask tiling period in pixels (None: no tiling).
+    recon : dict, default {}
+        Reconstruction options (``method`` and the method's options), overridden by the
+        ``recon_options`` of :func:`lfproc.bench.run_bench`.
+    exposure_s : float, default 0.004
+        Exposure time of a shot in seconds.
+    """
 
     name: str
     description: str
@@ -93,6 +125,28 @@ PRESETS = {
 
 
 def get_preset(name: str) -> Preset:
+    """The bench preset of this name (a :class:`Preset` is returned as is).
+
+    Parameters
+    ----------
+    name : {"quick", "paper"} or Preset
+
+    Returns
+    -------
+    Preset
+
+    Raises
+    ------
+    InputError
+        An unknown name.
+
+    Examples
+    --------
+    >>> from lfproc.bench import get_preset
+    >>> p = get_preset("quick")
+    >>> p.crop, p.mask_period, p.full_grid
+    ((48, 48), 4, False)
+    """
     if isinstance(name, Preset):
         return name
     check_choice("preset", name, tuple(PRESETS))
@@ -105,7 +159,27 @@ def _iso_text(isos) -> str:
 
 @dataclass(frozen=True)
 class Cell:
-    """One row of results.csv (module notes)."""
+    """One row of results.csv (module notes).
+
+    Parameters
+    ----------
+    scene : str
+        Scene name.
+    method : str
+        One of :data:`METHODS`.
+    iso_pattern : str
+        ISO pattern (one of :data:`PATTERNS`; the baselines use a global ISO).
+    shots : int
+        Number of shots.
+    isos : tuple of int
+        ISO set.
+    noise : str
+        Noise level (one of :data:`NOISE_LEVELS`).
+    exposure : float, default 1.0
+        Relative exposure (the saturation sweep).
+    merge : str, default ""
+        Merge of the per-shot baselines (``"debevec"`` or ``"ml"``; empty for the others).
+    """
 
     scene: str
     method: str
@@ -179,7 +253,33 @@ def _baselines(scene, isos, noise) -> list[Cell]:
 
 
 def grid_cells(preset: Preset | str, scenes: list[str]) -> list[Cell]:
-    """Every cell of the grid for these scene names, without duplicates, in a fixed order."""
+    """Every cell of the grid for these scene names, without duplicates, in a fixed order.
+
+    Parameters
+    ----------
+    preset : Preset or {"quick", "paper"}
+    scenes : list of str
+        Scene names (at least one).
+
+    Returns
+    -------
+    list of Cell
+
+    Raises
+    ------
+    InputError
+        No scenes, or an unknown preset.
+
+    Examples
+    --------
+    >>> from lfproc.bench import grid_cells
+    >>> len(grid_cells("quick", ["lamps"])), len(grid_cells("quick", ["lamps", "window"]))
+    (35, 70)
+    >>> len(grid_cells("paper", ["lamps"]))
+    191
+    >>> grid_cells("quick", ["lamps"])[0].label()
+    'lamps, joint, random, 1 shot, ISO 100,400,800,1600, noise low'
+    """
     preset = get_preset(preset)
     if not scenes:
         raise InputError("scenes: expected at least one light field, got none")

@@ -1,7 +1,7 @@
 """The bench report: tables laid out like the paper's Tables I-IV, the claims, the plots.
 
 Every figure in report.md is computed from the rows of results.csv; the paper's own numbers
-(method.md section 7) appear beside them for orientation only -- the paper used PU2 and
+(Miandji et al., IEEE TCI 2021, Tables I-IV) appear beside them for orientation only -- the paper used PU2 and
 HDR-VDP-2 on its own scenes, lfproc scores PU21 (and PU2 with its own peak convention) on the
 scenes given, so the columns are not expected to agree.
 
@@ -44,7 +44,7 @@ from .._shared.deps import require
 
 __all__ = ["write_report", "claims", "PAPER", "PLOTS", "REPORT_FILES", "mean_metric"]
 
-#: The paper's Table I-IV numbers (method.md section 7): PU2-PSNR (dB) and PU2-SSIM by shots.
+#: The paper's Table I-IV numbers (Miandji et al., IEEE TCI 2021): PU2-PSNR (dB) and PU2-SSIM by shots.
 PAPER = {
     ("joint", "random"): {"psnr": (31.09, 32.84, 32.38), "ssim": (0.9072, 0.9409, 0.9445)},
     ("joint", "row"): {"psnr": (31.55, 32.73, 32.79), "ssim": (0.9106, 0.9407, 0.9444)},
@@ -157,7 +157,19 @@ def _verdict(parts: list[bool | None]) -> str:
 
 
 def claims(rows: list[dict]) -> list[dict[str, Any]]:
-    """The paper's claims decided on these rows (module notes): name, verdict, evidence text."""
+    """The paper's claims decided on these rows (module notes).
+
+    Parameters
+    ----------
+    rows : list of dict
+        Rows of results.csv.
+
+    Returns
+    -------
+    list of dict
+        One per claim: ``claim`` (text), ``verdict`` (``"holds"``, ``"partly"``, ``"does not
+        hold"`` or ``"not testable"``) and ``evidence`` (the numbers that decided it).
+    """
     out = []
     # 1. shots
     gains = {}
@@ -461,6 +473,24 @@ def write_report(bench_dir: str | os.PathLike, rows: list[dict], *, meta: dict,
     (:func:`lfproc.io.atomic_outputs`); with ``paths`` (file name -> path, e.g. the staged
     paths of a larger :func:`~lfproc.io.atomic_outputs` transaction) they are written there.
     ``bench_dir`` is where the cells (for the best/worst picture) are read.
+
+    Parameters
+    ----------
+    bench_dir : str or path-like
+        The bench directory (cells are read there; outputs go there without ``paths``).
+    rows : list of dict
+        Rows of results.csv.
+    meta : dict
+        The run's description (``preset``, ``preset_description``, ``scenes``, ``crop``,
+        ``mask_period``, ``recon``, ``exposure_s``, ``dictionary``, ``dictionary_patch``,
+        ``dictionary_atoms``, ``seed``, ``lfproc_version``, ...), as :func:`run_bench` writes it.
+    paths : dict of str to Path, optional
+        Where to write each of :data:`REPORT_FILES` instead of ``bench_dir``.
+
+    Returns
+    -------
+    pathlib.Path
+        The path of report.md.
     """
     if paths is None:
         out = Path(bench_dir)

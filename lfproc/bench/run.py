@@ -322,7 +322,9 @@ def run_bench(
         Processes of the local Dask cluster (default: the CPU count, at most the number of jobs).
     scheduler : str, optional
         Address of a running Dask scheduler, or ``"synchronous"`` (this process).
-    random_state : int
+    force : bool, default False
+        Use a folder that is not a bench folder, and recompute (delete) every cached cell.
+    random_state : int, default 0
         Bench seed (every cell's seed derives from it; recorded per cell as ``"seed"``; the keyword
         ``seed`` is deprecated).
     recon_options : dict, optional
@@ -330,14 +332,23 @@ def run_bench(
         ``lfproc reconstruct``) and the options of that method's function over the preset's
         (:func:`lfproc.recon.reconstruct_gmm`: stride...; :func:`lfproc.recon.reconstruct`:
         solver, mu, max_iter...).
-    report : bool
+    report : bool, default True
         Write report.md and the plots (results.csv is always written).
+    progress_bar : bool, optional
+        Show a progress bar of the jobs (None: when stderr is a terminal).
 
     Returns
     -------
     dict
         ``cells``, ``computed``, ``cached``, ``failed`` (cell label -> error), ``seconds``,
         ``results`` (path), ``report`` (path or None), ``rows``.
+
+    Raises
+    ------
+    InputError
+        No scenes, a bad worker count or seed, an unknown preset.
+    OutputExistsError
+        ``out_dir`` is a non-empty folder that is not a bench folder and ``force`` is false.
     """
     started = time.perf_counter()
     preset = get_preset(preset)

@@ -339,7 +339,18 @@ def _member(name: str) -> zipfile.ZipInfo:
 
 
 def is_capture_file(path: str | os.PathLike) -> bool:
-    """True when ``path`` is a ZIP archive whose first member is the capture header."""
+    """True when ``path`` is a ZIP archive whose first member is the capture header.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file to test (only its first ZIP member name is read; a missing or non-ZIP
+        file gives False).
+
+    Returns
+    -------
+    bool
+    """
     return zip_first_member(path) == HEADER_NAME
 
 
@@ -510,6 +521,28 @@ def load_capture(path: str | os.PathLike) -> Capture:
     FileFormatError
         Not a capture file, another schema version, a field or array that is missing, of the
         wrong type or shape, or larger than the file can hold.
+
+    Examples
+    --------
+    A round trip through :meth:`Capture.save`:
+
+    >>> import numpy as np
+    >>> from lfproc.synth import synthesize
+    >>> from lfproc.camera import load_capture, simulate_capture
+    >>> from lfproc.camera.capture import noise_floor
+    >>> lf = synthesize("window", size=(24, 24), views=5, random_state=0)
+    >>> capture = simulate_capture(lf, shots=2, mask_period=4, random_state=0)
+    >>> capture.save("capture.npz").name
+    'capture.npz'
+    >>> back = load_capture("capture.npz")
+    >>> bool(np.array_equal(back.dn, capture.dn)), bool(np.array_equal(back.iso, capture.iso))
+    (True, True)
+    >>> back.exposures_s == capture.exposures_s, back.radiance_scale == capture.radiance_scale
+    (True, True)
+    >>> back.dn.flags.writeable  # the arrays read are read-only
+    False
+    >>> bool(noise_floor(back) == noise_floor(capture) > 0)  # radiance of one read-noise sigma
+    True
     """
     path = Path(path)
     if not path.exists():
@@ -568,7 +601,7 @@ def load_capture(path: str | os.PathLike) -> Capture:
 # -- calibrated observations --------------------------------------------------------------
 
 def observations(capture: Capture, *, warn_saturation: bool = True, **options) -> Observation:
-    """Radiance estimates ``T`` (e-/s), their variance and weights for every shot (method.md section 3).
+    """Radiance estimates ``T`` (e-/s), their variance and weights for every shot (paper eqs. 5-7).
 
     Parameters
     ----------
@@ -587,6 +620,11 @@ def observations(capture: Capture, *, warn_saturation: bool = True, **options) -
     Observation
         With arrays of shape ``(S, H, W)``: ``radiance`` (T), ``variance``, ``weight``
         (``1/std(T)``, 0 where saturated or black-clipped), ``saturated``, ``black_clipped``.
+
+    Raises
+    ------
+    InputError
+        Not a capture, or ``radiance_estimate`` with ``variance_from="local"``.
     """
     if not isinstance(capture, Capture):
         raise InputError(f"observations: expected a Capture, got {type(capture).__name__}")
@@ -681,7 +719,27 @@ def _warn_saturation(capture: Capture, *, stacklevel: int) -> None:
 
 
 def describe_capture(path: str | os.PathLike) -> dict[str, Any]:
-    """Figures of a capture file for ``lfproc info`` (first key ``kind = "capture"``)."""
+    """Figures of a capture file for ``lfproc info`` (first key ``kind = "capture"``).
+
+    Parameters
+    ----------
+    path : str or path-like
+        A capture file written by :meth:`Capture.save`.
+
+    Returns
+    -------
+    dict
+        ``kind``, ``path``, ``shots``, ``size`` ``[H, W]``, ``views`` ``[V, U]``,
+        ``sampling_rate_percent``, saturated and black-clipped fractions (overall and
+        ``per_iso``), ``isos``, ``exposures_s``, ``cfa_pattern``, ``gamma``, ``mask``,
+        ``iso_pattern``, ``profile``, ``radiance_scale``, ``dn_min``/``dn_max``,
+        ``ground_truth`` and ``parameters``.
+
+    Raises
+    ------
+    MissingFileError, FileFormatError
+        As :func:`load_capture`.
+    """
     capture = load_capture(path)
     obs = observations(capture, warn_saturation=False)  # the figures below report it
     per_iso = {}
@@ -844,11 +902,15 @@ def capture_from_raw(
     -------
     Capture
 
+    Raises
+    ------
+    InputError, ShapeError
+        No images, images of other sizes or CFA layouts, a named layout without ``isos``, a bad mask.
+
     Warns
     -----
     LfprocWarning
-        When a raw file's black level differs from the profile's by more than 2 DN (the
-        profile is probably for another camera or mode).
+        A raw file's black level differs from the profile's by more than 2 DN (another camera or mode?).
     """
     import warnings
 

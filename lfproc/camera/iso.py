@@ -1,4 +1,8 @@
-"""Per-pixel ISO layouts of a multi-ISO sensor (method.md section 7).
+"""Per-pixel ISO layouts of a multi-ISO sensor.
+
+The random, row and block patterns of Miandji, Nguyen, Hajisharif, Unger and Guillemot,
+"Compressive HDR light field imaging using a single multi-ISO sensor", IEEE TCI 2021, section
+IV-B.
 
 Patterns (:func:`iso_pattern`): ``random`` (i.i.d. per pixel), ``row`` (rows alternate ISO
 in 2-row units, so a Bayer quad shares one ISO, as in Magic Lantern's dual ISO), ``block``
@@ -96,6 +100,25 @@ def iso_pattern(
     Returns
     -------
     ndarray of shape (H, W), float32
+
+    Raises
+    ------
+    InputError
+        An unknown pattern name, an empty ISO set, a bad block size or ISO file.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.camera import iso_pattern
+    >>> iso_pattern("row", size=(8, 2))[:, 0].tolist()  # rows in pairs: a Bayer quad shares one ISO
+    [100.0, 100.0, 400.0, 400.0, 800.0, 800.0, 1600.0, 1600.0]
+    >>> print(iso_pattern("block", size=(4, 4), block_px=2).astype(int))
+    [[ 100  100  400  400]
+     [ 100  100  400  400]
+     [ 800  800 1600 1600]
+     [ 800  800 1600 1600]]
+    >>> np.unique(iso_pattern("dual", size=(8, 8))).tolist()  # lowest and highest of the set
+    [100.0, 1600.0]
     """
     h, w = (int(size[0]), int(size[1]))
     isos = np.asarray([float(v) for v in isos])

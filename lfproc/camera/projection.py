@@ -1,4 +1,7 @@
-"""The projection operator ``Phi`` of the coded-mask camera (method.md section 1).
+"""The projection operator ``Phi`` of the coded-mask camera.
+
+The camera model of Miandji, Nguyen, Hajisharif, Unger and Guillemot, "Compressive HDR light
+field imaging using a single multi-ISO sensor", IEEE TCI 2021, section III-A.
 
 One shot ``s`` maps a light field ``L`` of shape ``(V, U, H, W, C)`` to one sensor image:
 
@@ -570,6 +573,11 @@ def build_operator(mask: MaskCode, *, views: tuple[int, int], size: tuple[int, i
     -------
     ProjectionOperator
         With ``period = lcm(mask period, 2)`` per axis when the mask is periodic.
+
+    Raises
+    ------
+    ShapeError
+        A mask that does not have 3 colours.
     """
     if mask.channels != 3:
         raise ShapeError(f"a Bayer CFA needs a 3-colour mask, this one has {mask.channels} colours")

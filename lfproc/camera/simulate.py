@@ -1,4 +1,8 @@
-"""Simulated captures of the multi-ISO coded-mask camera (method.md sections 1, 2, 6, 7).
+"""Simulated captures of the multi-ISO coded-mask camera.
+
+The camera, its sensor model, baselines and settings are those of Miandji, Nguyen, Hajisharif,
+Unger and Guillemot, "Compressive HDR light field imaging using a single multi-ISO sensor", IEEE
+TCI 2021 (sections III and IV).
 
 :func:`simulate_capture` projects an HDR light field through the coded mask and the Bayer
 CFA (:mod:`lfproc.camera.projection`) and exposes each shot on a sensor with a per-pixel ISO map
@@ -33,7 +37,12 @@ lowest and the highest ISO of the set: (100, 1600) for the default set), or a fi
 or a single-channel integer image, values = ISO). The ISO map is the same in every shot (it
 is a property of the sensor); each shot has its own mask code.
 
-Baselines (method.md section 6): ``baseline="individual-iso"`` takes one shot per ISO of the
+Mask period. A random mask tiled with a period (``mask_period``, 4 by default) lets patches
+share one operator per phase; without tiling (``mask_period=None``: one code per pixel) the
+quality is the same on the realistic bench (27.25 against 27.11 dB at 96 x 128), but every patch
+has its own operator: minutes instead of seconds at the Lytro size.
+
+Baselines (the paper's section III-B and Table IV): ``baseline="individual-iso"`` takes one shot per ISO of the
 set, each with one global ISO; ``baseline="bracketing"`` takes 2, 3 or 4 shots at the lowest
 ISO of the set with relative exposures ``[0.5, 8]``, ``[0.5, 2, 8]``, ``[0.5, 2, 4, 8]``
 (times ``exposure_s``).
@@ -85,7 +94,7 @@ __all__ = [
 ]
 
 BASELINES = ("individual-iso", "bracketing")
-#: Relative exposures of the bracketing baseline by number of shots (method.md section 6).
+#: Relative exposures of the bracketing baseline by number of shots (the paper's Table IV).
 BRACKETING_EXPOSURES = {2: (0.5, 8.0), 3: (0.5, 2.0, 8.0), 4: (0.5, 2.0, 4.0, 8.0)}
 #: ``--noise LEVEL`` -> shipped camera profile (paper Table VI noise levels).
 NOISE_PROFILES = {"none": "paper-none", "low": "paper-low", "medium": "paper-medium", "high": "paper-high"}
@@ -336,49 +345,44 @@ def simulate_capture(
     design : CaptureDesign, optional
         The capture's design: every parameter below from ``profile`` to ``noise``. Give either
         ``design`` or its fields as keywords (``**design_options``), not both.
-    profile : CameraProfile, shipped name or path
+    profile : CameraProfile, shipped name or path, default "paper-low"
         Camera profile (``paper-none|low|medium|high`` for the paper's noise levels).
-    iso_pattern_kind : {"random", "row", "block", "dual"} or path
+    iso_pattern_kind : {"random", "row", "block", "dual"} or path, default "random"
         Per-pixel ISO layout (ignored by the baselines, which use global ISOs).
-    isos : sequence of float
+    isos : sequence of float, default (100, 400, 800, 1600)
         The ISO set; each must be in the profile.
-    shots : int
+    shots : int, default 1
         Number of shots (each its own mask code). For ``bracketing``: 2, 3 or 4.
-    exposure_s : float
+    exposure_s : float, default 0.004
         Exposure time of a shot (s); the reference for ``relative_exposures``.
     gamma : float, optional
         Power-law response (default: the profile's).
-    mask : {"random", "shifted"}
-    mask_period : int, None or "default"
+    mask : {"random", "shifted"}, default "random"
+    mask_period : int, None or "default", default "default"
         Tile the mask with this period (pixels); lets patches share one operator. ``"default"``:
         :data:`DEFAULT_MASK_PERIOD` (4) for a ``random`` mask, none for ``shifted``; None: no
-        tiling (one code per pixel: the same quality on the realistic bench, 27.25 against 27.11 dB
-        at 96 x 128, but every patch has its own operator, minutes instead of seconds at the Lytro
-        size).
-    mask_shift : int
+        tiling (module documentation).
+    mask_shift : int, default 1
         Pixels of mask shift per view step (``shifted``).
-    block_px : int
+    block_px : int, default 8
         Block size of the ``block`` ISO pattern.
-    baseline : {None, "individual-iso", "bracketing"}
+    baseline : {None, "individual-iso", "bracketing"}, default None
     relative_exposures : sequence of float, optional
         Exposure of each shot relative to ``exposure_s`` (default 1, or the bracketing table).
     radiance_scale : float, optional
         Electrons per second per light-field unit; default: automatic (module documentation).
-    reference_exposure_s : float
-        Exposure at which the automatic scale saturates the brightest expected signal (default
-        4 ms); independent of ``exposure_s``, so that exposure time acts as in a camera.
-    noise : bool
+    reference_exposure_s : float, default 0.004
+        Exposure (s) at which the automatic scale saturates the brightest expected signal.
+    noise : bool, default True
         False: noiseless expected codes (still quantised and clipped).
     random_state : int, Generator or None
         Seeds the mask, the random ISO map and the noise. None draws a seed and records it.
     ground_truth : dict, optional
         ``{"path", "sha256"}`` of the light-field file, recorded in the capture.
     dictionary : Dictionary, shipped name, path or None
-        The dictionary the capture is meant to be reconstructed with (``"default"``: the shipped
-        one). When its views differ from the light field's, a
-        :class:`~lfproc.errors.ViewCountWarning` names both (the capture is still made, but
-        :func:`lfproc.recon.reconstruct` will refuse it with that dictionary). None (default):
-        no check; :func:`simulate_file` and ``lfproc simulate`` check against ``"default"``.
+        The dictionary the capture is meant for: a :class:`~lfproc.errors.ViewCountWarning` when
+        its views differ from the light field's (:func:`lfproc.recon.reconstruct` would refuse
+        the capture). None (default): no check (``lfproc simulate`` checks ``"default"``).
 
     Returns
     -------
@@ -396,6 +400,17 @@ def simulate_capture(
     SaturationWarning
         More than :data:`lfproc.errors.SATURATION_WARNING_FRACTION` of the least sensitive pixels
         are saturated.
+
+    Examples
+    --------
+    >>> from lfproc.synth import synthesize
+    >>> from lfproc.camera import simulate_capture
+    >>> lf = synthesize("window", size=(24, 24), views=5, random_state=0)  # 5 x 5 views, 24 x 24 px
+    >>> capture = simulate_capture(lf, shots=2, mask_period=4, random_state=0)
+    >>> capture.shots, capture.dn.shape, capture.isos
+    (2, (2, 24, 24), [100.0, 400.0, 800.0, 1600.0])
+    >>> f"{100 * capture.sampling_rate:.2f} %"  # 2 sensor images for 5 * 5 * 3 unknowns per pixel
+    '2.67 %'
     """
     design = resolve_options(CaptureDesign, design, design_options, func_name="simulate_capture", argument="design")
     profile = load_profile(design.profile)
@@ -486,10 +501,38 @@ def simulate_file(
     compression) say otherwise (:func:`lfproc.lightfield.clean_nonfinite`). The capture records
     the input's path and SHA-256 as its ground truth.
 
+    Parameters
+    ----------
+    input_path : str or path-like
+        The HDR light field to read (any format :func:`lfproc.io.read_lightfield` reads).
+    output_path : str or path-like
+        The capture file to write (``.npz``, see :meth:`Capture.save`).
+    force : bool, default False
+        Overwrite ``output_path`` when it exists.
+    nonfinite : {"raise", "zero", "clip"}, default "raise"
+        What to do with NaN/Inf input samples.
+    negative : {"raise", "clip"}, default "raise"
+        What to do with negative input samples.
+    dictionary : str, path-like, Dictionary or None, default "default"
+        The dictionary the capture is meant for (checked for the number of views only).
+    **options
+        Passed to :func:`simulate_capture` (``iso_pattern_kind``, ``shots``, ``random_state``, ...).
+
     Returns
     -------
     capture : Capture
-    summary : dict (:func:`capture_summary`)
+        The simulated capture, as written.
+    summary : dict
+        Its figures (:func:`capture_summary`), with the output path.
+
+    Raises
+    ------
+    OutputExistsError
+        ``output_path`` exists and ``force`` is false.
+    MissingFileError, FileFormatError
+        The input cannot be read.
+    InputError
+        NaN/Inf or negative radiance refused, or an invalid option.
     """
     check_output(output_path, force=force)
     lf = read_lightfield(input_path, nonfinite=nonfinite, negative=negative)

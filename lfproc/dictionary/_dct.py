@@ -50,6 +50,24 @@ def dct_dictionary(patch: tuple[int, int, int, int, int], n_atoms: int | None = 
     -------
     Dictionary
         ``preset="dct"``.
+
+    Raises
+    ------
+    InputError
+        A patch that is not ``(V, U, P, P, C)`` with C in (1, 3), or a number of atoms below 1
+        or above the available frequency combinations.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.dictionary import dct_dictionary
+    >>> d = dct_dictionary((5, 5, 4, 4, 3))  # complete: the orthonormal 4-D DCT
+    >>> d.atoms.shape, d.patch, d.preset
+    ((1200, 1200), (5, 5, 4, 4, 3), 'dct')
+    >>> bool(np.allclose(d.atoms.T @ d.atoms, np.eye(1200), atol=1e-5))
+    True
+    >>> dct_dictionary((5, 5, 4, 4, 3), 2400).atoms.shape  # twice overcomplete
+    (1200, 2400)
     """
     patch = tuple(int(p) for p in patch)
     if len(patch) != 5 or min(patch) < 1 or patch[4] not in (1, 3):

@@ -192,7 +192,17 @@ class Dictionary(ReadOnlyState):
 
 
 def is_dictionary_file(path: str | os.PathLike) -> bool:
-    """True for a shipped name or a ZIP archive whose first member is the dictionary header."""
+    """True for a shipped name or a ZIP archive whose first member is the dictionary header.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A shipped dictionary name or a file (only its first ZIP member name is read).
+
+    Returns
+    -------
+    bool
+    """
     if str(path) in SHIPPED and not Path(path).exists():
         return True
     return zip_first_member(path) == HEADER_NAME
@@ -211,13 +221,37 @@ def save_dictionary(dictionary: Dictionary, path: str | os.PathLike, *, dtype="f
     Parameters
     ----------
     dictionary : Dictionary
-    path : path of the ``.npz`` file
-    dtype : {"float16", "float32"}
+    path : str or path-like
+        The ``.npz`` file to write.
+    dtype : {"float16", "float32"}, default "float16"
         Storage precision of the atoms (float16 halves the file; atoms are renormalised on load).
-    force : bool
+    force : bool, default False
         Overwrite an existing file.
 
     The archive is byte-identical for equal dictionaries (fixed member timestamps).
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    InputError
+        Not a Dictionary, or another dtype.
+    OutputExistsError
+        ``path`` exists and ``force`` is false.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.dictionary import dct_dictionary, load_dictionary, save_dictionary
+    >>> d = dct_dictionary((3, 3, 4, 4, 3), 600)
+    >>> save_dictionary(d, "dct.npz", dtype="float32").name
+    'dct.npz'
+    >>> back = load_dictionary("dct.npz")
+    >>> back.patch, back.atoms.shape, bool(np.array_equal(back.atoms, d.atoms))
+    ((3, 3, 4, 4, 3), (432, 600), True)
     """
     if not isinstance(dictionary, Dictionary):
         raise InputError(f"save_dictionary: expected a Dictionary, got {type(dictionary).__name__}")
@@ -320,6 +354,27 @@ def dictionary_patch(source: "str | os.PathLike | Dictionary" = "default") -> tu
 
 def load_dictionary(source: str | os.PathLike | Dictionary = "default") -> Dictionary:
     """Read a dictionary: a :class:`Dictionary` (returned as is), a shipped name or a file path.
+
+    Parameters
+    ----------
+    source : str, path-like or Dictionary, default "default"
+        A shipped name (``"default"``, the one :func:`lfproc.reconstruct` uses; a file of that
+        name in the current directory takes precedence), the path of a ``.npz`` file written by
+        :func:`save_dictionary`, or a :class:`Dictionary`.
+
+    Returns
+    -------
+    Dictionary
+        Atoms ``(n, K)`` with unit-norm columns, ``n = V*U*P*P*C`` (the ``patch`` shape).
+
+    Examples
+    --------
+    >>> from lfproc.dictionary import load_dictionary
+    >>> d = load_dictionary("default")  # shipped with lfproc
+    >>> d.patch, d.atoms.shape, d.atoms.dtype, d.sparsity
+    ((5, 5, 8, 8, 3), (4800, 2560), dtype('float32'), 10)
+    >>> load_dictionary(d) is d
+    True
 
     Raises
     ------

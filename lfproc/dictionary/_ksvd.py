@@ -2,7 +2,7 @@
 
 Written by hand: no maintained Python K-SVD exists (the PyPI ``ksvd`` package uses
 scikit-learn's OMP, which copies the Gram matrix per signal, and drops negative
-coefficients; reconstruction.md section 2.5).
+coefficients).
 
 Each iteration:
 
@@ -115,7 +115,27 @@ class TrainingSignals:
 @short_repr
 @dataclass
 class KsvdResult:
-    """What :func:`ksvd` returns."""
+    """What :func:`ksvd` returns.
+
+    Parameters
+    ----------
+    atoms : ndarray of shape (n, K), float32
+        The learned dictionary, unit-norm columns.
+    errors : list of float
+        Relative squared error ``||X - D G||^2 / ||X||^2`` after each iteration's coding.
+    final_error : float
+        The same for the returned dictionary.
+    usage : ndarray of shape (K,)
+        Number of training signals using each atom (final coding).
+    iterations : int
+        Iterations run.
+    replaced : list of int, default []
+        Atoms replaced (unused or duplicated) in each iteration.
+    seconds : float, default 0.0
+        Wall-clock time of the run.
+    resumed_from : int, default 0
+        Iteration of the checkpoint the run resumed from (0: a fresh start).
+    """
 
     atoms: np.ndarray  #: (n, K) float32, unit-norm columns
     errors: list[float]  #: relative squared error ||X - D G||^2 / ||X||^2 after each iteration's coding
@@ -384,6 +404,12 @@ def ksvd(
     Returns
     -------
     KsvdResult
+
+    Raises
+    ------
+    InputError
+        Sizes out of range (more atoms than signals, a sparsity above ``min(n, K)``), or a
+        checkpoint without an integer seed.
     """
     signals = TrainingSignals(signals)
     n_sig, n = signals.shape

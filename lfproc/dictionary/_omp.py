@@ -2,7 +2,7 @@
 
 Written by hand because no library does it at this size: scikit-learn's
 ``orthogonal_mp_gram`` loops over signals in Python and copies the ``K x K`` Gram matrix for
-each of them (reconstruction.md section 2.5), SPAMS's ``omp`` is order-recursive MP (a
+each of them, SPAMS's ``omp`` is order-recursive MP (a
 different selection rule).
 
 The algorithm is Batch-OMP of Rubinstein, Zibulevsky and Elad (2008): with the Gram matrix
@@ -237,11 +237,20 @@ def batch_omp(D, X, n_nonzero_coefs: int, *, tol: float | None = None, gram=None
 
     Examples
     --------
+    >>> import numpy as np
+    >>> from lfproc.dictionary import batch_omp
     >>> rng = np.random.default_rng(0)
-    >>> D = rng.standard_normal((64, 128)); D /= np.linalg.norm(D, axis=0)
-    >>> a = np.zeros(128); a[[3, 50, 99]] = [1.0, -2.0, 0.5]
-    >>> np.flatnonzero(batch_omp(D, D @ a, 3)).tolist()
-    [3, 50, 99]
+    >>> D = rng.standard_normal((64, 128))
+    >>> D /= np.linalg.norm(D, axis=0)
+    >>> a = np.zeros(128)
+    >>> a[[3, 50, 99]] = [1.0, -2.0, 0.5]
+    >>> coef = batch_omp(D, D @ a, 3)
+    >>> coef.shape, np.flatnonzero(coef).tolist()
+    ((128,), [3, 50, 99])
+    >>> np.round(coef[[3, 50, 99]], 4).tolist()
+    [1.0, -2.0, 0.5]
+    >>> batch_omp(D, rng.standard_normal((64, 10)), 5).shape  # ten signals as columns
+    (128, 10)
     """
     D = _check_dictionary(D)
     X = np.asarray(X)

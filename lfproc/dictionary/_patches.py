@@ -115,6 +115,11 @@ def training_patches(
     patches : ndarray of shape (n_patches, n), float32
     info : dict
         ``per_source`` counts, ``rejected_empty``, ``rejected_flat``, ``kept_flat`` and the rule.
+
+    Raises
+    ------
+    InputError
+        No light fields, an unknown normalisation, a bad count, or too few usable patches.
     """
     patch = _check_patch(patch)
     if normalise not in NORMALISATIONS:

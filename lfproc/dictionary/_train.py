@@ -48,7 +48,25 @@ __all__ = ["Preset", "PRESETS", "TrainingSizes", "synthetic_lightfields", "train
 
 @dataclass(frozen=True)
 class Preset:
-    """Sizes of a training run."""
+    """Sizes of a training run (:data:`PRESETS`: ``tiny``, ``default``, ``paper``).
+
+    Parameters
+    ----------
+    patch : tuple of 5 int
+        Patch shape ``(V, U, P, P, C)``: views, pixels, colours.
+    atoms : int
+        Number of atoms ``K``.
+    sparsity : int
+        Atoms per training patch in the K-SVD coding step.
+    iterations : int
+        K-SVD iterations.
+    patches : int
+        Number of training patches drawn.
+    synthetic_scenes : int, default 48
+        Scenes of the synthetic training set (``--synthetic``).
+    synthetic_size : tuple of 2 int, default (128, 128)
+        View size ``(H, W)`` of the synthetic scenes.
+    """
 
     patch: tuple[int, int, int, int, int]
     atoms: int
@@ -86,6 +104,28 @@ SYNTHETIC_BASELINES = (0.5, 1.0, 1.5, 2.0, 0.25, 3.0)
 
 
 def get_preset(name: str) -> Preset:
+    """The dictionary-training preset of this name.
+
+    Parameters
+    ----------
+    name : {"tiny", "default", "paper"}
+
+    Returns
+    -------
+    Preset
+
+    Raises
+    ------
+    InputError
+        An unknown name.
+
+    Examples
+    --------
+    >>> from lfproc.dictionary import get_preset
+    >>> p = get_preset("paper")
+    >>> p.patch, p.atoms, p.sparsity
+    ((5, 5, 9, 9, 3), 16402, 10)
+    """
     check_choice("preset", name, tuple(PRESETS))
     return PRESETS[name]
 
@@ -157,6 +197,11 @@ def train_dictionary(
     Returns
     -------
     Dictionary
+
+    Raises
+    ------
+    InputError
+        No light fields, a bad seed, or ``sources`` of another length.
     """
     p = get_preset(preset)
     sizes = resolve_options(TrainingSizes, sizes, size_overrides, func_name="train_dictionary", argument="sizes")
@@ -205,7 +250,28 @@ def approximate(dictionary: Dictionary, lf, *, n_nonzero_coefs: int | None = Non
     half the patch) normalised, coded with ``n_nonzero_coefs`` atoms (default: the dictionary's
     sparsity; the keyword ``sparsity`` is deprecated), rescaled; overlaps averaged.
 
-    Returns an array of the central ``V x U`` views, ``(V, U, H, W, C)`` float32.
+    Parameters
+    ----------
+    dictionary : Dictionary, str or path-like
+        Anything :func:`load_dictionary` accepts.
+    lf : LightField or array_like of shape (V', U', H, W, C)
+        At least the dictionary's views; its central ``V x U`` views are approximated.
+    n_nonzero_coefs : int, optional
+        Atoms per patch (Batch-OMP); default the dictionary's sparsity.
+    stride : int, optional
+        Patch step in pixels, ``1..P``; default ``P // 2``.
+
+    Returns
+    -------
+    ndarray of shape (V, U, H, W, C), float32
+        The approximation of the central ``V x U`` views.
+
+    Raises
+    ------
+    InputError
+        A stride out of range.
+    ShapeError
+        A light field smaller than the patch or of other colours.
     """
     d = load_dictionary(dictionary)
     t = int(n_nonzero_coefs or d.sparsity)
@@ -266,6 +332,11 @@ def evaluate_dictionary(dictionary, lightfields: Sequence[Any], *, n_nonzero_coe
         ``relative_error`` (``||L_hat - L|| / ||L||``), ``pu21_psnr_db`` and, with
         ``compare_dct``, ``dct_relative_error`` and ``dct_pu21_psnr_db``: means over the
         light fields; ``lightfields``: the same per light field.
+
+    Raises
+    ------
+    InputError
+        No light fields, or ``n_nonzero_coefs`` out of range.
     """
     d = load_dictionary(dictionary)
     if not lightfields:

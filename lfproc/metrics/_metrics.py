@@ -206,6 +206,17 @@ def pu21_encode(luminance_cd_m2: Any, *, variant: Pu21Variant = "banding_glare")
     ------
     InputError
         Unknown variant, non-numeric or non-finite input.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.metrics import pu21_decode, pu21_encode
+    >>> np.round(pu21_encode([0.005, 1.0, 100.0, 10000.0]), 1).tolist()
+    [0.0, 36.5, 256.4, 595.4]
+    >>> np.round(pu21_encode([1e-4, 1e5]), 1).tolist()  # clamped to [0.005, 10000] cd/m^2
+    [0.0, 595.4]
+    >>> np.round(pu21_decode(pu21_encode([0.1, 42.0, 5000.0])), 6).tolist()  # the inverse
+    [0.1, 42.0, 5000.0]
     """
     p1, p2, p3, p4, p5, p6, p7 = _pu21_params(variant)
     arr = _as_float64(luminance_cd_m2, "luminance_cd_m2")
@@ -311,12 +322,24 @@ def metric_luminance(values: np.ndarray, *, channel_axis: int | None = -1) -> np
     ----------
     values : ndarray
         Linear values; with ``channel_axis`` set, that axis holds 1 or 3 channels (RGB).
-    channel_axis : int or None
+    channel_axis : int or None, default -1
         ``None``: ``values`` already are luminance and are returned as float64.
 
     Returns
     -------
     ndarray without the channel axis, float64.
+
+    Raises
+    ------
+    ShapeError
+        The channel axis holds neither 1 nor 3 channels.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.metrics import metric_luminance
+    >>> np.round(metric_luminance(np.array([[1.0, 1.0, 1.0], [1.0, 0.0, 0.0]])), 6).tolist()  # white, red
+    [1.0, 0.212656]
     """
     arr = np.asarray(values)
     if channel_axis is None:
@@ -392,6 +415,27 @@ def psnr(result: Any, reference: Any, *, data_range: float) -> float:
     result, reference : array_like of the same shape
     data_range : float
         The peak value (required: no guess from the dtype).
+
+    Returns
+    -------
+    float
+        dB.
+
+    Raises
+    ------
+    ShapeError
+        Shapes that differ.
+    InputError
+        A non-positive ``data_range`` or non-finite values.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.metrics import psnr
+    >>> psnr(np.zeros(4), np.full(4, 0.1), data_range=1.0)  # RMSE 0.1 of the range
+    20.0
+    >>> psnr(np.ones(4), np.ones(4), data_range=1.0)
+    inf
     """
     data_range = check_positive("data_range", data_range)
     res, ref = _check_pair(result, reference)
@@ -439,6 +483,46 @@ _SHARED_PARAMS_DOC = """
 def pu21_psnr(result: Any, reference: Any, *, peak_luminance: float | None = 1000.0,
               channel_axis: int | None = None, variant: Pu21Variant = "banding_glare") -> float:
     """PU21-PSNR in dB on luminance (peak 256, ``pu21_metric.m``); ``inf`` for identical images.
+
+    ``20 log10(256 / RMSE(P_result, P_reference))`` with ``P`` the PU21 encoding
+    (:func:`pu21_encode`) of the scaled luminance (Mantiuk and Azimi, PCS 2021).
+
+    Parameters
+    ----------
+    result, reference : array_like of the same shape
+        Linear values: luminance of shape (..., H, W), or colour of shape (..., H, W, C) with
+        ``channel_axis=-1``.
+    peak_luminance : float or None, default 1000
+        Display peak in cd/m^2; both arrays are multiplied by ``peak_luminance / max(reference)``.
+        ``None``: the values already are absolute cd/m^2.
+    channel_axis : int or None, default None
+        Axis holding 1 or 3 channels (converted with :data:`PU21_LUMA`); ``None`` for luminance.
+    variant : {"banding_glare", "banding", "peaks", "peaks_glare"}, default "banding_glare"
+        PU21 parameter set.
+
+    Returns
+    -------
+    float
+        dB; ``inf`` when the encoded images are identical.
+
+    Raises
+    ------
+    ShapeError, InputError
+        Shapes that differ, non-finite values, a reference without a positive maximum.
+
+    Examples
+    --------
+    >>> import math
+    >>> import numpy as np
+    >>> from lfproc.metrics import pu21_encode, pu21_psnr
+    >>> ref = np.random.default_rng(0).uniform(0.01, 1.0, (16, 16, 3))
+    >>> pu21_psnr(ref, ref, channel_axis=-1)
+    inf
+    >>> a, b = np.full((4, 4), 100.0), np.full((4, 4), 1.0)  # cd/m^2: PU21 256.4 and 36.5
+    >>> round(pu21_psnr(a, b, peak_luminance=None), 3)
+    1.323
+    >>> round(20 * math.log10(256 / float(pu21_encode(100.0) - pu21_encode(1.0))), 3)
+    1.323
     """
     y_res, y_ref, _ = _scaled_luminance(result, reference, peak_luminance, channel_axis)
     mse = np.mean(np.square(pu21_encode(y_res, variant=variant) - pu21_encode(y_ref, variant=variant)))
@@ -451,6 +535,16 @@ def pu21_ssim(result: Any, reference: Any, *, peak_luminance: float | None = 100
 
     Arrays with more than two (luminance) axes are taken as a stack of 2-D images over the
     last two axes; the mean SSIM of the images is returned. Images must be at least 11x11.
+
+    Returns
+    -------
+    float
+        Mean SSIM, at most 1 (identical images).
+
+    Raises
+    ------
+    ShapeError
+        Shapes that differ, fewer than two axes, or images smaller than 11 x 11.
     """
     y_res, y_ref, _ = _scaled_luminance(result, reference, peak_luminance, channel_axis)
     if y_ref.ndim < 2:
@@ -465,6 +559,11 @@ def pu2_psnr(result: Any, reference: Any, *, peak_luminance: float | None = 1000
 
     After scaling the peak is ``pu2_encode(peak_luminance)`` (419.6 for 1000 cd/m^2); see the
     module notes for why this convention.
+
+    Returns
+    -------
+    float
+        dB; ``inf`` for identical images.
     """
     y_res, y_ref, display_peak = _scaled_luminance(result, reference, peak_luminance, channel_axis)
     mse = np.mean(np.square(pu2_encode(y_res) - pu2_encode(y_ref)))
@@ -487,6 +586,19 @@ def log_psnr(result: Any, reference: Any, *, peak_luminance: float | None = 1000
     (``peak_luminance``), so the peak is the number of decades the display spans above
     PU21's black level (5.30 for 1000 cd/m^2). A uniform error of ``d`` decades gives
     ``20 log10(peak / d)``.
+
+    Returns
+    -------
+    float
+        dB; ``inf`` for identical images.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.metrics import log_psnr
+    >>> ref = np.random.default_rng(0).uniform(0.1, 1.0, (16, 16))
+    >>> round(log_psnr(10 * ref, ref), 2)  # one decade everywhere: 20 log10(5.30 / 1)
+    14.49
     """
     y_res, y_ref, display_peak = _scaled_luminance(result, reference, peak_luminance, channel_axis)
     mse = np.mean(np.square(_log_luminance(y_res) - _log_luminance(y_ref)))
@@ -501,6 +613,38 @@ def log_luminance_error(result: Any, reference: Any, *, mask: Any = None, align:
     since a merged radiance map from 8-bit images has an arbitrary scale) or 0 with
     ``align="none"``. Luminance with :data:`PU21_LUMA` weights (RGB on the last axis; one
     channel as is). Result luminances below 1e-12 of the reference mean are clamped there.
+
+    Parameters
+    ----------
+    result, reference : array_like of the same shape
+        Linear images or light fields, RGB (or one channel) on the last axis.
+    mask : array_like of bool, optional
+        Samples to use, of the luminance's shape (the input's without the colour axis).
+    align : {"gain", "none"}, default "gain"
+        Fit one gain (a constant log offset) first, or not.
+
+    Returns
+    -------
+    float
+        RMS error in natural-log units (``/ ln 2`` for stops).
+
+    Raises
+    ------
+    ShapeError
+        Shapes differ, or a mask of another shape.
+    InputError
+        No sample of positive reference luminance in the mask.
+
+    Examples
+    --------
+    >>> import math
+    >>> import numpy as np
+    >>> from lfproc.metrics import log_luminance_error
+    >>> ref = np.linspace(0.1, 10.0, 300).reshape(10, 10, 3)
+    >>> round(log_luminance_error(4 * ref, ref), 6)  # a gain is fitted away
+    0.0
+    >>> round(log_luminance_error(4 * ref, ref, align="none") / math.log(2), 6)  # two stops
+    2.0
     """
     check_choice("align", align, ("gain", "none"))
     res, ref = _check_pair(result, reference)
@@ -534,6 +678,17 @@ def mean_relative_error(result: Any, reference: Any, *, epsilon_relative: float 
         Linear radiance in the same units.
     epsilon_relative : float, default 1e-3
         Regulariser relative to the reference peak (positive).
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    ShapeError
+        Shapes that differ.
+    InputError
+        A non-positive ``epsilon_relative`` or a reference without a positive peak.
     """
     epsilon_relative = check_positive("epsilon_relative", epsilon_relative)
     res, ref = _check_pair(result, reference)
@@ -552,9 +707,14 @@ def _relative_error(res: np.ndarray, ref: np.ndarray, eps: float) -> np.ndarray:
     return err
 
 
-for _f in (pu21_psnr, pu21_ssim, pu2_psnr, log_psnr):
-    _f.__doc__ = (_f.__doc__ or "").rstrip() + "\n" + _SHARED_PARAMS_DOC
-del _f
+_VARIANT_DOC = """    variant : {"banding_glare", "banding", "peaks", "peaks_glare"}, default "banding_glare"
+        PU21 parameter set.
+"""
+for _f, _extra in ((pu21_ssim, _VARIANT_DOC), (pu2_psnr, ""), (log_psnr, "")):
+    # the shared Parameters go before the docstring's own sections (Returns, Raises, Examples)
+    _head, _sep, _tail = (_f.__doc__ or "").partition("\n    Returns\n")
+    _f.__doc__ = _head.rstrip() + "\n" + _SHARED_PARAMS_DOC + _extra + _sep + _tail
+del _f, _extra, _head, _sep, _tail
 
 
 # -- figures a user sees: error in stops per decade, zeros, highlight energy, detail -------------
@@ -650,12 +810,10 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
         Linear radiance in the same units and of the same shape (for example
         ``(V, U, H, W, 3)`` or ``(H, W, 3)``).
     noise_floor : float or None
-        Reference luminance (in the data's units, before any scaling) at or below which a
-        sample is left out of ``stops_by_decade`` and ``zeros_above_floor``. ``None``
-        (default) is 0: every sample with a positive reference luminance counts.
+        Reference luminance (data units, before any scaling) at or below which a sample is left
+        out of ``stops_by_decade`` and ``zeros_above_floor``; ``None`` (default): 0.
     mask : array_like of bool, shape (H, W) or the luminance shape (e.g. (V, U, H, W)), optional
-        Samples to include in every figure (an (H, W) mask applies to every view).
-        Default: all samples.
+        Samples to include in every figure (an (H, W) mask applies to every view; default all).
     peak_luminance : float or None, default 1000
         Display peak in cd/m^2; both luminances are multiplied by
         ``peak_luminance / max(reference)`` (the maximum over every sample and channel, as
@@ -702,6 +860,15 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
         Different shapes, no colour axis, a mask of another shape, an empty mask.
     InputError
         Non-finite values, a negative noise floor, a reference without a positive maximum.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.metrics import hdr_figures
+    >>> ref = np.random.default_rng(0).uniform(0.01, 1.0, (16, 16, 3))
+    >>> f = hdr_figures(2 * ref, ref)  # one stop too bright everywhere
+    >>> f["max_decade_stops"], f["zeros_above_floor"], f["highlight_energy"], f["samples"]
+    (1.0, 0.0, 2.0, 256)
     """
     y_res = _figure_luminance(result, "result")
     y_ref = _figure_luminance(reference, "reference")
@@ -766,6 +933,24 @@ def error_stops(result: Any, reference: Any, *, view: tuple[int, int] | None = N
         Positive where the result is too bright; ``nan`` where the reference luminance is
         ``<= 0`` (no defined error), ``-inf`` where the result is ``<= 0`` and the reference
         is not (a lost sample).
+
+    Raises
+    ------
+    ShapeError
+        Shapes that differ or have no colour axis.
+    InputError
+        A view outside the light field.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.metrics import error_stops
+    >>> ref = np.ones((2, 2, 3))
+    >>> res = ref.copy()
+    >>> res[0, 0] = 2.0  # one stop too bright
+    >>> res[1, 1] = 0.0  # lost
+    >>> error_stops(res, ref).tolist()
+    [[1.0, 0.0], [0.0, -inf]]
     """
     y_res = _figure_luminance(result, "result")
     y_ref = _figure_luminance(reference, "reference")
@@ -819,7 +1004,26 @@ def align_result(result: LightField, reference: LightField, align: str = "none")
       whose reference luminance lies between its 1st and 99th percentiles of positive values
       (clipped and black samples left out), for any units (HDR comparisons of relative data).
 
-    Returns the (new) result and ``{"align": mode, "gain": factor applied}``.
+    Parameters
+    ----------
+    result, reference : LightField
+    align : {"none", "exposure", "gain"}, default "none"
+
+    Returns
+    -------
+    aligned : LightField
+        ``result`` (``"none"``) or a new light field scaled to the reference (data, variance and
+        saturation level; the reference's units, exposure and ISO; ``attrs["evaluate_alignment"]``).
+    info : dict
+        ``{"align": mode, "gain": factor applied}``.
+
+    Raises
+    ------
+    InputError
+        A mismatch of units or exposures with ``"none"``, missing exposures with ``"exposure"``,
+        too few usable pixels with ``"gain"``.
+    ShapeError
+        Shapes differ (``"gain"``).
     """
     check_choice("align", align, ALIGN_MODES)
     for name, lf in (("result", result), ("reference", reference)):
@@ -1100,6 +1304,17 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
     InputError
         Different units, all-black reference, scales more than ``scale_tolerance_stops`` apart,
         ``peak_luminance=None`` with data not in cd/m2.
+
+    Examples
+    --------
+    >>> from lfproc.metrics import evaluate
+    >>> from lfproc.synth import synthesize
+    >>> truth = synthesize("window", size=(24, 24), views=3, random_state=0)
+    >>> evaluate(truth, truth)["pu21_psnr_db"], evaluate(truth, truth)["angular_shape"]
+    (inf, [3, 3])
+    >>> r = evaluate(truth.replace(data=2 * truth.data), truth, align="gain")  # a gain is fitted
+    >>> r["pu21_psnr_db"], round(r["gain"], 6)
+    (inf, 0.5)
     """
     result, alignment = align_result(result, reference, align)
     _check_lightfields(result, reference, scale_tolerance_stops)

@@ -18,9 +18,27 @@ def render_atoms(dictionary: Dictionary, *, count: int = 32, zoom: int = 8, colu
     parallax), both magnified ``zoom`` times; values are mapped per atom from ``-max|a|`` (black)
     through 0 (mid grey) to ``+max|a|`` (white), colour kept.
 
+    Parameters
+    ----------
+    dictionary : Dictionary
+    count : int, default 32
+        Atoms shown (clipped to ``1..K``); the most used first when the dictionary has usage
+        counts, else the first ``count``.
+    zoom : int, default 8
+        Magnification (screen pixels per atom sample).
+    columns : int, default 8
+        Cells per row.
+    **_options
+        Ignored (other preview options).
+
     Returns
     -------
     ndarray of shape (H, W, 3), uint8
+
+    Raises
+    ------
+    InputError
+        Not a Dictionary.
     """
     if not isinstance(dictionary, Dictionary):
         raise InputError(f"atoms preview: expected a Dictionary, got {type(dictionary).__name__}")

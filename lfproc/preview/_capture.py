@@ -46,12 +46,19 @@ def render_capture_preview(capture: Capture, kind: str = "capture", *, shot: int
         ISO map a legend of its ISOs.
     shot : int
         Which shot to show.
-    zoom : int
+    zoom : int, default 32
         Side of the zoomed crop in pixels.
+    dpi : int, default 100
+        Resolution of the matplotlib figure (the picture's size in pixels scales with it).
 
     Returns
     -------
     ndarray of shape (H, W, 3), uint8
+
+    Raises
+    ------
+    InputError
+        An unknown kind or a shot out of range.
     """
     require("matplotlib", purpose="capture previews")
     import matplotlib
@@ -130,7 +137,44 @@ def write_capture_preview(capture, output: str | os.PathLike, *, kind: str = "ca
     """Write :func:`render_capture_preview` of a capture (object or file) to a PNG/JPEG/TIFF.
 
     Goes through :func:`lfproc.preview.write_preview` (the capture kinds are registered
-    there). Returns a summary (``output``, ``kind``, ``size`` of the picture, ``shots``, ``isos``).
+    there).
+
+    Parameters
+    ----------
+    capture : Capture or str or path-like
+        A capture, or a capture file (read with :func:`lfproc.camera.load_capture`).
+    output : str or path-like
+        The picture to write (``.png``, ``.jpg``, ``.tif``).
+    kind : {"capture", "sensor", "iso", "mask"}, default "capture"
+        See :func:`render_capture_preview`.
+    force : bool, default False
+        Overwrite an existing ``output``.
+    shot : int, default 0
+        Which shot to show.
+
+    Returns
+    -------
+    dict
+        ``output`` (path), ``kind``, ``size`` ``[height, width]`` of the picture, ``shots``, ``isos``.
+
+    Raises
+    ------
+    OutputExistsError
+        ``output`` exists and ``force`` is false.
+    InputError
+        An unknown kind.
+
+    Examples
+    --------
+    >>> import os
+    >>> from lfproc.camera import simulate_capture
+    >>> from lfproc.preview import write_capture_preview
+    >>> from lfproc.synth import synthesize
+    >>> capture = simulate_capture(synthesize("window", size=(24, 24), views=5, random_state=0),
+    ...                            shots=2, mask_period=4, random_state=0)
+    >>> summary = write_capture_preview(capture, "sensor.png", kind="sensor")
+    >>> summary["output"], summary["shots"], summary["isos"], os.path.isfile("sensor.png")
+    ('sensor.png', 2, [100, 400, 800, 1600], True)
     """
     check_choice("--kind (capture previews)", kind, PREVIEW_KINDS)
     check_output(output, force=force)

@@ -62,11 +62,38 @@ def reinhard_parameters(image: np.ndarray, *, key: float = 0.18, white_percentil
                         exposure_ev: float = 0.0) -> dict[str, float]:
     """Statistics of the Reinhard global operator for ``image`` (linear, last axis colour).
 
+    Parameters
+    ----------
+    image : ndarray
+        Linear image or light field, colour on the last axis (RGB or one channel).
+    key : float, default 0.18
+        The grey the log-average luminance maps to, in (0, 1).
+    white_percentile : float, default 99.9
+        Percentile of the scaled luminance mapped to white, in (0, 100].
+    exposure_ev : float, default 0.0
+        Extra exposure in stops.
+
     Returns
     -------
-    dict with ``log_average`` (``exp(mean(log L))`` over the positive luminances ``L``),
-    ``scale`` (``key * 2**exposure_ev / log_average``: scene luminance to the operator's
-    ``L_s``) and ``white`` (``L_white``: the ``white_percentile`` of ``L_s``, mapped to 1).
+    dict
+        ``log_average`` (``exp(mean(log L))`` over the positive luminances ``L``),
+        ``scale`` (``key * 2**exposure_ev / log_average``: scene luminance to the operator's
+        ``L_s``) and ``white`` (``L_white``: the ``white_percentile`` of ``L_s``, mapped to 1).
+        A black image gives ``{"log_average": 0.0, "scale": 0.0, "white": 1.0}``.
+
+    Raises
+    ------
+    InputError
+        ``key``, ``white_percentile`` or ``exposure_ev`` out of range.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc.preview import reinhard_parameters
+    >>> grey = np.full((4, 4, 3), 2.0, dtype=np.float32)  # luminance 2 everywhere
+    >>> p = reinhard_parameters(grey)
+    >>> round(p["log_average"], 6), round(p["scale"], 6), round(p["white"], 6)
+    (2.0, 0.09, 0.18)
     """
     if not (0 < key < 1):
         raise InputError(f"key: expected a number in (0, 1) (0.18 is middle grey), got {key!r}")
@@ -125,6 +152,23 @@ def tonemap(image: np.ndarray, *, key: float = 0.18, white_percentile: float = 9
     -------
     ndarray of the shape of ``image``, float32 in [0, 1].
 
+    Raises
+    ------
+    InputError
+        An unknown encoding, or ``key``/``white_percentile``/``exposure_ev`` out of range.
+
+    Examples
+    --------
+    Three grey pixels a decade apart (log-average 1); the brightest is the white point:
+
+    >>> import numpy as np
+    >>> from lfproc.preview import tonemap
+    >>> grey = np.array([0.1, 1.0, 10.0], dtype=np.float32)[:, None] * np.ones(3, dtype=np.float32)
+    >>> np.round(tonemap(grey, white_percentile=100, encoding="linear")[:, 0].astype(float), 4).tolist()
+    [0.0178, 0.161, 1.0]
+    >>> np.round(tonemap(grey, white_percentile=100)[:, 0].astype(float), 4).tolist()  # sRGB-encoded
+    [0.1418, 0.4379, 1.0]
+
     References
     ----------
     .. [1] E. Reinhard, M. Stark, P. Shirley, J. Ferwerda, "Photographic tone reproduction
@@ -178,7 +222,24 @@ SHEET_MAX_PIXELS = 1_200_000
 
 def sheet_tile_size(lf: LightField, max_pixels: int | None = SHEET_MAX_PIXELS) -> tuple[int, int]:
     """Size (h, w) of one tile of the contact sheet: the view size, downscaled by one factor
-    (at most 1) so that all ``V * U`` tiles hold at most ``max_pixels`` pixels (``None``: full size)."""
+    (at most 1) so that all ``V * U`` tiles hold at most ``max_pixels`` pixels (``None``: full size).
+
+    Parameters
+    ----------
+    lf : LightField
+    max_pixels : int or None, default SHEET_MAX_PIXELS
+        Pixel budget of all tiles together.
+
+    Returns
+    -------
+    tuple of 2 int
+        ``(h, w)``, each at least 1.
+
+    Raises
+    ------
+    InputError
+        ``max_pixels`` is not a positive integer.
+    """
     nv, nu = lf.views
     h, w = lf.size
     if max_pixels is None:
@@ -240,7 +301,17 @@ def _preview_sheet(lf: LightField, *, exposure_ev: float = 0.0, exposure_from: L
 
 
 def epi_stretch(lf: LightField) -> int:
-    """Rows (or columns) each view gets in an EPI preview: EPIs about a quarter of the view tall."""
+    """Rows (or columns) each view gets in an EPI preview: EPIs about a quarter of the view tall.
+
+    Parameters
+    ----------
+    lf : LightField
+
+    Returns
+    -------
+    int
+        ``max(1, ceil(min(H, W) / (4 * max(V, U))))``.
+    """
     h, w = lf.size
     return max(1, math.ceil(min(h, w) / (4 * max(lf.views))))
 
@@ -374,7 +445,24 @@ PREVIEWS: dict[str, PreviewKind] = {}
 
 def register_preview(kind: str, render: Callable[..., np.ndarray], *, accepts: type = LightField,
                      description: str = "") -> None:
-    """Add a preview kind (e.g. a capture's sensor image): ``render(obj, **options) -> uint8 (H, W, 3)``."""
+    """Add a preview kind (e.g. a capture's sensor image): ``render(obj, **options) -> uint8 (H, W, 3)``.
+
+    Parameters
+    ----------
+    kind : str
+        The new kind's name.
+    render : callable
+        ``render(obj, **options)`` returning a uint8 RGB array of shape ``(H, W, 3)``.
+    accepts : type, default LightField
+        The input type the kind renders.
+    description : str, default ""
+        One line for ``lfproc preview --help``.
+
+    Raises
+    ------
+    InputError
+        ``kind`` is already registered.
+    """
     if kind in PREVIEWS:
         raise InputError(f"preview kind {kind!r} is already registered")
     PREVIEWS[kind] = PreviewKind(accepts=accepts, render=render, description=description)
@@ -387,7 +475,26 @@ register_preview("histogram", _preview_histogram, description="histogram of log2
 
 
 def preview_kinds(input_type: type | None = None) -> list[str]:
-    """Preview kinds (those accepting inputs of ``input_type`` when given)."""
+    """Preview kinds (those accepting inputs of ``input_type`` when given).
+
+    Parameters
+    ----------
+    input_type : type, optional
+        Keep the kinds whose renderer accepts this type (e.g. :class:`lfproc.LightField` or
+        :class:`lfproc.camera.Capture`); None: every registered kind.
+
+    Returns
+    -------
+    list of str
+        Kinds in registration order.
+
+    Examples
+    --------
+    >>> from lfproc import LightField
+    >>> from lfproc.preview import preview_kinds
+    >>> preview_kinds(LightField)
+    ['centre', 'sheet', 'epi', 'histogram']
+    """
     return [k for k, p in PREVIEWS.items() if input_type is None or issubclass(input_type, p.accepts)]
 
 
@@ -410,6 +517,26 @@ def render_preview(obj: Any, kind: str = "centre", **options) -> np.ndarray:
         and white point) from the reference instead of ``obj``, so a result and its truth
         rendered with the same ``exposure_from`` are shown at one exposure (the histogram
         shares the reference's range of stops).
+
+    Returns
+    -------
+    ndarray of shape (H, W, 3), uint8
+
+    Raises
+    ------
+    InputError
+        An unknown kind, or an input the kind does not accept.
+    ShapeError
+        A renderer that does not return uint8 ``(H, W, 3)``.
+
+    Examples
+    --------
+    >>> from lfproc.preview import render_preview
+    >>> from lfproc.synth import synthesize
+    >>> lf = synthesize("lamps", size=(24, 32), views=3, random_state=0)
+    >>> centre = render_preview(lf)  # the tone-mapped centre view
+    >>> centre.shape, centre.dtype
+    ((24, 32, 3), dtype('uint8'))
     """
     if kind not in PREVIEWS:
         raise InputError(f"preview kind: expected one of {', '.join(PREVIEWS)}; got {kind!r}")
@@ -432,7 +559,44 @@ def write_preview(obj: Any, path: str | os.PathLike, *, kind: str = "centre", fo
                   **options) -> Path:
     """Render a preview and write it atomically (PNG with lfproc version and kind in text chunks; JPEG, TIFF).
 
-    Raises :class:`lfproc.errors.OutputExistsError` when ``path`` exists and ``force`` is false.
+    Parameters
+    ----------
+    obj : LightField (or the input type a registered kind accepts)
+    path : str or path-like
+        The picture to write; the suffix picks the format (``.png``, ``.jpg``/``.jpeg``,
+        ``.tif``/``.tiff``).
+    kind : str, default "centre"
+        A kind of :func:`preview_kinds` (see :func:`render_preview`).
+    force : bool, default False
+        Overwrite an existing ``path``.
+    **options
+        Passed to the renderer (:func:`render_preview`).
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    OutputExistsError
+        ``path`` exists and ``force`` is false.
+    InputError
+        An unknown kind, an input the kind does not accept, or an unknown suffix.
+
+    Examples
+    --------
+    >>> import os
+    >>> from lfproc.synth import synthesize
+    >>> from lfproc.preview import write_preview
+    >>> lf = synthesize("lamps", size=(24, 24), views=3, random_state=0)
+    >>> path = write_preview(lf, "centre.png")
+    >>> path.name, os.path.getsize(path) > 0
+    ('centre.png', True)
+    >>> from PIL import Image
+    >>> with Image.open(path) as im:
+    ...     print(im.size, im.mode)  # (width, height) of the centre view
+    (24, 24) RGB
     """
     text = {"lfproc_preview": kind,
             "lfproc_options": repr(sorted((k, _describe_option(v)) for k, v in options.items()))}
@@ -503,12 +667,21 @@ def render_error_map(result: Any, reference: Any, *, view: tuple[int, int] | Non
     limit_stops : float, optional
         Half-range of the colour bar in stops (default: the 99th percentile of the absolute
         error shown, rounded up to a quarter stop, from 0.25 to 8).
-    cmap : str
+    cmap : str, default "RdBu_r"
         A diverging matplotlib colour map.
+    dpi : int, default 100
+        Resolution of the matplotlib figure.
 
     Returns
     -------
     ndarray (H', W', 3), uint8
+
+    Raises
+    ------
+    ShapeError
+        Light fields of other shapes, or a mask that is not boolean of shape (H, W) or (V, U, H, W).
+    InputError
+        A non-positive ``limit_stops``.
     """
     require("matplotlib", purpose="error maps")
     import matplotlib
@@ -573,6 +746,28 @@ def render_error_map(result: Any, reference: Any, *, view: tuple[int, int] | Non
 def write_error_map(result: Any, reference: Any, path: str | os.PathLike, *, force: bool = False,
                     **options) -> Path:
     """Write :func:`render_error_map` atomically to a PNG (or JPEG/TIFF); refuses an existing
-    ``path`` unless ``force``. ``options`` go to :func:`render_error_map`."""
+    ``path`` unless ``force``. ``options`` go to :func:`render_error_map`.
+
+    Parameters
+    ----------
+    result, reference : LightField
+        The light fields compared (as :func:`render_error_map`).
+    path : str or path-like
+        The picture to write; the suffix picks the format.
+    force : bool, default False
+        Overwrite an existing ``path``.
+    **options
+        Passed to :func:`render_error_map`.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    OutputExistsError
+        ``path`` exists and ``force`` is false.
+    """
     return _write_picture(path, lambda: render_error_map(result, reference, **options),
                           {"lfproc_preview": "error-map"}, what="an error-map", force=force)

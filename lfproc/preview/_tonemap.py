@@ -25,7 +25,27 @@ TONEMAPS = ("none", "reinhard", "drago")
 
 
 def clipped_fraction(lf: LightField) -> float:
-    """Fraction of samples above 1 (clipped by an 8/16-bit encoding)."""
+    """Fraction of samples above 1 (clipped by an 8/16-bit encoding).
+
+    Parameters
+    ----------
+    lf : LightField
+
+    Returns
+    -------
+    float
+        In [0, 1].
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc import LightField
+    >>> from lfproc.preview import clipped_fraction
+    >>> data = np.full((1, 1, 2, 2, 3), 0.5, dtype=np.float32)
+    >>> data[..., 0, 0, :] = 4.0  # one pixel of four over 1
+    >>> clipped_fraction(LightField(data))
+    0.25
+    """
     return float(np.mean(lf.data > 1.0))
 
 
@@ -35,6 +55,38 @@ def display_transform(lf: LightField, *, exposure_ev: float = 0.0, tonemap: str 
     ``tonemap="none"`` only scales. Tone-mapped output lies in [0, 1] (``saturation_level = 1``);
     the variance is dropped (it no longer applies), the disparity kept, and ``attrs["display"]``
     records the exposure and operator.
+
+    Parameters
+    ----------
+    lf : LightField
+    exposure_ev : float, default 0.0
+        Exposure change in stops (finite).
+    tonemap : {"none", "reinhard", "drago"}, default "none"
+        Global operator (OpenCV's Reinhard with no light adaptation, or Drago), applied to all
+        views together.
+
+    Returns
+    -------
+    LightField
+
+    Raises
+    ------
+    InputError
+        Not a light field, a non-finite exposure, or a black light field to tone map.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lfproc import LightField
+    >>> from lfproc.preview import display_transform
+    >>> lf = LightField(np.full((1, 1, 2, 2, 3), 0.25, dtype=np.float32))
+    >>> out = display_transform(lf, exposure_ev=2)  # two stops brighter
+    >>> float(out.data.max()), out.attrs["display"]["tonemap"]
+    (1.0, 'none')
+    >>> tm = display_transform(LightField(np.geomspace(0.01, 100, 12, dtype=np.float32).reshape(1, 1, 2, 2, 3)),
+    ...                        tonemap="reinhard")
+    >>> bool(tm.data.min() >= 0 and tm.data.max() <= 1), tm.saturation_level
+    (True, 1.0)
     """
     check_choice("tonemap", tonemap, TONEMAPS)
     if not isinstance(lf, LightField):

@@ -1,7 +1,7 @@
 """Joint HDR light-field reconstruction from coded multi-ISO captures (stage 5, its second half).
 
 :func:`reconstruct` solves, for every patch of the sensor, the weighted lasso
-``argmin_a 1/2 ||W (Phi_p D a - T_p)||^2 + mu ||a||_1`` (method.md section 4) with a batched
+``argmin_a 1/2 ||W (Phi_p D a - T_p)||^2 + mu ||a||_1`` (Miandji et al., IEEE TCI 2021, eq. 9) with a batched
 ADMM (default), FISTA or OMP, and averages the overlapping patch estimates. Periodic masks
 share one patch operator per phase (:func:`lfproc.camera.projection.patch_operators`), so the
 solvers' work is matrix-matrix products; blocks of patches run in this process or on Dask.

@@ -193,6 +193,15 @@ def load_patch_model(model: str | os.PathLike | PatchModel = "default") -> Patch
     The file is untrusted: its header is checked (types, ranges) and every array's shape and
     dtype are checked against it before any data is read (:mod:`lfproc._untrusted`).
 
+    Parameters
+    ----------
+    model : str, path-like or PatchModel, default "default"
+        ``"default"``, a path, or a :class:`PatchModel` (returned as is).
+
+    Returns
+    -------
+    PatchModel
+
     Raises
     ------
     MissingFileError
@@ -265,6 +274,11 @@ def train_patch_model(images, *, patch: int = 8, margin: int = 2, components: in
     Returns
     -------
     PatchModel
+
+    Raises
+    ------
+    ShapeError
+        A training image that is not ``(H, W, 3)`` larger than ``E`` pixels.
     """
     rng = check_random_state(random_state)
     e = patch + 2 * margin
@@ -335,50 +349,51 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
     ----------
     capture : Capture or path of a capture file
         With a periodic random mask (``mask_period``).
-    model : PatchModel, ``"default"`` or path
+    model : PatchModel, ``"default"`` or path, default "default"
         The patch prior (:func:`train_patch_model`); ``"default"`` is the shipped one.
-    stride : int
-        Spacing of the estimated patches in pixels (1 .. the model's patch). With a mask of period
-        4, a stride of 2 overlaps every pixel with patches of four mask phases, whose errors
-        differ, so they average out instead of printing the mask's period on the result.
+    stride : int, default 2
+        Spacing of the estimated patches, 1 .. the patch (2 for a period-4 mask: module notes).
     search_stride : int, optional
-        Spacing of the patches on which the disparity is searched (default: half the model's
-        patch); every estimated patch takes the disparity of the nearest one.
-    disparities : sequence of float
+        Spacing of the disparity-search patches (default: half the patch).
+    disparities : sequence of float, default DEFAULT_DISPARITIES
         Disparities tried per patch (pixels per view step), within the model's margin.
-    scales : sequence of float
-        Multipliers of the chosen component's covariance tried per patch (module notes); ``(1,)``
-        turns the scale mixture off.
-    pool_radius : int
-        The disparity of a patch is chosen on the evidence summed over the ``(2 r + 1)^2``
-        neighbouring patches (0: each patch alone).
-    search : {"joint", "staged"}
-        Evaluate every (disparity, component, scale) per patch (``"joint"``), or choose the
-        disparity at the scale nearest 1 and try the other scales only there (``"staged"``:
-        about ``S`` times fewer factorisations).
-    saturation : {"bound", "ignore"}
+    scales : sequence of float, default DEFAULT_SCALES
+        Multipliers of the chosen component's covariance tried per patch; ``(1,)``: none.
+    pool_radius : int, default 1
+        Disparity evidence summed over ``(2 r + 1)^2`` neighbouring patches (0: each alone).
+    search : {"joint", "staged"}, default "staged"
+        Every (disparity, component, scale) per patch, or the disparity at scale 1 first and the
+        other scales only there (``S`` times fewer factorisations).
+    saturation : {"bound", "ignore"}, default "bound"
         Use saturated measurements as lower bounds (module notes) or leave them out.
-    chunk : int
+    chunk : int, default 256
         Patches solved at once (memory: about ``chunk * m^2 * 16`` bytes per thread).
     threads : int, optional
-        Chunks solved at once, each on one BLAS thread (default: the CPUs available). The
-        output does not depend on it.
+        Chunks solved at once, one BLAS thread each (default: the CPUs); the output is the same.
     progress_bar : bool, optional
         Show progress (None: when stderr is a terminal).
 
     Returns
     -------
     LightField
-        ``(V, U, H, W, 3)``, in the light field's units (the capture's ``radiance_scale``
-        divided out) or e-/s; ``attrs["reconstruction"]`` records the settings and figures
-        (disparities chosen, seconds).
+        ``(V, U, H, W, 3)``, light-field units (or e-/s); ``attrs["reconstruction"]``: settings, figures.
 
     Raises
     ------
     InputError
-        A capture without a periodic random mask, a bad stride, disparities beyond the margin.
+        No periodic random mask, a bad stride, disparities beyond the margin.
     ShapeError
         The model's patch does not fit the capture.
+
+    Examples
+    --------
+    >>> from lfproc import evaluate, simulate_capture
+    >>> from lfproc.recon import reconstruct_gmm
+    >>> from lfproc.synth import synthesize
+    >>> truth = synthesize("window", size=(24, 24), views=5, random_state=0)
+    >>> result = reconstruct_gmm(simulate_capture(truth, shots=2, mask_period=4, random_state=0), progress_bar=False)
+    >>> result.shape, bool(10 < evaluate(result, truth)["pu21_psnr_db"] < 40)  # PU21-PSNR in dB
+    ((5, 5, 24, 24, 3), True)
     """
     started = time.perf_counter()
     if isinstance(capture, (str, os.PathLike)):

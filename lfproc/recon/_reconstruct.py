@@ -101,7 +101,8 @@ VARIANCES = ("local", "measurement")
 DEFAULTS = {"stride": 4, "mu": 0.5, "tol": {"admm": 1e-3, "fista": 2.0**-15, "omp": None},
             "max_iter": {"admm": 100, "fista": 1000, "omp": None},
             "block_patches": 512, "scale": "universal", "overlap": "scale-window-fit", "variance": "local"}
-#: The paper's settings (method.md section 4: mu 1e-4 on patches of unit norm, tolerance 2^-15, plain averages;
+#: The paper's settings (Miandji et al., IEEE TCI 2021, eq. 9: mu 1e-4 on patches of unit norm,
+#: tolerance 2^-15, plain averages;
 #: the paper weighs measurements by their noise model, which its text does not detail: the plug-in here).
 PAPER = {"stride": 4, "mu": 1e-4, "tol": 2.0**-15, "max_iter": 300, "scale": "patch", "overlap": "mean",
          "variance": "measurement"}
@@ -125,7 +126,29 @@ class _Settings:
 
 
 def patch_count(size: tuple[int, int], patch: int, stride: int) -> int:
-    """Number of patches :func:`reconstruct` solves for a sensor of ``size``."""
+    """Number of patches :func:`reconstruct` solves for a sensor of ``size``.
+
+    The grid steps by ``stride`` and adds a last patch flush with the bottom/right edge.
+
+    Parameters
+    ----------
+    size : tuple of 2 int
+        Sensor size ``(H, W)`` in pixels.
+    patch : int
+        Patch side ``P`` in pixels.
+    stride : int
+        Step between patches in pixels.
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    >>> from lfproc.recon import patch_count
+    >>> patch_count((24, 24), 8, 4), patch_count((25, 25), 8, 4)
+    (25, 36)
+    """
     tops, lefts = patch_grid(size, patch, stride)
     return len(tops) * len(lefts)
 
@@ -657,7 +680,7 @@ def reconstruct(
     threads: int | None = None,
     **options,
 ) -> LightField:
-    """Reconstruct the HDR light field of a coded multi-ISO capture (method.md section 4).
+    """Reconstruct the HDR light field of a coded multi-ISO capture (Miandji et al., IEEE TCI 2021, eq. 9).
 
     Per patch ``p`` (the dictionary's patch: ``V x U`` views of ``P x P`` pixels, 3 colours), with
     the defaults: ``a* = argmin_a 1/2 ||W (Phi_p D a - T_p)||^2 + lambda_p ||a||_1`` with ``T`` the
@@ -674,22 +697,17 @@ def reconstruct(
     capture : Capture or path of a capture file
     dictionary : Dictionary, ``"default"`` (the shipped one) or path of a dictionary file
     settings : ReconstructionSettings, optional
-        Every option that decides the result (the fields below from ``solver`` to ``variance``,
-        except the execution options ``workers``, ``scheduler``, ``progress_bar`` and
+        Every option below that decides the result (not ``workers``, ``scheduler``, ``progress_bar``,
         ``threads``). Give either ``settings`` or its fields as keywords (``**options``), not both.
-    solver : {"admm", "fista", "omp"}
+    solver : {"admm", "fista", "omp"}, default "admm"
         ``admm`` (default; Woodbury solve, one ``m x m`` system per patch), ``fista`` (step
         ``1/L``), ``omp`` (greedy, ``n_nonzero_coefs`` atoms: the fast mode).
-    stride : int
-        Patch spacing in pixels (1 .. patch size; 4 as the paper). Any stride works with the
-        Bayer CFA: patch operators carry their CFA phase.
-    mu : float
-        l1 weight (module notes): with ``scale="universal"`` (default 0.5, measured)
-        ``mu sqrt(2 ln K) s_p`` against the chi-square data term, ``s_p`` the rms of the weighted
-        atoms' norms (the noise level of their correlations with the data); with
-        ``scale="noise"`` ``mu / c_p`` against the chi-square data term averaged over the measurements; with
-        ``scale="patch"`` relative to a patch of unit norm with weights of mean square one
-        (the paper's 1e-4: :data:`PAPER`). Ignored by ``omp``.
+    stride : int, default 4
+        Patch spacing in pixels (1 .. patch size; 4 as the paper; patch operators carry their CFA phase).
+    mu : float, default 0.5
+        l1 weight, whose meaning depends on ``scale`` (module notes, "Scale handling"): with
+        ``"universal"`` ``mu sqrt(2 ln K) s_p``, ``s_p`` the rms of the weighted atoms' norms; with
+        ``"patch"`` relative to a unit-norm patch (the paper's 1e-4: :data:`PAPER`). Not for ``omp``.
     max_iter : int, optional
         Iteration limit (default 100 for ADMM, 1000 for FISTA). Ignored by ``omp``.
     tol : float, optional
@@ -698,12 +716,11 @@ def reconstruct(
     n_nonzero_coefs : int, optional
         Atoms per patch for ``omp`` (default: the dictionary's training sparsity). The keyword
         ``sparsity`` is deprecated.
-    scale : {"universal", "noise", "patch", "global"}
-        How HDR scale is handled (module notes): the chi-square data term with the l1 weight at
-        its noise level (``"universal"``, default), the chi-square data term with the l1 weight
-        relative to the patch's norm (``"noise"``, the previous default), per-patch codes and data
-        term (``"patch"``, the first implementation's), or one scale for the capture.
-    block_patches : int
+    scale : {"universal", "noise", "patch", "global"}, default "universal"
+        How HDR scale is handled (module notes): chi-square data term, l1 weight at its noise level
+        (``"universal"``) or relative to the patch's norm (``"noise"``); per-patch codes and data
+        term (``"patch"``); one scale for the capture (``"global"``).
+    block_patches : int, default 512
         About this many patches per block, the unit of work (memory is bounded by a block).
         The output depends on it only through float rounding in the batched products.
     workers : int, optional
@@ -714,25 +731,22 @@ def reconstruct(
     progress_bar : bool, optional
         Show patches/s and the remaining time (None: when stderr is a terminal).
     threads : int, optional
-        In this process: blocks solved at once, each on one BLAS thread (default: the
-        number of CPUs available). The output does not depend on it.
-    overlap : {"scale-window-fit", "scale-window", "scale", "window", "mean"}
+        Blocks solved at once here, one BLAS thread each (default: the CPUs); the output is the same.
+    overlap : {"scale-window-fit", "scale-window", "scale", "window", "mean"}, default "scale-window-fit"
         How overlapping patch estimates are combined (module notes); ``"mean"`` is the paper's.
-    debias : int
+    debias : int, default 0
         Refit each ADMM/FISTA code by least squares on its ``debias`` largest atoms (0: off, the
         default: measured to lose quality on noisy captures, README).
-    variance : {"local", "measurement"}
-        The signal in the photon-noise variance of every measurement, hence its weight: from its
-        neighbours (``"local"``, the default: :func:`lfproc.camera.capture.local_signal`) or its own
-        value (``"measurement"``, the plug-in, which biases the fit low; module notes).
+    variance : {"local", "measurement"}, default "local"
+        The signal in each measurement's photon-noise variance (its weight): from its neighbours
+        (:func:`lfproc.camera.capture.local_signal`) or its own value (a plug-in biased low).
 
     Returns
     -------
     LightField
-        ``(V, U, H, W, 3)`` in the units of the light field the capture was simulated from
-        (the capture's ``radiance_scale`` is divided out), or ``e-/s`` for a real capture.
-        ``attrs["reconstruction"]`` records the lfproc version, every parameter and figures
-        (patches, iterations, seconds...). Negative estimates are clipped to zero.
+        ``(V, U, H, W, 3)`` in the units of the light field the capture was simulated from (the
+        ``radiance_scale`` divided out), or ``e-/s`` for a real capture; negatives clipped to zero.
+        ``attrs["reconstruction"]``: lfproc version, every parameter, figures (patches, seconds...).
 
     Raises
     ------
@@ -745,6 +759,16 @@ def reconstruct(
         whose measurements all have weight zero.
     FileFormatError, MissingFileError
         Unreadable capture or dictionary files.
+
+    Examples
+    --------
+    >>> from lfproc import evaluate, reconstruct, simulate_capture
+    >>> from lfproc.synth import synthesize
+    >>> truth = synthesize("window", size=(24, 24), views=5, random_state=0)
+    >>> capture = simulate_capture(truth, shots=2, mask_period=4, random_state=0)
+    >>> result = reconstruct(capture, progress_bar=False)  # the shipped dictionary, ADMM
+    >>> result.shape, result.units, bool(10 < evaluate(result, truth)["pu21_psnr_db"] < 40)
+    ((5, 5, 24, 24, 3), 'relative', True)
     """
     started = time.perf_counter()
     settings = resolve_options(ReconstructionSettings, settings, options, func_name="reconstruct",

@@ -1,4 +1,8 @@
-"""Batched sparse solvers for the per-patch weighted lasso (reconstruction.md section 3).
+"""Batched sparse solvers for the per-patch weighted lasso.
+
+ADMM in its scaled form follows Boyd, Parikh, Chu, Peleato and Eckstein, "Distributed optimization
+and statistical learning via the alternating direction method of multipliers", Foundations and
+Trends in Machine Learning 2011; FISTA is Beck and Teboulle, SIAM J. Imaging Sciences 2009.
 
 Every solver works on a batch of ``B`` patches at once, each the problem
 
@@ -12,7 +16,7 @@ columns in :func:`admm`), small systems are factorised in float64.
 
 Written by hand because no library solves many small weighted lasso problems that share
 (or do not share) a sensing matrix in one batch: scikit-learn, skglm and celer solve one
-problem at a time (reconstruction.md section 3.4).
+problem at a time.
 
 The solvers set no BLAS thread limit: threadpoolctl changes the BLAS library's state for the
 whole process and is not thread-safe, so the caller sets it once (:func:`lfproc.recon.reconstruct`
