@@ -67,7 +67,8 @@ def test_no_docstring_points_outside_the_repository():
         for dirpath, _, files in os.walk(root):
             for f in files:
                 if f.endswith(".py"):
-                    text = open(os.path.join(dirpath, f), encoding="utf-8").read()
+                    with open(os.path.join(dirpath, f), encoding="utf-8") as fh:
+                        text = fh.read()
                     bad += [f"{os.path.join(dirpath, f)}: {m.group(0)}" for m in OUTSIDE.finditer(text)]
     assert not bad, bad
 
