@@ -46,7 +46,7 @@ print(f"RMS ln error: debevec {log_error(hdr_debevec):.3f}, ml {log_error(hdr_ml
 fig, ax = plt.subplots(1, len(exposures) + 2, figsize=(14, 2.8))
 for a, img, t in zip(ax, images, exposures):
     a.imshow(img)
-    a.set_title(f"{t:g} s")
+    a.set_title(f"{t:g} s" if t >= 1 else f"1/{1 / t:g} s")
     a.axis("off")
 ax[-2].imshow(tonemap(hdr_ml))
 ax[-2].set_title("ML merge")

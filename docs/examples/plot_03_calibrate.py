@@ -37,18 +37,6 @@ for iso in (100, 400):
           f"read noise {got.read_noise_e:.2f} e- (true {want['read_noise_e']:.2f})")
 
 # %%
-# The photon transfer curve (temporal variance against mean signal) gives the gain; its slope
-# is ``K`` in DN per electron.
-fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
-for iso, curve in result.curves.items():
-    signal, var = np.array(curve["flat_signal_dn"]), np.array(curve["flat_var_dn2"])
-    ax[0].loglog(signal[signal > 0], var[signal > 0], "o-", ms=3, label=f"ISO {iso}")
-ax[0].set_xlabel("mean signal (DN)")
-ax[0].set_ylabel("temporal variance (DN$^2$)")
-ax[0].set_title("photon transfer (frame manifest)")
-ax[0].legend()
-
-# %%
 # The same sensor as an EMVA 1288 data set: one channel (recorded as a monochrome sensor), one
 # ISO. With a dark stack and a bright stack (steps of more than two images), the profile also
 # gets per-pixel maps: the master bias frame and the flat field (PRNU map), saved as sidecars
@@ -63,6 +51,20 @@ print(f"EMVA 1288: QE {figures['quantum_efficiency']:.3f}, "
       f"SNR max {figures['snr_max_db']:.1f} dB, dynamic range {figures['dynamic_range_emva_db']:.1f} dB")
 print("per-pixel maps:", "bias" if profile.bias_frames else "no bias",
       "and flat field" if profile.flat_field is not None else "no flat field")
+
+# %%
+# Left: the photon transfer curves of the manifest's flats (temporal variance against mean
+# signal; the slope is the gain ``K`` in DN per electron; clipped flats left out). Right: the
+# flat field measured from the EMVA data set's stacks.
+fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+for iso, curve in result.curves.items():
+    signal, var = np.array(curve["flat_signal_dn"]), np.array(curve["flat_var_dn2"])
+    ok = (signal > 0) & (np.array(curve["flat_clipped_fraction"]) == 0)
+    ax[0].loglog(signal[ok], var[ok], "o-", ms=3, label=f"ISO {iso}")
+ax[0].set_xlabel("mean signal above dark (DN)")
+ax[0].set_ylabel("temporal variance (DN$^2$)")
+ax[0].set_title("photon transfer (frame manifest)")
+ax[0].legend()
 im = ax[1].imshow(profile.flat_field, cmap="coolwarm")
 ax[1].set_title("measured flat field (EMVA data)")
 ax[1].axis("off")

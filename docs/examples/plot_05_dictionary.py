@@ -32,7 +32,8 @@ print(f"trained: {scores['pu21_psnr_db']:.2f} dB PU21-PSNR, relative error {scor
       f"DCT: {scores['dct_pu21_psnr_db']:.2f} dB, {scores['dct_relative_error']:.3f}")
 
 # %%
-# The most used atoms: the centre view of each (top) and an epipolar image (bottom); sloped
+# The most used atoms; each cell shows the atom's centre view (top) and its horizontal epipolar
+# image (bottom), mid grey = 0; sloped
 # lines in the EPI are atoms tuned to a disparity.
 plt.figure(figsize=(9, 4))
 plt.imshow(render_atoms(dictionary, count=16, zoom=6, columns=8))
