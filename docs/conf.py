@@ -23,7 +23,8 @@ version = release = lfproc.__version__
 API_MODULES = [
     ("Core: light fields, files, errors, test scenes",
      ["lfproc", "lfproc.lightfield", "lfproc.io", "lfproc.errors", "lfproc.synth", "lfproc.info"]),
-    ("1. Lytro decoding", ["lfproc.lytro", "lfproc.lytro.decode", "lfproc.lytro.whites", "lfproc.lytro.virtual"]),
+    ("1. Lytro decoding", ["lfproc.lytro", "lfproc.lytro.decode", "lfproc.lytro.whites", "lfproc.lytro.virtual",
+                           "lfproc.lytro.extract", "lfproc.lytro.score"]),
     ("2. HDR merging and data sets", ["lfproc.merge", "lfproc.bracket", "lfproc.dataset"]),
     ("3. Calibration and camera profiles",
      ["lfproc.calib", "lfproc.calib.calibrate", "lfproc.calib.emva", "lfproc.calib.simulate_frames",
