@@ -98,6 +98,7 @@ try:
     html_theme_options = {"navigation_depth": 2, "show_toc_level": 2}
 except ImportError:  # pragma: no cover
     html_theme = "alabaster"
+smartquotes = False  # "--option" must stay two hyphens (the CLI reference and the guide quote options)
 html_title = f"lfproc {release}"
 html_static_path: list[str] = []
 # numpydoc turns a module docstring's "References" section into citations that its text does not
