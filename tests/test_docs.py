@@ -182,5 +182,5 @@ def test_gallery_has_eight_examples_that_draw():
     assert len(examples) >= 8
     for path in examples:
         text = path.read_text()
-        assert "matplotlib.pyplot" in text and "imshow(" in text or ".plot(" in text, path.name
+        assert "matplotlib.pyplot" in text and ("imshow(" in text or ".plot(" in text), path.name
         assert "../shared" not in text and "LFPROC_SHARED_DATA" not in text, path.name
