@@ -92,6 +92,7 @@ def test_readme_is_short_and_keeps_the_quick_start():
     assert TEST_COMMAND in (ROOT / ".ci" / "run").read_text().splitlines()  # .ci/run runs it verbatim
 
 
+@pytest.mark.slow  # six commands, a reconstruction among them (about 5 s); test_readme_links_exist is the fast check
 def test_readme_cli_example_runs_anywhere(tmp_path, monkeypatch):
     """README's ``sh`` block: every line is an lfproc command that succeeds in an empty folder."""
     from lfproc.cli.main import main
@@ -131,7 +132,7 @@ def test_readme_links_the_emva_calibration_section():
     assert "## From an EMVA 1288 data set (folder or descriptor)" in guide  # the anchor's heading
 
 
-@pytest.mark.slow
+@pytest.mark.slow  # the whole tour: a virtual Illum, a calibration, a dictionary (about 10 s)
 def test_python_api_tour_runs(tmp_path, monkeypatch):
     """The Python blocks of docs/python-api.md run, in order, in an empty folder."""
     blocks = re.findall(r"```python\n(.*?)```", (DOCS / "python-api.md").read_text(), re.S)

@@ -151,8 +151,27 @@ class LfprocCli(SphinxDirective):
         return node.children
 
 
+def _drop_type_docstring(app, what, name, obj, options, lines) -> None:
+    """A constant without a doc comment would show its type's docstring (a numpy array: all of
+    ``numpy.ndarray``'s, whose glossary terms then fail the build): drop it. A constant's own doc
+    comment (``#:``) is kept."""
+    if what not in ("data", "attribute") or not lines:
+        return
+    import inspect
+
+    if inspect.isclass(obj) or inspect.isroutine(obj) or inspect.ismodule(obj):
+        return
+    inherited = getattr(obj, "__doc__", None)  # an instance's __doc__ is its type's
+    if not inherited:
+        return
+    longest = max((line.strip() for line in lines), key=len)
+    if longest and longest in inherited:
+        lines.clear()
+
+
 def setup(app):
     app.add_config_value("lfproc_api_modules", [], "env")
     app.connect("config-inited", write_api_pages)
     app.add_directive("lfproc-cli", LfprocCli)
+    app.connect("autodoc-process-docstring", _drop_type_docstring, priority=400)  # before numpydoc
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}

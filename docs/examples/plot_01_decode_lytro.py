@@ -20,12 +20,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from lfproc.io import read_lightfield
-from lfproc.lytro import read_capture
-from lfproc.lytro.decode import decode_capture
-from lfproc.lytro.score import clip_level, score_decode
-from lfproc.lytro.virtual import make_virtual_illum
-from lfproc.lytro.whites import build_white_db
-from lfproc.merge import merge_lightfields
+from lfproc.lytro import build_white_db, decode_capture, make_virtual_illum, read_capture, score_decode
+from lfproc.lytro.score import clip_level
+from lfproc.hdr import merge_lightfields
 from lfproc.preview import tonemap
 from lfproc.synth import synthesize
 

@@ -3,7 +3,7 @@ Merge an exposure bracket into HDR
 ==================================
 
 An 8-bit bracket of a synthetic HDR scene (a camera-like response, photon and read noise,
-8-bit rounding and a JPEG round trip, :func:`lfproc.bracket.simulate_ldr_bracket`) is merged
+8-bit rounding and a JPEG round trip, :func:`lfproc.hdr.simulate_ldr_bracket`) is merged
 with Debevec and Malik's estimator, which also recovers the camera response, and with the
 noise-aware ML estimator (:doc:`/guide/merge`).
 
@@ -14,8 +14,8 @@ Command line: ``lfproc merge IMG_*.jpg --method ml -o hdr.exr`` (exposure times 
 import matplotlib.pyplot as plt
 import numpy as np
 
-from lfproc.bracket import simulate_ldr_bracket
-from lfproc.merge import merge_debevec, merge_ml_codes8
+from lfproc.hdr import simulate_ldr_bracket
+from lfproc.hdr import merge_debevec, merge_ml_codes8
 from lfproc.preview import tonemap
 from lfproc.synth import synthesize
 

@@ -3,8 +3,8 @@ Calibrate a sensor (frame manifest and EMVA 1288)
 =================================================
 
 A camera profile holds, per ISO, the gain, read noise, dark current and full well that drive
-lfproc's noise model. :func:`lfproc.calib.simulate_frames.simulate_frames` writes the bias,
-dark and flat frames a profile predicts; :func:`lfproc.calib.calibrate.calibrate` measures the
+lfproc's noise model. :func:`lfproc.calib.simulate_frames` writes the bias,
+dark and flat frames a profile predicts; :func:`lfproc.calib.calibrate` measures the
 profile back from them, either from a frame manifest or from an EMVA 1288 data set
 (descriptor + images). See :doc:`/guide/calibration`.
 
@@ -22,9 +22,9 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from lfproc.calib import load_profile
-from lfproc.calib.calibrate import calibrate
-from lfproc.calib.simulate_frames import expected_figures, simulate_frames
+from lfproc.calib import calibrate, simulate_frames
+from lfproc.calib.simulate_frames import expected_figures
+from lfproc.sensor import load_profile
 
 work = Path(tempfile.mkdtemp())
 truth = load_profile("paper-high")

@@ -4,9 +4,9 @@ Simulate the paper's multi-ISO coded-mask camera
 
 The camera of Miandji et al. puts a random colour-coded mask in front of a Bayer sensor whose
 pixels have different ISOs, and captures an HDR light field in one or a few shots.
-:func:`lfproc.camera.simulate.simulate_capture` simulates it with a camera profile's noise
+:func:`lfproc.camera.simulate_capture` simulates it with a camera profile's noise
 model (photon, dark-current and read noise, full well, quantisation) and returns a
-:class:`~lfproc.camera.capture.Capture`: the sensor codes, the ISO map, the mask codes and
+:class:`~lfproc.camera.Capture`: the sensor codes, the ISO map, the mask codes and
 everything needed to reconstruct. See :doc:`/guide/camera`.
 
 Command line: ``lfproc simulate scene.exr -o shot.capture.npz --shots 2 --noise medium``.
@@ -17,8 +17,9 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 
-from lfproc.camera.capture import load_capture, observations, render_capture_preview
-from lfproc.camera.simulate import capture_summary, simulate_capture
+from lfproc.camera import load_capture, observations, simulate_capture
+from lfproc.camera.simulate import capture_summary
+from lfproc.preview import render_capture_preview
 from lfproc.synth import synthesize
 
 scene = synthesize("lamps", size=(64, 64), views=5, random_state=3)

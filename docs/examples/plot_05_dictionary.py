@@ -15,7 +15,8 @@ Command line: ``lfproc dictionary train SCENES... --preset tiny -o tiny.npz``,
 
 import matplotlib.pyplot as plt
 
-from lfproc.dictionary import evaluate_dictionary, render_atoms, train_dictionary
+from lfproc.dictionary import evaluate_dictionary, train_dictionary
+from lfproc.preview import render_atoms
 from lfproc.synth import synthesize
 
 training = [synthesize(kind, size=(32, 32), views=5, random_state=seed)

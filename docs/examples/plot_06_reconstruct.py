@@ -18,7 +18,7 @@ import time
 
 import matplotlib.pyplot as plt
 
-from lfproc.camera.simulate import simulate_capture
+from lfproc.camera import simulate_capture
 from lfproc.metrics import evaluate
 from lfproc.preview import tonemap
 from lfproc.recon import reconstruct, reconstruct_gmm

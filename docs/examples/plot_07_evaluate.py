@@ -14,7 +14,7 @@ Command line: ``lfproc evaluate recon.exr scene.exr --error-map err.png``.
 import matplotlib.pyplot as plt
 
 from lfproc.camera.capture import noise_floor
-from lfproc.camera.simulate import simulate_capture
+from lfproc.camera import simulate_capture
 from lfproc.metrics import evaluate, hdr_figures
 from lfproc.preview import render_error_map, tonemap
 from lfproc.recon import reconstruct
