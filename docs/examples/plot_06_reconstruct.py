@@ -11,7 +11,8 @@ Two coded shots of a small HDR scene are reconstructed with lfproc's two methods
   (disparity, scale) per patch.
 
 See :doc:`/guide/reconstruction`. Command line: ``lfproc reconstruct shot.capture.npz -o
-recon.exr [--method gmm]``.
+recon.exr --method gmm|dictionary`` (the default, ``auto``, takes ``gmm`` for a
+periodic random mask such as this one).
 """
 
 import time
