@@ -32,7 +32,7 @@ scene = synthesize("layers", size=(48, 64), views=5, random_state=1)
 # %%
 # The virtual camera writes one ``IMG_nnnn.LFR`` per exposure, ``caldata-<serial>.tar`` and the
 # views a perfect decoder would return for the 0 EV capture (``truth.exr``).
-info = make_virtual_illum(scene, work / "cam", sensor="small", exposures_ev=(-2, 0, 2), seed=1)
+info = make_virtual_illum(scene, work / "cam", sensor="small", exposures_ev=(-2, 0, 2), random_state=1)
 print(sorted(p.name for p in (work / "cam").iterdir()))
 
 # %%

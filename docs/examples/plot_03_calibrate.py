@@ -28,7 +28,7 @@ from lfproc.sensor import load_profile
 
 work = Path(tempfile.mkdtemp())
 truth = load_profile("paper-high")
-manifest = simulate_frames(truth, work / "frames", size=(64, 64), isos=[100, 400], seed=1)
+manifest = simulate_frames(truth, work / "frames", size=(64, 64), isos=[100, 400], random_state=1)
 result = calibrate(manifest)
 
 for iso in (100, 400):
@@ -41,7 +41,7 @@ for iso in (100, 400):
 # ISO. With a dark stack and a bright stack (steps of more than two images), the profile also
 # gets per-pixel maps: the master bias frame and the flat field (PRNU map), saved as sidecars
 # ``<stem>.bias.npz`` and ``<stem>.flat.npz`` beside the profile JSON.
-descriptor = simulate_frames(truth, work / "emva", format="emva", size=(64, 64), isos=[100], seed=1)
+descriptor = simulate_frames(truth, work / "emva", format="emva", size=(64, 64), isos=[100], random_state=1)
 print(descriptor.read_text().splitlines()[:4])
 emva = calibrate(descriptor)
 profile = emva.profile

@@ -21,7 +21,7 @@ from lfproc.synth import synthesize
 
 training = [synthesize(kind, size=(32, 32), views=5, random_state=seed)
             for seed, kind in enumerate(["layers", "lamps", "window", "checker"])]
-dictionary = train_dictionary(training, preset="tiny", atoms=200, patches=2000, iterations=4, seed=0)
+dictionary = train_dictionary(training, preset="tiny", atoms=200, patches=2000, max_iter=4, random_state=0)
 print(dictionary)
 
 # %%
