@@ -19,8 +19,10 @@ inside functions, each with a comment saying why).
 5. **Applications** -- what a user runs: :mod:`lfproc.cli` (the ``lfproc`` command; the
    folder ``cli/``) above :mod:`lfproc.demo`, :mod:`lfproc.info` and :mod:`lfproc.bench`
    (independent of each other).
+
 4. **Presentation** -- pictures of results: :mod:`lfproc.preview` (previews of light fields,
    captures and dictionaries, which it registers itself; tone mapping).
+
 3. **Stages** -- the pipeline, one package each, top to bottom:
 
    - :mod:`lfproc.recon` (reconstruction of coded captures, the per-shot baselines);
@@ -31,8 +33,10 @@ inside functions, each with a comment saying why).
    - :mod:`lfproc.lytro` (decoding Lytro captures);
    - :mod:`lfproc.synth` (procedural scenes), :mod:`lfproc.metrics` (HDR metrics) and
      :mod:`lfproc.refocus`, independent of each other.
+
 2. **Models** -- :mod:`lfproc.sensor`: the sensor's noise model and the camera profile type
    with the shipped profiles, which every stage uses.
+
 1. **Foundations** -- :mod:`lfproc.io` (light-field and image files, atomic outputs) above
    :mod:`lfproc.lightfield` (the light-field type) above :mod:`lfproc._untrusted`
    (reading hostile files), :mod:`lfproc._shared` (helpers, one module per job),
