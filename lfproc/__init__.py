@@ -57,11 +57,12 @@ from .lightfield import LightField
 
 _layout.install()
 
-__all__ = ["__version__", "LfprocError", "LightField", "read_image", "read_lightfield", "reconstruct", "write_image",
+__all__ = ["__version__", "LfprocError", "LightField", "read_image", "read_lightfield", "reconstruct", "reconstruct_gmm",
+           "write_image",
            "write_lightfield", "simulate_capture", "load_capture", "evaluate"]
 
 # imported on first use (the solvers, the simulator and the metrics are not needed by every command)
-_LAZY = {"reconstruct": ".recon", "simulate_capture": ".camera", "load_capture": ".camera", "evaluate": ".metrics"}
+_LAZY = {"reconstruct": ".recon", "reconstruct_gmm": ".recon", "simulate_capture": ".camera", "load_capture": ".camera", "evaluate": ".metrics"}
 
 
 def __getattr__(name):

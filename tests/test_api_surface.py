@@ -14,7 +14,7 @@ import pytest
 API = {
     "lfproc": [
         "LfprocError", "LightField", "__version__", "evaluate", "load_capture", "read_image", "read_lightfield",
-        "reconstruct", "simulate_capture", "write_image", "write_lightfield",
+        "reconstruct", "reconstruct_gmm", "simulate_capture", "write_image", "write_lightfield",
     ],
     "lfproc.io": [
         "IMAGE_SUFFIXES", "exr_parts", "parse_view_name", "read_image", "read_lightfield", "srgb_decode",
@@ -49,17 +49,19 @@ API = {
         "check_slopes", "focal_stack", "refocus",
     ],
     "lfproc.camera": [
-        "BASELINES", "Capture", "DEFAULT_ISOS", "ISO_PATTERNS", "MASK_KINDS", "MaskCode", "NOISE_PROFILES",
-        "ProjectionOperator", "build_operator", "capture_from_raw", "describe_capture", "is_capture_file",
-        "iso_pattern", "load_capture", "make_mask", "observations", "simulate_capture", "simulate_file",
+        "BASELINES", "Capture", "CaptureDesign", "DEFAULT_ISOS", "ISO_PATTERNS", "MASK_KINDS", "MaskCode",
+        "NOISE_PROFILES", "ProjectionOperator", "build_operator", "capture_from_raw", "describe_capture",
+        "is_capture_file", "iso_pattern", "load_capture", "make_mask", "noise_floor", "observations",
+        "simulate_capture", "simulate_file",
     ],
     "lfproc.dictionary": [
-        "Dictionary", "KsvdResult", "PRESETS", "Preset", "SHIPPED", "approximate", "batch_omp",
+        "Dictionary", "KsvdResult", "PRESETS", "Preset", "SHIPPED", "TrainingSizes", "approximate", "batch_omp",
         "dct_dictionary", "evaluate_dictionary", "get_preset", "is_dictionary_file", "ksvd", "load_dictionary",
         "save_dictionary", "train_dictionary", "training_patches",
     ],
     "lfproc.recon": [
-        "DEFAULTS", "MERGES", "OVERLAPS", "PAPER", "PatchModel", "SCALES", "SOLVERS", "VARIANCES",
+        "DEFAULTS", "MERGES", "OVERLAPS", "PAPER", "PatchModel", "ReconstructionSettings", "SCALES", "SOLVERS",
+        "VARIANCES",
         "load_patch_model", "merge_reconstructions", "patch_count", "reconstruct", "reconstruct_gmm",
         "reconstruct_per_shot", "reexpose", "split_shots", "train_patch_model",
     ],

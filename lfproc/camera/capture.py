@@ -699,6 +699,29 @@ def noise_floor(capture: Capture) -> float:
     views): below it no single measurement sees the scene above its noise (units of the light
     field the capture was simulated from; e-/s for a real capture, whose scale is 1). Used as
     the noise floor of :func:`lfproc.metrics.hdr_figures`.
+
+    Parameters
+    ----------
+    capture : Capture
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    InputError
+        Not a :class:`Capture`.
+
+    Examples
+    --------
+    >>> from lfproc.camera import noise_floor, simulate_capture
+    >>> from lfproc.synth import synthesize
+    >>> lf = synthesize("layers", size=(16, 16), random_state=0)
+    >>> a = noise_floor(simulate_capture(lf, exposure_s=0.004, random_state=0))
+    >>> b = noise_floor(simulate_capture(lf, exposure_s=0.002, random_state=0))  # half the light: twice the floor
+    >>> round(b / a, 6)
+    2.0
     """
     if not isinstance(capture, Capture):
         raise InputError(f"noise_floor: expected a Capture, got {type(capture).__name__}")

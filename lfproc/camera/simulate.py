@@ -179,7 +179,24 @@ def _check_dictionary_views(dictionary, views: tuple[int, int]) -> None:
 class CaptureDesign:
     """How a capture is taken: the options of :func:`simulate_capture` besides the light field,
     the random state and the records (see its parameters for each field). Values are validated
-    by :func:`simulate_capture`."""
+    by :func:`simulate_capture`.
+
+    Parameters
+    ----------
+    profile, iso_pattern_kind, isos, shots, exposure_s, gamma, mask, mask_period, mask_shift, block_px
+        The keywords of :func:`simulate_capture` of the same names, with the same defaults.
+    baseline, relative_exposures, radiance_scale, reference_exposure_s, noise
+        As well.
+
+    Examples
+    --------
+    >>> from lfproc.camera import CaptureDesign, simulate_capture
+    >>> from lfproc.synth import synthesize
+    >>> design = CaptureDesign(profile="paper-medium", shots=2)
+    >>> capture = simulate_capture(synthesize("layers", size=(16, 16), random_state=0), design=design, random_state=0)
+    >>> capture.shots, capture.iso.shape
+    (2, (2, 16, 16))
+    """
     profile: Any = "paper-low"
     iso_pattern_kind: str | os.PathLike = "random"
     isos: Sequence[float] = DEFAULT_ISOS

@@ -18,11 +18,11 @@ from ._files import SHIPPED, Dictionary, is_dictionary_file, load_dictionary, sa
 from ._ksvd import KsvdResult, ksvd
 from ._omp import batch_omp
 from ._patches import training_patches
-from ._train import PRESETS, Preset, approximate, evaluate_dictionary, get_preset, train_dictionary
+from ._train import PRESETS, Preset, TrainingSizes, approximate, evaluate_dictionary, get_preset, train_dictionary
 
 __all__ = ["Dictionary", "load_dictionary", "save_dictionary", "is_dictionary_file", "SHIPPED", "batch_omp",
            "dct_dictionary", "ksvd", "KsvdResult", "training_patches", "PRESETS", "Preset", "get_preset",
-           "train_dictionary", "evaluate_dictionary", "approximate"]
+           "train_dictionary", "TrainingSizes", "evaluate_dictionary", "approximate"]
 
 #: former exports of this package -> the module that defines them
 _FORMER = {"shipped_path": _files, "dictionary_patch": _files, "omp_codes": _omp, "codes_to_dense": _omp,

@@ -90,7 +90,15 @@ PRESETS: dict[str, Preset] = {
 @dataclass(frozen=True)
 class TrainingSizes:
     """Overrides of a :class:`Preset`'s sizes in :func:`train_dictionary` (None: the preset's):
-    patch ``(V, U, P, P, C)``, atoms, atoms per training patch, K-SVD iterations (all run), patches."""
+    patch ``(V, U, P, P, C)``, atoms, atoms per training patch, K-SVD iterations (all run), patches.
+
+    Parameters
+    ----------
+    patch : tuple of 5 int, optional
+        ``(V, U, P, P, C)`` of the atoms.
+    atoms, n_nonzero_coefs, max_iter, patches : int, optional
+        Atoms, atoms per training patch, K-SVD iterations and training patches.
+    """
 
     patch: tuple[int, int, int, int, int] | None = None
     atoms: int | None = None

@@ -408,6 +408,11 @@ class ReconstructionSettings:
 
     ``max_iter`` and ``tol`` None: the solver's defaults (:data:`DEFAULTS`); ``n_nonzero_coefs``
     None: the dictionary's training sparsity. Values are validated by :func:`reconstruct`.
+
+    Parameters
+    ----------
+    solver, stride, mu, max_iter, tol, n_nonzero_coefs, scale, block_patches, overlap, debias, variance
+        The keywords of :func:`reconstruct` of the same names, with the same defaults.
     """
     solver: str = "admm"
     stride: int = DEFAULTS["stride"]
