@@ -295,7 +295,14 @@ def fill_unusable(data: np.ndarray, unusable: np.ndarray, *, keep: np.ndarray | 
 @dataclass(frozen=True)
 class LensletSensor:
     """The sensor figures :func:`decode_lenslet` needs: levels, CFA, the white target's response, known
-    hot pixels and the noise figures at the capture's ISO (see its parameters)."""
+    hot pixels and the noise figures at the capture's ISO (see its parameters).
+
+    Parameters
+    ----------
+    black_level, white_level, cfa_pattern, white_responses, hot_pixels, gain_dn_per_e, read_noise_dn
+        The keywords of :func:`decode_lenslet` of the same names (``black_level`` and
+        ``white_level`` required, the others with the same defaults).
+    """
     black_level: float
     white_level: float
     cfa_pattern: str = "GRBG"
@@ -349,12 +356,6 @@ def decode_lenslet(raw: np.ndarray, white: np.ndarray, grid: LensletGrid, sensor
     dict with ``data`` (n, n, rows, cols, 3) float32, ``variance`` (same shape), ``weight``
     (n, n, rows, cols) in [0, 1] (white-image transmission, 0 where unusable) and
     ``hot_pixels`` (count replaced in the capture and the white image).
-
-    Parameters
-    ----------
-    black_level, white_level, cfa_pattern, white_responses, hot_pixels, gain_dn_per_e, read_noise_dn
-        The keywords of :func:`decode_lenslet` of the same names (``black_level`` and
-        ``white_level`` required, the others with the same defaults).
     """
     sensor = resolve_options(LensletSensor, sensor, sensor_fields, func_name="decode_lenslet", argument="sensor")
     black_level, white_level, cfa_pattern = sensor.black_level, sensor.white_level, sensor.cfa_pattern
