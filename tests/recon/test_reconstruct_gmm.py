@@ -180,7 +180,7 @@ def test_model_files_round_trip_and_bad_files_are_refused(tmp_path):
 
 @pytest.mark.slow  # two simulations and a reconstruction through the CLI
 def test_cli_method_gmm(tmp_path, capsys):
-    from lfproc.io import write_lightfield
+    from lfproc.io import read_lightfield, write_lightfield
 
     lf = _plane(0.25, size=(24, 32))
     src = tmp_path / "lf.exr"
@@ -191,12 +191,17 @@ def test_cli_method_gmm(tmp_path, capsys):
     assert main(["reconstruct", str(cap), "-o", str(out), "--method", "gmm", "--disparities", "0,0.25,0.5",
                  "--json"]) == 0
     assert out.is_file() and '"method": "gmm"' in capsys.readouterr().out
+    joint = tmp_path / "joint.exr"  # --search joint reaches reconstruct_gmm (its record says so)
+    assert main(["reconstruct", str(cap), "-o", str(joint), "--search", "joint", "--disparities", "0,0.25,0.5"]) == 0
+    capsys.readouterr()
+    assert read_lightfield(joint).attrs["reconstruction"]["search"] == "joint"
     flat = tmp_path / "flat.capture.npz"  # one mask code per pixel: gmm cannot share its matrices
     assert main(["simulate", str(src), "-o", str(flat), "--mask-period", "none", "--seed", "1"]) == 0
     capsys.readouterr()
     bad_cases = [  # (capture, options, what the one line says)
         (cap, ["--method", "gmm", "--mu", "1"], "--mu: options of --method dictionary"),
         (cap, ["--method", "dictionary", "--model", "x.npz"], "--model: options of --method gmm"),
+        (cap, ["--method", "dictionary", "--search", "joint"], "--search: options of --method gmm"),
         (cap, ["--model", str(tmp_path / "none.npz")], "patch model file not found"),  # auto: --model means gmm
         (flat, ["--scales", "1"], "--mask-period 4"),  # auto with a gmm option on a non-periodic capture
         (cap, ["--method", "gmm", "--disparities", "a,b"], "--disparities: expected comma-separated numbers"),
