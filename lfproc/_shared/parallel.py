@@ -1,12 +1,16 @@
-"""Worker counts and the realignment of arrays a Dask worker receives."""
+"""Worker counts, the Dask client of lfproc's parallel runs, and the realignment of arrays a worker receives."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 import numpy as np
 
-__all__ = ["max_workers", "realign"]
+from ..errors import InputError
+from .deps import require
+
+__all__ = ["max_workers", "realign", "dask_client"]
 
 
 def max_workers() -> int:
@@ -29,3 +33,34 @@ def realign(value):
     if isinstance(value, (list, tuple)):
         return type(value)(realign(v) for v in value)
     return value
+
+
+@contextlib.contextmanager
+def dask_client(*, scheduler: str | None, workers: int | None, jobs: int):
+    """A Dask client: of the running scheduler at ``scheduler``, or of a local cluster started for the block.
+
+    The local cluster has ``workers`` processes (default: one per job, at most one per CPU), one
+    thread each (lfproc's sums are made on one BLAS thread), no dashboard and only error logs; it
+    is closed with the client when the block ends. Used by reconstruction, data sets and the bench.
+    """
+    import logging
+
+    require("distributed", purpose="a local Dask cluster or a Dask scheduler (--workers/--scheduler)")
+    from dask.distributed import Client, LocalCluster
+
+    cluster = None
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        n = workers or min(max(jobs, 1), os.cpu_count() or 1)
+        if n < 1:
+            raise InputError(f"--workers: expected a positive number, got {workers}")
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                               silence_logs=logging.ERROR)
+        client = Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()

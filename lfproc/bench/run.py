@@ -33,6 +33,7 @@ import numpy as np
 
 from .._shared.deprecate import renamed_keywords
 from .._shared.hashing import file_sha256
+from .._shared.parallel import dask_client
 from .._shared.validation import check_choice
 from .._shared.progress import progress
 from .._shared.jsonable import to_jsonable
@@ -50,7 +51,6 @@ from ..io import read_lightfield
 from ..io._atomic import atomic_file, atomic_outputs, clean_stale
 from ..metrics import evaluate
 from .report import REPORT_FILES, write_report
-from .._shared.deps import require
 
 __all__ = ["run_bench", "load_scene", "run_job", "read_cells", "COLUMNS", "BenchScene"]
 
@@ -414,21 +414,10 @@ def _csv_value(value):
 
 
 def _run_dask(specs, dictionary, workers, scheduler, bar, failed) -> int:
-    import logging
+    from dask.distributed import as_completed
 
-    require("distributed", purpose="a local Dask cluster or a Dask scheduler (--workers/--scheduler)")
-    from dask.distributed import Client, LocalCluster, as_completed
-
-    cluster = None
-    if scheduler:
-        client = Client(scheduler)
-    else:
-        n = workers or min(len(specs), os.cpu_count() or 1)
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                               silence_logs=logging.ERROR)
-        client = Client(cluster)
     computed = 0
-    try:
+    with dask_client(scheduler=scheduler, workers=workers, jobs=len(specs)) as client:
         dict_future = client.scatter(dictionary, broadcast=True)
         futures = {client.submit(run_job, spec, dict_future, key=f"bench-{spec['ids'][0]}", pure=False): spec
                    for spec in specs}
@@ -441,8 +430,4 @@ def _run_dask(specs, dictionary, workers, scheduler, bar, failed) -> int:
                 failed[spec["cells"][0].label()] = f"{type(exc).__name__}: {exc}"
             bar.update(len(spec["cells"]))
             future.release()
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
     return computed

@@ -70,7 +70,7 @@ from .._version import __version__
 from .._shared.hashing import file_sha256
 from ..errors import InputError, LfprocWarning, MissingFileError
 from .. import _untrusted as ut
-from .._shared.parallel import max_workers
+from .._shared.parallel import dask_client, max_workers
 from .._shared.progress import progress
 from .._shared.validation import check_count
 from ..hdr import BRACKET_SUFFIXES, merge_files, read_exif_exposure
@@ -80,7 +80,6 @@ from ..io._atomic import atomic_dir, atomic_file, clean_stale
 from ..lytro import whites
 from ..preview import write_preview
 from ..sensor import load_profile
-from .._shared.deps import require
 
 __all__ = [
     "Scene",
@@ -620,22 +619,9 @@ def build_dataset(
 
 
 def _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, failed) -> None:
-    import logging
+    from dask.distributed import as_completed
 
-    require("distributed", purpose="a local Dask cluster or a Dask scheduler (--workers/--scheduler)")
-    from dask.distributed import Client, LocalCluster, as_completed
-
-    cluster = None
-    if scheduler:
-        client = Client(scheduler)
-    else:
-        n = workers or min(len(todo), os.cpu_count() or 1)
-        if n < 1:
-            raise InputError(f"--workers: expected a positive number, got {workers}")
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                               silence_logs=logging.ERROR)
-        client = Client(cluster)
-    try:
+    with dask_client(scheduler=scheduler, workers=workers, jobs=len(todo)) as client:
         futures = {client.submit(_run_scene, scene, str(out), method, profile, key=f"scene-{scene.name}-{i}",
                                  pure=False): scene for i, scene in enumerate(todo)}
         for future in as_completed(futures):
@@ -647,7 +633,3 @@ def _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, fa
             else:
                 processed.append(scene.name)
             bar.update(1)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()

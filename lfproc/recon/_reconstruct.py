@@ -75,7 +75,7 @@ import numpy as np
 from .._shared.deprecate import resolve_options
 from .._shared.validation import check_choice
 from .._shared.progress import progress
-from .._shared.parallel import realign
+from .._shared.parallel import dask_client, realign
 from .._version import __version__
 from ..errors import InputError, ShapeError
 from ..lightfield import LightField
@@ -86,7 +86,6 @@ from .._shared.patches import patch_grid
 from ..camera.capture import Capture, load_capture, observations
 from ..camera.projection import patch_operators, PatchOperators
 from ..dictionary import Dictionary, load_dictionary
-from .._shared.deps import require
 
 __all__ = ["reconstruct", "ReconstructionSettings", "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "VARIANCES", "patch_count"]
 
@@ -821,19 +820,10 @@ def _run_threads(tasks, shared, attach_operators, add, bar, *, threads: int) -> 
 
 
 def _run_dask(tasks, shared, attach_operators, add, bar, *, workers, scheduler) -> None:
-    import logging
+    from dask.distributed import as_completed
 
-    require("distributed", purpose="a local Dask cluster or a Dask scheduler (--workers/--scheduler)")
-    from dask.distributed import Client, LocalCluster, as_completed
-
-    cluster = None
-    if scheduler and scheduler != "synchronous":
-        client = Client(scheduler)
-    else:
-        cluster = LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True, dashboard_address=":0",
-                               silence_logs=logging.ERROR)
-        client = Client(cluster)
-    try:
+    local = scheduler == "synchronous" or not scheduler  # "synchronous": a one-process local cluster
+    with dask_client(scheduler=None if local else scheduler, workers=workers or 1, jobs=len(tasks)) as client:
         shared_future = client.scatter(shared, broadcast=True)
         futures = {}
         for i, task in enumerate(tasks):
@@ -849,7 +839,3 @@ def _run_dask(tasks, shared, attach_operators, add, bar, *, workers, scheduler) 
             while next_index in done:  # add in block order: the same sums as in process
                 add(done.pop(next_index))
                 next_index += 1
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
