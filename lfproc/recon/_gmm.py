@@ -639,26 +639,16 @@ def _normalised(T, W, tops, lefts, p, rowsum):
     return y / level[:, None], w * level[:, None], level
 
 
-def _evidence(T, W, tops, lefts, p, phase, log_pi, scales, which, disparity=None):
-    """Log evidence of the hypotheses (disparity, component, scale index in ``which``) of a chunk of patches.
-
-    All disparities: ``(B, D K S)`` with ``-inf`` for scales not in ``which``. One ``disparity``:
-    ``(values (B, H), columns (H,))`` of those hypotheses in the ``(D K S)`` layout.
-    """
+def _evidence(T, W, tops, lefts, p, phase, log_pi, scales, which):
+    """Log evidence of every hypothesis (disparity, component, scale) of a chunk of patches, ``(B, D K S)``,
+    ``-inf`` for the scales not in ``which`` (indices)."""
     yn, wn, _ = _normalised(T, W, tops, lefts, p, phase["rowsum"])
     n_s = len(scales)
-    cols, vals = [], []
-    for j, (di, k, a, kmat, a_mu, a_cov) in enumerate(phase["hyp"]):
-        if disparity is not None and di != disparity:
-            continue
-        for si in which:
-            score, _ = _wiener(scales[si] * kmat, a_mu, yn, wn, log_pi[k] - math.log(n_s), want_solution=False)
-            cols.append(j * n_s + si)
-            vals.append(score)
-    if disparity is not None:
-        return np.stack(vals, axis=1), np.array(cols)
     out = np.full((len(yn), len(phase["hyp"]) * n_s), -np.inf)
-    out[:, cols] = np.stack(vals, axis=1)
+    for j, (di, k, a, kmat, a_mu, a_cov) in enumerate(phase["hyp"]):
+        for si in which:
+            out[:, j * n_s + si] = _wiener(scales[si] * kmat, a_mu, yn, wn, log_pi[k] - math.log(n_s),
+                                           want_solution=False)[0]
     return out
 
 
