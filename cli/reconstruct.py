@@ -137,15 +137,14 @@ def _run_gmm(args, capture=None) -> int:
 
 def run(args) -> int:
     # lfproc.recon loads scipy.linalg: imported when the command runs, so `lfproc --help` starts fast
-    from lfproc.recon import DEFAULTS, PAPER, reconstruct, reconstruct_per_shot
+    from lfproc.recon import DEFAULTS, PAPER, gmm_fits, reconstruct, reconstruct_per_shot
 
     capture, method = None, args.method
     if method == "auto":
         gmm_given = any(v is not None for v in (args.model, args.disparities, args.scales, args.search))
         if gmm_given or not _dictionary_options(args):
             capture = load_capture(args.capture)
-            periodic = capture.mask.kind == "random" and capture.mask.period is not None
-            method = "gmm" if periodic or gmm_given else "dictionary"
+            method = "gmm" if gmm_fits(capture) or gmm_given else "dictionary"
         else:
             method = "dictionary"
     if method == "gmm":

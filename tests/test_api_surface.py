@@ -62,7 +62,7 @@ API = {
     "lfproc.recon": [
         "DEFAULTS", "MERGES", "OVERLAPS", "PAPER", "PatchModel", "ReconstructionSettings", "SCALES", "SOLVERS",
         "VARIANCES",
-        "load_patch_model", "merge_reconstructions", "patch_count", "reconstruct", "reconstruct_gmm",
+        "gmm_fits", "load_patch_model", "merge_reconstructions", "patch_count", "reconstruct", "reconstruct_gmm",
         "reconstruct_per_shot", "reexpose", "split_shots", "train_patch_model",
     ],
     "lfproc.preview": [

@@ -13,10 +13,10 @@ global-ISO shots reconstructed shot by shot and merged; formerly ``lfproc.bench.
 
 from ._reconstruct import (DEFAULTS, OVERLAPS, PAPER, SCALES, VARIANCES, ReconstructionSettings, patch_count,
                            reconstruct)
-from ._gmm import PatchModel, load_patch_model, reconstruct_gmm, train_patch_model
+from ._gmm import PatchModel, gmm_fits, load_patch_model, reconstruct_gmm, train_patch_model
 from ._per_shot import MERGES, merge_reconstructions, reconstruct_per_shot, reexpose, split_shots
 from ._solvers import SOLVERS
 
-__all__ = ["reconstruct", "ReconstructionSettings", "reconstruct_gmm", "PatchModel", "load_patch_model", "train_patch_model", "patch_count",
+__all__ = ["reconstruct", "ReconstructionSettings", "reconstruct_gmm", "gmm_fits", "PatchModel", "load_patch_model", "train_patch_model", "patch_count",
            "DEFAULTS", "PAPER", "SCALES", "OVERLAPS", "VARIANCES", "SOLVERS", "reconstruct_per_shot",
            "merge_reconstructions", "reexpose", "split_shots", "MERGES"]

@@ -75,7 +75,7 @@ from ..camera.capture import Capture, load_capture, observations
 from ..camera.projection import patch_operators, transmittance_map
 from ..io._atomic import atomic_file
 
-__all__ = ["PatchModel", "train_patch_model", "load_patch_model", "reconstruct_gmm", "shear_matrix",
+__all__ = ["PatchModel", "train_patch_model", "load_patch_model", "reconstruct_gmm", "gmm_fits", "shear_matrix",
            "DEFAULT_DISPARITIES", "SATURATION_MODES"]
 
 #: Disparities tried by default (pixels per view step): a lenslet camera's range, in quarter pixels.
@@ -328,8 +328,23 @@ def train_patch_model(images, *, patch: int = 8, margin: int = 2, components: in
                              "random_state": random_state if isinstance(random_state, (int, type(None))) else "generator"})
 
 
+def gmm_fits(capture) -> bool:
+    """Whether :func:`reconstruct_gmm` can reconstruct ``capture``: its mask is random and periodic (the
+    default of :func:`lfproc.camera.simulate_capture`). ``lfproc reconstruct --method auto`` chooses gmm then.
+
+    Parameters
+    ----------
+    capture : Capture
+
+    Returns
+    -------
+    bool
+    """
+    return capture.mask.kind == "random" and capture.mask.period is not None
+
+
 def _check_capture(capture, model: PatchModel, stride: int, name: str = "stride"):
-    if capture.mask.kind != "random" or capture.mask.period is None:
+    if not gmm_fits(capture):
         raise InputError("reconstruct_gmm: needs a capture with a periodic random mask (simulate with "
                          f"{option_name('mask_period', '--mask-period')} 4, the default); this capture's mask is {capture.mask.kind!r} with period {capture.mask.period}")
     h, w = capture.size

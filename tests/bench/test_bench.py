@@ -162,6 +162,10 @@ def test_per_shot_mode_refuses_what_it_cannot_merge(ramp, dct8):
     capture = simulate_capture(ramp, profile="paper-low", baseline="bracketing", shots=2, mask_period=4, random_state=1)
     with pytest.raises(InputError, match="merge"):
         reconstruct_per_shot(capture, dct8, merges=("median",))
+    with pytest.raises(InputError, match="method"):
+        reconstruct_per_shot(capture, dct8, method="lasso")
+    with pytest.raises(InputError, match="patch model .* not a dictionary"):
+        reconstruct_per_shot(capture, dct8, method="gmm")
 
 
 # -- the grid ------------------------------------------------------------------------------------------
