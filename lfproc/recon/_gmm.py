@@ -457,10 +457,10 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
 
             def solve(job):  # pass 2, estimate grid: the component and scale of largest evidence at that disparity
                 ph, sel = job
-                chosen, alpha = _best_at_disparity(data.T, data.W, g.gt[sel], g.gl[sel], p, phases[ph], log_pi,
-                                                   scales, chosen_d[sel])
+                norm = _normalised(data.T, data.W, g.gt[sel], g.gl[sel], p, phases[ph]["rowsum"])
+                chosen, alpha = _best_at_disparity(norm[0], norm[1], phases[ph], log_pi, scales, chosen_d[sel])
                 return _estimate(data, g.gt[sel], g.gl[sel], p, phases[ph], chosen, shears_sparse, model, (nv, nu),
-                                 scales, alpha=alpha)
+                                 scales, alpha=alpha, norm=norm)
 
             # the estimates added in a fixed order (the output does not depend on the threads)
             for (ph, sel), est in zip(jobs, pool.map(solve, jobs)):
@@ -677,10 +677,9 @@ def _pool(per_d: np.ndarray, radius: int) -> np.ndarray:
     return uniform_filter(np.maximum(rel, -50.0), size=(2 * radius + 1, 2 * radius + 1, 1), mode="nearest")
 
 
-def _best_at_disparity(T, W, tops, lefts, p, phase, log_pi, scales, chosen_d):
+def _best_at_disparity(yn, wn, phase, log_pi, scales, chosen_d):
     """The hypothesis (component, scale) of largest evidence of each patch at its disparity ``chosen_d``, and
     its ``alpha`` (:func:`_wiener`), so :func:`_estimate` does not factorise again."""
-    yn, wn, _ = _normalised(T, W, tops, lefts, p, phase["rowsum"])
     n_s = len(scales)
     best = np.full(len(yn), -np.inf)
     chosen = np.zeros(len(yn), np.intp)
@@ -699,10 +698,11 @@ def _best_at_disparity(T, W, tops, lefts, p, phase, log_pi, scales, chosen_d):
     return chosen, alpha
 
 
-def _estimate(data: _Data, tops, lefts, p, phase, chosen, shears_sparse, model, views, scales, alpha=None) -> dict:
+def _estimate(data: _Data, tops, lefts, p, phase, chosen, shears_sparse, model, views, scales, alpha=None,
+              norm=None) -> dict:
     """The estimate of each patch under its chosen hypothesis, and its overlap weight (``alpha``: the first
-    solution of every patch, when known)."""
-    yn, wn, level = _normalised(data.T, data.W, tops, lefts, p, phase["rowsum"])
+    solution of every patch, ``norm``: its :func:`_normalised` measurements, when known)."""
+    yn, wn, level = _normalised(data.T, data.W, tops, lefts, p, phase["rowsum"]) if norm is None else norm
     ws = _gather(data.W_sat, tops, lefts, p) * level[:, None]
     b_n = len(yn)
     patches = np.zeros((b_n, shears_sparse[0].shape[0]))
