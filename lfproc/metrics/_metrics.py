@@ -487,19 +487,6 @@ def pu21_psnr(result: Any, reference: Any, *, peak_luminance: float | None = 100
     ``20 log10(256 / RMSE(P_result, P_reference))`` with ``P`` the PU21 encoding
     (:func:`pu21_encode`) of the scaled luminance (Mantiuk and Azimi, PCS 2021).
 
-    Parameters
-    ----------
-    result, reference : array_like of the same shape
-        Linear values: luminance of shape (..., H, W), or colour of shape (..., H, W, C) with
-        ``channel_axis=-1``.
-    peak_luminance : float or None, default 1000
-        Display peak in cd/m^2; both arrays are multiplied by ``peak_luminance / max(reference)``.
-        ``None``: the values already are absolute cd/m^2.
-    channel_axis : int or None, default None
-        Axis holding 1 or 3 channels (converted with :data:`PU21_LUMA`); ``None`` for luminance.
-    variant : {"banding_glare", "banding", "peaks", "peaks_glare"}, default "banding_glare"
-        PU21 parameter set.
-
     Returns
     -------
     float
@@ -710,7 +697,7 @@ def _relative_error(res: np.ndarray, ref: np.ndarray, eps: float) -> np.ndarray:
 _VARIANT_DOC = """    variant : {"banding_glare", "banding", "peaks", "peaks_glare"}, default "banding_glare"
         PU21 parameter set.
 """
-for _f, _extra in ((pu21_ssim, _VARIANT_DOC), (pu2_psnr, ""), (log_psnr, "")):
+for _f, _extra in ((pu21_psnr, _VARIANT_DOC), (pu21_ssim, _VARIANT_DOC), (pu2_psnr, ""), (log_psnr, "")):
     # the shared Parameters go before the docstring's own sections (Returns, Raises, Examples)
     _head, _sep, _tail = (_f.__doc__ or "").partition("\n    Returns\n")
     _f.__doc__ = _head.rstrip() + "\n" + _SHARED_PARAMS_DOC + _extra + _sep + _tail
