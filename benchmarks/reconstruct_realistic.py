@@ -61,18 +61,14 @@ def parse_capture(name: str) -> dict:
     return dict(shots=int(parts[0]), iso_pattern_kind=parts[1], profile=f"paper-{noise}")
 
 
-def reconstruct_capture(cap, method, options):
-    """One reconstruction; a bracketing capture's shots are reconstructed alone and merged (Debevec weights,
-    ``lfproc.bench.baselines.merge_reconstructions``, as ``lfproc.bench.reconstruct_per_shot`` does)."""
-    from lfproc.bench.baselines import merge_reconstructions, split_shots
+def reconstruct_capture(cap, method: str, options: dict):
+    """One reconstruction with ``method`` ("gmm" or "dictionary"); a bracketing capture's shots are reconstructed
+    alone and merged with Debevec weights (``lfproc.recon.reconstruct_per_shot``, the paper's baseline)."""
+    from lfproc.recon import reconstruct, reconstruct_gmm, reconstruct_per_shot
 
-    if cap.parameters.get("baseline") is None:
-        return method(cap, **options)
-    shots = split_shots(cap)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        recs = [method(s, **options) for s in shots]
-    return merge_reconstructions(recs, shots, merge="debevec")
+    if cap.parameters.get("baseline") is not None:
+        return reconstruct_per_shot(cap, merges=["debevec"], method=method, **options)["debevec"]
+    return (reconstruct_gmm if method == "gmm" else reconstruct)(cap, **options)
 
 
 def figures(result, truth, floor: float) -> dict:
@@ -87,7 +83,6 @@ def figures(result, truth, floor: float) -> dict:
 def main() -> None:
     from lfproc.camera.capture import noise_floor
     from lfproc.camera.simulate import simulate_capture
-    from lfproc.recon import reconstruct, reconstruct_gmm
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--set", choices=sorted(quality_scenes.SETS), default="test")
@@ -105,7 +100,6 @@ def main() -> None:
     os.environ.setdefault("LFPROC_PROGRESS", "0")
     warnings.simplefilter("ignore")  # saturation warnings of the brightest scenes: expected
     period = None if args.mask_period.lower() == "none" else int(args.mask_period)
-    method = reconstruct_gmm if args.method == "gmm" else reconstruct
     options = json.loads(args.options)
     names = [c.strip() for c in args.captures.split(",")]
     scenes = args.scenes.split(",") if args.scenes else list(quality_scenes.SETS[args.set])
@@ -126,7 +120,7 @@ def main() -> None:
         for name in names:
             cap = simulate_capture(lf, mask_period=period, random_state=seed, **parse_capture(name))
             t = time.perf_counter()
-            out = reconstruct_capture(cap, method, options)
+            out = reconstruct_capture(cap, args.method, options)
             seconds = time.perf_counter() - t
             f = figures(out, lf, noise_floor(cap))  # lfproc.camera.capture.noise_floor
             f["seconds"] = seconds
