@@ -10,6 +10,7 @@ not in the repository.
 from __future__ import annotations
 
 import doctest
+import functools
 import importlib
 import inspect
 import os
@@ -73,6 +74,7 @@ def test_no_docstring_points_outside_the_repository():
     assert not bad, bad
 
 
+@functools.lru_cache(maxsize=None)
 def _examples():
     finder = doctest.DocTestFinder(exclude_empty=True)
     tests = {}
