@@ -65,14 +65,14 @@ COLUMNS = (
 )
 
 
-def _scenes(paths, preset: Preset, dictionary) -> list[BenchScene]:
+def _scenes(paths, preset: Preset, dictionary, policies: dict[str, str]) -> list[BenchScene]:
     paths = [Path(p) for p in paths]
     if not paths:
         raise InputError("scenes: expected at least one light field (LF...), got none")
     v_n, u_n, size, _, c_n = dictionary.patch
     out, names = [], set()
     for path in paths:
-        lf = read_lightfield(path, nonfinite="raise", negative="raise")
+        lf = read_lightfield(path, **policies)
         if lf.views != (v_n, u_n):
             raise ShapeError(f"{path}: {lf.views[0]} x {lf.views[1]} views; the dictionary "
                              f"({dictionary.name or dictionary.preset}) needs {v_n} x {u_n}, like every scene of a "
@@ -94,7 +94,7 @@ def _scenes(paths, preset: Preset, dictionary) -> list[BenchScene]:
             name, i = f"{base}-{i}", i + 1
         names.add(name)
         out.append(BenchScene(name=name, path=str(path.resolve()), sha256=file_sha256(path) if path.is_file() else
-                              _folder_sha(path), crop=crop, views=lf.views, size=(h, w)))
+                              _folder_sha(path), crop=crop, views=lf.views, size=(h, w), **policies))
     return out
 
 
@@ -288,7 +288,8 @@ def _bench_meta(preset: Preset, recon, seed: int, dictionary, dict_id, bench_sce
         "exposure_s": preset.exposure_s, "recon": recon, "seed": int(seed), "dictionary": dict_id,
         "dictionary_patch": list(dictionary.patch), "dictionary_atoms": dictionary.n_atoms,
         "scenes": [{"name": s.name, "path": s.path, "given": str(g), "sha256": s.sha256, "crop": s.crop,
-                    "size": list(s.size)} for s, g in zip(bench_scenes, scenes)],
+                    "size": list(s.size), "nonfinite": s.nonfinite, "negative": s.negative}
+                   for s, g in zip(bench_scenes, scenes)],
     }
 
 
@@ -306,6 +307,8 @@ def run_bench(
     recon_options: dict[str, Any] | None = None,
     report: bool = True,
     progress_bar: bool | None = None,
+    nonfinite: str = "raise",
+    negative: str = "raise",
 ) -> dict[str, Any]:
     """Run the bench grid on light fields and write results.csv, report.md and plots (module notes).
 
@@ -336,6 +339,10 @@ def run_bench(
         Write report.md and the plots (results.csv is always written).
     progress_bar : bool, optional
         Show a progress bar of the jobs (None: when stderr is a terminal).
+    nonfinite, negative : str, default "raise"
+        Value policies of the scenes (:func:`lfproc.io.read_lightfield`): NaN/Inf and negative
+        samples are refused unless ``"zero"``/``"clip"`` (``lfproc bench --nonfinite``,
+        ``--negative``). A policy other than the default is part of every cell's identity.
 
     Returns
     -------
@@ -362,7 +369,10 @@ def run_bench(
         raise InputError("scenes: expected at least one light field (LF...), got none")
     source = dictionary
     dictionary = load_dictionary(dictionary) if not isinstance(dictionary, Dictionary) else dictionary
-    bench_scenes = _scenes(scenes, preset, dictionary)
+    check_choice("nonfinite", nonfinite, ("raise", "zero", "clip"))
+    check_choice("negative", negative, ("raise", "clip", "keep"))
+    policies = {"nonfinite": nonfinite, "negative": negative}
+    bench_scenes = _scenes(scenes, preset, dictionary, policies)
     out = Path(out_dir)
     cells_dir = _prepare_bench_dir(out, force=force)
 
@@ -382,6 +392,8 @@ def run_bench(
         context = {"scene_sha256": s.sha256, "crop": s.crop, "dictionary": dict_id, "recon": recon,
                    "mask_period": preset.mask_period, "exposure_s": preset.exposure_s, "seed": int(seed),
                    "defaults": defaults}
+        if policies != {"nonfinite": "raise", "negative": "raise"}:  # the default's cells keep their ids
+            context["values"] = policies
         ids[c] = cell_id(c, context)
     jobs = group_jobs(cells)
     # a job whose cells are partly done (killed between its cells) computes only the missing ones
