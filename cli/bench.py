@@ -51,8 +51,8 @@ def run(args) -> int:
         raise InputError(f"--workers: expected a positive number, got {args.workers}")
     result = run_bench(args.scenes, args.output, preset=args.preset, dictionary=args.dictionary,
                        workers=args.workers, scheduler=args.scheduler, force=args.force, random_state=args.seed,
-                       recon_options={"method": args.method}, nonfinite=args.nonfinite,
-                       negative=args.negative)
+                       recon_options={"method": args.method},
+                       read_options={"nonfinite": args.nonfinite, "negative": args.negative})
     failed = result["failed"]
     summary = {k: v for k, v in result.items() if k != "rows"}
     summary["failed"] = len(failed)

@@ -65,6 +65,16 @@ COLUMNS = (
 )
 
 
+def _policies(read_options: dict[str, str] | None) -> dict[str, str]:
+    """The scenes' value policies from ``run_bench(read_options=...)``, checked."""
+    options = dict(read_options or {})
+    unknown = sorted(set(options) - {"nonfinite", "negative"})
+    if unknown:
+        raise InputError(f"read_options: expected the keys nonfinite and negative, got {', '.join(unknown)}")
+    return {"nonfinite": check_choice("nonfinite", options.get("nonfinite", "raise"), ("raise", "zero", "clip")),
+            "negative": check_choice("negative", options.get("negative", "raise"), ("raise", "clip", "keep"))}
+
+
 def _scenes(paths, preset: Preset, dictionary, policies: dict[str, str]) -> list[BenchScene]:
     paths = [Path(p) for p in paths]
     if not paths:
@@ -307,8 +317,7 @@ def run_bench(
     recon_options: dict[str, Any] | None = None,
     report: bool = True,
     progress_bar: bool | None = None,
-    nonfinite: str = "raise",
-    negative: str = "raise",
+    read_options: dict[str, str] | None = None,
 ) -> dict[str, Any]:
     """Run the bench grid on light fields and write results.csv, report.md and plots (module notes).
 
@@ -339,10 +348,9 @@ def run_bench(
         Write report.md and the plots (results.csv is always written).
     progress_bar : bool, optional
         Show a progress bar of the jobs (None: when stderr is a terminal).
-    nonfinite, negative : str, default "raise"
-        Value policies of the scenes (:func:`lfproc.io.read_lightfield`): NaN/Inf and negative
-        samples are refused unless ``"zero"``/``"clip"`` (``lfproc bench --nonfinite``,
-        ``--negative``). A policy other than the default is part of every cell's identity.
+    read_options : dict, optional
+        ``nonfinite`` and ``negative``, the scenes' value policies (:func:`lfproc.io.read_lightfield`;
+        default ``"raise"`` both). A policy other than the default is part of every cell's identity.
 
     Returns
     -------
@@ -369,9 +377,7 @@ def run_bench(
         raise InputError("scenes: expected at least one light field (LF...), got none")
     source = dictionary
     dictionary = load_dictionary(dictionary) if not isinstance(dictionary, Dictionary) else dictionary
-    check_choice("nonfinite", nonfinite, ("raise", "zero", "clip"))
-    check_choice("negative", negative, ("raise", "clip", "keep"))
-    policies = {"nonfinite": nonfinite, "negative": negative}
+    policies = _policies(read_options)
     bench_scenes = _scenes(scenes, preset, dictionary, policies)
     out = Path(out_dir)
     cells_dir = _prepare_bench_dir(out, force=force)
@@ -392,9 +398,8 @@ def run_bench(
         context = {"scene_sha256": s.sha256, "crop": s.crop, "dictionary": dict_id, "recon": recon,
                    "mask_period": preset.mask_period, "exposure_s": preset.exposure_s, "seed": int(seed),
                    "defaults": defaults}
-        if policies != {"nonfinite": "raise", "negative": "raise"}:  # the default's cells keep their ids
-            context["values"] = policies
-        ids[c] = cell_id(c, context)
+        # a policy other than the default is part of the cell (the default's cells keep their ids)
+        ids[c] = cell_id(c, context | ({"values": policies} if set(policies.values()) != {"raise"} else {}))
     jobs = group_jobs(cells)
     # a job whose cells are partly done (killed between its cells) computes only the missing ones
     todo = [Job(key=j.key, cells=missing) for j in jobs

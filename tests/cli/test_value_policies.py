@@ -130,7 +130,7 @@ def test_bench_negative_refused_by_default_clipped_on_request(bench_inputs, tmp_
     (scene,) = _scenes([neg], PRESETS["quick"], load_dictionary(dictionary), {"nonfinite": "raise", "negative": "clip"})
     assert scene.negative == "clip" and load_scene(scene).data.min() == 0
     with pytest.raises(InputError, match="nonfinite: expected one of"):
-        run_bench([neg], tmp_path / "lib", dictionary=dictionary, nonfinite="drop")
+        run_bench([neg], tmp_path / "lib", dictionary=dictionary, read_options={"nonfinite": "drop"})
 
 
 def test_bench_cells_of_another_value_policy_are_not_reused(bench_inputs):
