@@ -402,8 +402,7 @@ def process_scene(
     n_threads : int, default 1
         Threads of the merge.
     nonfinite, negative : str
-        Value policies of light-field inputs (EXR files, folders of views), as
-        :func:`lfproc.hdr.merge_files` (``lfproc dataset build --nonfinite``, ``--negative``).
+        Value policies of light-field inputs (EXR files, folders of views): see :func:`lfproc.hdr.merge_files`.
 
     Returns
     -------

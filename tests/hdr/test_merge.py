@@ -611,6 +611,46 @@ def test_cli_merge_refuses_options_without_effect(frobisher, tmp_path, capsys):
     assert not out.exists()
 
 
+def test_cli_merge_refuses_options_the_chosen_method_ignores(frobisher, tmp_path, capsys):
+    """Issue 20: options accepted but without effect in the mode the merge chose were silently ignored:
+    --iterations on 8-bit images (default method debevec) or on inputs with their own variances, --isos with
+    ml on 8-bit images, --seed on linear inputs (no response to recover), --profile with debevec on linear
+    (non-raw) inputs. Each is refused in one line naming the option and why; nothing is written."""
+    paths, _ = frobisher
+    jpegs = list(map(str, paths))
+    linear = []
+    radiance = np.geomspace(0.05, 20, 12 * 12 * 3, dtype=np.float32).reshape(1, 1, 12, 12, 3)
+    for i, t in enumerate([0.05, 0.5]):
+        linear.append(str(tmp_path / f"lin{i}.exr"))
+        write_lightfield(LightField(data=np.minimum(radiance * t, 1), saturation_level=1.0, exposure_s=t, iso=100),
+                         linear[-1])
+    with_var = []
+    for i, t in enumerate([0.05, 0.5]):
+        data = np.minimum(radiance * t, 1)
+        with_var.append(str(tmp_path / f"var{i}.exr"))
+        write_lightfield(LightField(data=data, variance=1e-4 + 1e-3 * data, saturation_level=1.0, exposure_s=t,
+                                    iso=100), with_var[-1])
+    out = tmp_path / "o.exr"
+    cases = (
+        (jpegs + ["--iterations", "3"], "--iterations: has no effect with method debevec"),
+        (with_var + ["--method", "ml", "--iterations", "3"], "--iterations: has no effect with method ml on inputs "
+                                                              "with their own variances"),
+        (jpegs + ["--method", "ml", "--isos", "100"], "--isos: has no effect with method ml on 8-bit images"),
+        (linear + ["--seed", "3"], "--seed: has no effect on linear inputs"),
+        (linear + ["--method", "debevec", "--profile", "illum"], "--profile: has no effect with method debevec on "
+                                                                 "linear (non-raw) inputs"),
+    )
+    for args, message in cases:
+        assert main(["merge", *args, "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith("lfproc merge: error: ") and message in err, (args, err)
+        assert "drop it" in err
+    assert not out.exists()
+    # the same options where they have an effect are accepted
+    assert main(["merge", *linear, "-o", str(out), "--method", "ml", "--profile", "illum", "--iterations", "3"]) == 0
+    capsys.readouterr()
+
+
 # -- issue 20 item 8: merge --response-out ----------------------------------------------------------------------
 
 @pytest.mark.slow  # response recovery through the CLI
