@@ -26,3 +26,16 @@ def test_preview_exposure_refused_for_dictionaries_and_captures(tmp_path, capsys
     lf_path = write_lightfield(lf, tmp_path / "lf.exr")
     assert main(["preview", str(lf_path), "-o", str(tmp_path / "l.png"), "--exposure", "1"]) == 0
     capsys.readouterr()
+
+
+def test_evaluate_force_without_error_map_is_refused(tmp_path, capsys):
+    """--force only allows overwriting --error-map; alone it did nothing."""
+    lf = synthesize("layers", size=(16, 16), views=3, random_state=1)
+    path = write_lightfield(lf, tmp_path / "lf.exr")
+    assert main(["evaluate", str(path), str(path), "--force"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--force: has no effect without --error-map" in err
+    out = tmp_path / "map.png"
+    assert main(["evaluate", str(path), str(path), "--error-map", str(out), "--json"]) == 0
+    assert main(["evaluate", str(path), str(path), "--error-map", str(out), "--force", "--json"]) == 0
+    capsys.readouterr()
