@@ -39,3 +39,27 @@ def test_evaluate_force_without_error_map_is_refused(tmp_path, capsys):
     assert main(["evaluate", str(path), str(path), "--error-map", str(out), "--json"]) == 0
     assert main(["evaluate", str(path), str(path), "--error-map", str(out), "--force", "--json"]) == 0
     capsys.readouterr()
+
+
+def test_block_px_refused_unless_the_iso_pattern_is_block(tmp_path, capsys):
+    """lfproc simulate --block-px and lfproc capture import --block-px only shape the block pattern."""
+    lf_path = write_lightfield(synthesize("layers", size=(16, 16), views=5, random_state=1), tmp_path / "lf.exr")
+    out = tmp_path / "c.npz"
+    assert main(["simulate", str(lf_path), "-o", str(out), "--iso-pattern", "row", "--block-px", "4"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--block-px: has no effect with --iso-pattern row (block only)" in err
+    assert not out.exists()
+    assert main(["simulate", str(lf_path), "-o", str(out), "--iso-pattern", "block", "--block-px", "4",
+                 "--seed", "1", "--json"]) == 0
+    capsys.readouterr()
+    assert main(["capture", "import", str(tmp_path / "a.dng"), "-o", str(tmp_path / "x.npz"), "--iso-layout", "row",
+                 "--isos", "100,800", "--block-px", "4", "--mask", "random", "--exposures-s", "0.01",
+                 "--profile", "paper-low"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--block-px: has no effect with --iso-layout row" in err
+    # an ISO map file gives every pixel's ISO: --isos was ignored
+    assert main(["capture", "import", str(tmp_path / "a.dng"), "-o", str(tmp_path / "x.npz"), "--iso-layout",
+                 str(tmp_path / "isos.npy"), "--isos", "100,800", "--mask", "random", "--exposures-s", "0.01",
+                 "--profile", "paper-low"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--isos: has no effect with an ISO map file" in err
