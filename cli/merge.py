@@ -79,6 +79,10 @@ def run(args) -> int:
         raise InputError("--exposures-s and --exposures-file: expected one source of exposure times, got both")
     if args.iterations is not None and args.method == "debevec":
         raise InputError("--iterations: has no effect with --method debevec (ml weight updates); drop it")
+    if args.iterations is not None and args.method is None and all(
+            p.suffix.lower() in (".jpg", ".jpeg") for p in args.inputs):  # JPEGs are 8-bit: known before reading
+        raise InputError("--iterations: has no effect with method debevec, the default for 8-bit images (it does "
+                         "not iterate; ml weight updates only); drop it or give --method ml")
     # options whose effect depends on the inputs and the method chosen for them: refused after the merge
     # (before anything is written) when it ignored them (e.g. --iterations on 8-bit images: default debevec)
     given = [name for name, value in (("max_iter", args.iterations), ("random_state", args.seed),
