@@ -184,7 +184,8 @@ def test_frobisher_exif_and_response_recovery(frobisher):
         return np.array(out)
 
     ours, theirs = disagreement(g), disagreement(ref)
-    assert (ours < 0.9 * theirs).all(), (ours, theirs)  # measured: [0.078 0.096] against [0.107 0.127]
+    assert (ours < 0.9 * theirs).all(), (ours, theirs)  # measured: [0.083 0.095] against [0.107 0.127]
+    # (smoothness 3000; [0.078 0.096] with the former default 10)
 
 
 def test_frobisher_merge_radiance_ratios(frobisher):
@@ -476,11 +477,11 @@ def test_ml_8bit_frobisher_dark_deciles_agree_with_debevec_and_opencv(frobisher)
     assert sum(r is not None for r in vs_deb) >= 7  # measured: deciles 1-8 (0: 11 %, 9: 0 % well exposed twice)
     for q, (a, b) in enumerate(zip(vs_deb, vs_cv)):
         if a is not None:
-            assert abs(a - 1) < 0.10, (q, vs_deb)  # measured 0.997-1.003
-            assert abs(b - 1) < 0.20, (q, vs_cv)  # measured 0.86-1.01 (OpenCV's response differs, see above)
+            assert abs(a - 1) < 0.10, (q, vs_deb)  # measured 0.989-1.001 (0.997-1.003 with smoothness 10)
+            assert abs(b - 1) < 0.20, (q, vs_cv)  # measured 0.85-0.99 (OpenCV's response differs, see above)
     dark = {k: np.percentile(y, 10) / np.median(y) for k, y in lum.items()}
-    assert dark["ml"] == pytest.approx(dark["deb"], rel=0.10)  # measured 0.245 and 0.244
-    assert dark["ml"] == pytest.approx(dark["cv"], rel=0.15)  # measured 0.245 and 0.271
+    assert dark["ml"] == pytest.approx(dark["deb"], rel=0.10)  # measured 0.239 and 0.240
+    assert dark["ml"] == pytest.approx(dark["cv"], rel=0.15)  # measured 0.239 and 0.271
     assert np.isfinite(var).all() and (var > 0).all()
 
 
