@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ._common import add_json, emit
+from ._common import add_json, add_value_policies, emit
 from lfproc.errors import InputError
 
 
@@ -35,6 +35,7 @@ def register(sub, common) -> None:
     p.add_argument("--seed", type=int, default=0, help="bench seed; every cell's seed derives from it (default 0)")
     p.add_argument("--force", action="store_true",
                    help="recompute every cell (and use a folder that is not a bench folder)")
+    add_value_policies(p, negative="raise", what="scene light-field")
     add_json(p)
     p.set_defaults(run=run)
 
@@ -50,7 +51,8 @@ def run(args) -> int:
         raise InputError(f"--workers: expected a positive number, got {args.workers}")
     result = run_bench(args.scenes, args.output, preset=args.preset, dictionary=args.dictionary,
                        workers=args.workers, scheduler=args.scheduler, force=args.force, random_state=args.seed,
-                       recon_options={"method": args.method})
+                       recon_options={"method": args.method},
+                       read_options={"nonfinite": args.nonfinite, "negative": args.negative})
     failed = result["failed"]
     summary = {k: v for k, v in result.items() if k != "rows"}
     summary["failed"] = len(failed)

@@ -55,7 +55,8 @@ def register(sub, common) -> None:
     i.add_argument("--iso-layout", required=True, metavar="row|block|dual|random|FILE",
                    help="per-pixel ISO layout of the sensor, or an ISO map file (.npy or 16-bit image)")
     i.add_argument("--isos", default=None, help="ISO set of a named layout, comma-separated (e.g. 100,400,800,1600)")
-    i.add_argument("--block-px", type=int, default=DEFAULT_BLOCK_PX, help=f"block side in pixels for --iso-layout block (even; default {DEFAULT_BLOCK_PX})")
+    i.add_argument("--block-px", type=int, default=None,
+                   help=f"block side in pixels for --iso-layout block (even; default {DEFAULT_BLOCK_PX})")
     i.add_argument("--seed", type=int, default=None, help="seed of --iso-layout random (the sensor's layout)")
     i.add_argument("--profile", required=True, help="camera profile: shipped name or JSON file (lfproc calibrate)")
     i.add_argument("--exposures-s", required=True, metavar="T[,T...]",
@@ -75,6 +76,8 @@ def run_import(args) -> int:
         raise InputError(f"--exposures-s: expected 1 or {len(args.raw)} exposure times (one per RAW), "
                          f"got {len(exposures)}")
     layout = args.iso_layout
+    if args.block_px is not None and layout != "block":
+        raise InputError(f"--block-px: has no effect with --iso-layout {layout} (block only); drop it")
     isos = None
     if layout in ISO_PATTERNS:
         if args.isos is None:
@@ -84,6 +87,8 @@ def run_import(args) -> int:
             raise InputError("--iso-layout random: --seed is required (the seed that drew the sensor's ISO layout)")
     elif not (Path(layout).suffix or Path(layout).exists()):
         raise InputError(f"--iso-layout: expected one of {', '.join(ISO_PATTERNS)} or an ISO map file; got {layout!r}")
+    elif args.isos is not None:
+        raise InputError(f"--isos: has no effect with an ISO map file ({layout} gives every pixel's ISO); drop it")
     mask = args.mask if is_capture_file(args.mask) else {
         "kind": args.mask_kind, "codes": args.mask, "period": args.mask_period, "shift": args.mask_shift}
     with warnings.catch_warnings(record=True) as caught:
@@ -91,7 +96,8 @@ def run_import(args) -> int:
         capture = capture_from_raw(
             args.raw, mask=mask, iso_layout=layout, profile=args.profile, exposures_s=exposures,
             views=tuple(args.views) if args.views else None, cfa_pattern=args.cfa_pattern, gamma=args.gamma,
-            isos=isos, block_px=args.block_px, random_state=args.seed,
+            isos=isos, block_px=DEFAULT_BLOCK_PX if args.block_px is None else args.block_px,
+            random_state=args.seed,
         )
     for w in caught:  # one line each, as the errors
         print(f"lfproc capture: warning: {w.message}", file=sys.stderr)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ._common import add_json, emit
+from ._common import add_json, add_value_policies, emit
 from lfproc._shared.parallel import max_workers
 from lfproc._shared.validation import check_count
 from lfproc.dataset import build_dataset
@@ -28,6 +28,7 @@ def register(sub, common) -> None:
     b.add_argument("--workers", type=int, default=None, help="worker processes of the local cluster")
     b.add_argument("--method", choices=("ml", "debevec"), default=None, help="merging estimator (see lfproc merge)")
     b.add_argument("--profile", default=None, help="camera profile name or JSON file")
+    add_value_policies(b, what="light-field (EXR) input")
     add_json(b)
     b.set_defaults(run=run)
 
@@ -39,7 +40,8 @@ def run(args) -> int:
         check_count("--workers", args.workers, high=max_workers(),
                     why=f"at most 4 per CPU core; this machine has {os.cpu_count() or 1}")
     report = build_dataset(args.scenes_dir, args.output, method=args.method, profile=args.profile,
-                           scheduler=args.scheduler, workers=args.workers)
+                           scheduler=args.scheduler, workers=args.workers, nonfinite=args.nonfinite,
+                           negative=args.negative)
     failed = report["failed"]
     result = {
         "dataset": str(args.output),

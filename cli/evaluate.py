@@ -167,6 +167,8 @@ def _check_mask_shape(mask: np.ndarray, path: Path, reference) -> None:
 
 
 def run(args) -> int:
+    if args.force and args.error_map is None:
+        raise InputError("--force: has no effect without --error-map (the only file evaluate writes); drop it")
     if args.error_map is not None:  # before reading anything large
 
         if args.error_map.suffix.lower() not in PREVIEW_SUFFIXES:

@@ -8,7 +8,7 @@ from ._common import add_json, add_value_policies, add_output, emit, parse_float
 from lfproc.errors import InputError
 from lfproc.dataset import read_exposure_file
 from lfproc.hdr import merge_files
-from lfproc.hdr._bracket import format_response, plot_response, RESPONSE_SUFFIXES
+from lfproc.hdr._bracket import format_response, plot_response, unused_options, RESPONSE_SUFFIXES
 from lfproc.io import write_lightfield
 from lfproc.io._atomic import atomic_outputs, check_output
 from lfproc.lightfield import LightField
@@ -42,7 +42,8 @@ def register(sub, common) -> None:
     p.add_argument("--iterations", type=int, default=None,
                    help="ml: weight updates after the start (read-noise weights; 8-bit images: hat-weighted mean); "
                         "default 2")
-    p.add_argument("--seed", type=int, default=0, help="8-bit images: seed of the response-recovery pixel sampling")
+    p.add_argument("--seed", type=int, default=None,
+                   help="8-bit images: seed of the response-recovery pixel sampling (default 0)")
     p.add_argument("--response-out", type=Path, default=None, metavar="FILE",
                    help="also write the camera response the merge recovered from 8-bit images, f^-1(z) and "
                         "g(z) = ln f^-1(z) per code and channel (FILE.csv or FILE.json), and its plot FILE.png")
@@ -55,7 +56,7 @@ def register(sub, common) -> None:
 
 #: the CLI options of merge_files' parameters, for its messages
 _OPTION_NAMES = {"profile": "--profile", "exposures_s": "--exposures-s", "isos": "--isos", "white_db": "--white-db",
-                 "max_iter": "--iterations", "method": "--method"}
+                 "max_iter": "--iterations", "method": "--method", "random_state": "--seed"}
 
 
 def run(args) -> int:
@@ -78,6 +79,14 @@ def run(args) -> int:
         raise InputError("--exposures-s and --exposures-file: expected one source of exposure times, got both")
     if args.iterations is not None and args.method == "debevec":
         raise InputError("--iterations: has no effect with --method debevec (ml weight updates); drop it")
+    if args.iterations is not None and args.method is None and all(
+            p.suffix.lower() in (".jpg", ".jpeg") for p in args.inputs):  # JPEGs are 8-bit: known before reading
+        raise InputError("--iterations: has no effect with method debevec, the default for 8-bit images (it does "
+                         "not iterate; ml weight updates only); drop it or give --method ml")
+    # options whose effect depends on the inputs and the method chosen for them: refused after the merge
+    # (before anything is written) when it ignored them (e.g. --iterations on 8-bit images: default debevec)
+    given = [name for name, value in (("max_iter", args.iterations), ("random_state", args.seed),
+                                      ("isos", args.isos), ("profile", args.profile)) if value is not None]
     if args.iterations is not None and args.iterations < 0:
         raise InputError(f"--iterations: expected a non-negative integer, got {args.iterations}")
     exposures = parse_floats(args.exposures_s, option="--exposures-s") if args.exposures_s else None
@@ -86,8 +95,11 @@ def run(args) -> int:
     isos = parse_floats(args.isos, option="--isos") if args.isos else None
     merged, info = merge_files(args.inputs, method=args.method, profile=args.profile, exposures_s=exposures,
                                isos=isos, white_db=args.white_db,
-                               max_iter=2 if args.iterations is None else args.iterations, random_state=args.seed,
-                               option_names=_OPTION_NAMES, nonfinite=args.nonfinite, negative=args.negative)
+                               max_iter=2 if args.iterations is None else args.iterations,
+                               random_state=0 if args.seed is None else args.seed, option_names=_OPTION_NAMES,
+                               nonfinite=args.nonfinite, negative=args.negative)
+    for name, why in unused_options(given, method=info["method"], mapping=merged.attrs["input_mapping"])[:1]:
+        raise InputError(f"{_OPTION_NAMES[name]}: has no effect {why}; drop it")
     response_text = None
     if args.response_out is not None:
         if info.get("response") is None:

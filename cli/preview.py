@@ -31,7 +31,8 @@ def register(sub, common) -> None:
     p.add_argument("--kind", default=None,
                    help=f"light fields: {', '.join(kinds)} (default centre); coded captures: "
                         f"{', '.join(preview_kinds(lfproc.camera.capture.Capture))} (default capture); dictionaries: atoms")
-    p.add_argument("--exposure", type=float, default=0.0, metavar="EV", help="extra exposure in stops")
+    p.add_argument("--exposure", type=float, default=None, metavar="EV",
+                   help="extra exposure in stops (light fields; default 0)")
     p.add_argument("--exposure-from", type=Path, default=None, metavar="REFERENCE",
                    help="light field whose tone curve (log-average, white point) is used instead of the input's: "
                         "preview a result and its truth with the same REFERENCE to compare them at one exposure "
@@ -47,8 +48,9 @@ def run(args) -> int:
     check_output(args.output, force=args.force)
 
     def _no_exposure_from(what: str) -> None:
-        if args.exposure_from is not None:
-            raise InputError(f"--exposure-from: applies to light-field previews; {args.input} is {what}")
+        for option, value in (("--exposure-from", args.exposure_from), ("--exposure", args.exposure)):
+            if value is not None:
+                raise InputError(f"{option}: applies to light-field previews; {args.input} is {what}")
 
     if is_dictionary_file(args.input):
         _no_exposure_from("a dictionary")
@@ -65,7 +67,7 @@ def run(args) -> int:
     if args.exposure_from is not None and not args.exposure_from.exists():
         raise InputError(f"--exposure-from {args.exposure_from}: no such file or folder")
     lf = read_lightfield(args.input, nonfinite=args.nonfinite, negative=args.negative)
-    options = {"exposure_ev": args.exposure}
+    options = {"exposure_ev": 0.0 if args.exposure is None else args.exposure}
     if args.exposure_from is not None:
         options["exposure_from"] = read_lightfield(args.exposure_from, nonfinite=args.nonfinite,
                                                    negative=args.negative)

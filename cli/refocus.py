@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import add_json, add_output, emit, parse_floats
+from ._common import add_json, add_output, add_value_policies, emit, parse_floats
 from lfproc.errors import InputError
 from lfproc.io import read_lightfield, write_image
 from lfproc.io._atomic import atomic_dir, check_output
@@ -27,6 +27,7 @@ def register(sub, common) -> None:
     p.add_argument("--slope", required=True, nargs="+", metavar="S",
                    help="disparity in focus, pixels per view step; several (--slope -1 0 1, or --slope=-1,0,1) give "
                         "a focal stack")
+    add_value_policies(p)
     add_json(p)
     p.set_defaults(run=run)
 
@@ -47,7 +48,7 @@ def run(args) -> int:
         raise InputError(f"--output: {len(slopes)} slopes give a focal stack: expected a folder name without a "
                          f"suffix, got {out}")
     check_output(out, force=args.force)
-    lf = read_lightfield(args.input)
+    lf = read_lightfield(args.input, nonfinite=args.nonfinite, negative=args.negative)
     slopes = check_slopes(slopes, lf, name="--slope")
     stack = focal_stack(lf, slopes)
     if len(slopes) == 1:

@@ -8,6 +8,7 @@ from lfproc.camera.iso import DEFAULT_BLOCK_PX
 
 from ._common import add_json, add_value_policies, add_output, emit, parse_floats
 from lfproc._shared.validation import check_count
+from lfproc.errors import InputError
 from lfproc.camera.capture import MAX_SHOTS
 from lfproc.camera.simulate import NOISE_PROFILES, simulate_file
 
@@ -43,7 +44,8 @@ def register(sub, common) -> None:
     p.add_argument("--iso-pattern", default="random", metavar="random|row|block|dual|FILE",
                    help="per-pixel ISO layout, or a .npy/16-bit image of ISO values (default random)")
     p.add_argument("--isos", default="100,400,800,1600", help="ISO set, comma-separated (default 100,400,800,1600)")
-    p.add_argument("--block-px", type=int, default=DEFAULT_BLOCK_PX, help=f"block side in pixels for --iso-pattern block (even; default {DEFAULT_BLOCK_PX})")
+    p.add_argument("--block-px", type=int, default=None,
+                   help=f"block side in pixels for --iso-pattern block (even; default {DEFAULT_BLOCK_PX})")
     p.add_argument("--shots", type=int, default=None, help="number of shots (default 1; bracketing 2)")
     p.add_argument("--exposure-s", type=float, default=0.004, help="exposure time of a shot in seconds")
     p.add_argument("--gamma", type=float, default=None, help="power-law sensor response (default: the profile's)")
@@ -71,6 +73,8 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
+    if args.block_px is not None and args.iso_pattern != "block":
+        raise InputError(f"--block-px: has no effect with --iso-pattern {args.iso_pattern} (block only); drop it")
     profile = args.profile or NOISE_PROFILES[args.noise or "low"]
 
     shots = args.shots if args.shots is not None else (2 if args.baseline == "bracketing" else 1)
@@ -82,7 +86,7 @@ def run(args) -> int:
         profile=profile,
         iso_pattern_kind=args.iso_pattern,
         isos=parse_floats(args.isos, option="--isos"),
-        block_px=args.block_px,
+        block_px=DEFAULT_BLOCK_PX if args.block_px is None else args.block_px,
         shots=shots,
         exposure_s=args.exposure_s,
         gamma=args.gamma,

@@ -30,13 +30,15 @@ class BenchScene:
     crop: tuple[int, int, int, int] | None  # top, left, height, width
     views: tuple[int, int]
     size: tuple[int, int]
+    nonfinite: str = "raise"  # value policies the scene is read with (lfproc bench --nonfinite, --negative)
+    negative: str = "raise"
 
 
 def load_scene(scene: BenchScene):
     """The scene's light field, cropped (cached per process: workers read each scene once)."""
-    key = (scene.path, scene.sha256, scene.crop)
+    key = (scene.path, scene.sha256, scene.crop, scene.nonfinite, scene.negative)
     if key not in _SCENE_CACHE:
-        lf = read_lightfield(scene.path, nonfinite="raise", negative="raise")
+        lf = read_lightfield(scene.path, nonfinite=scene.nonfinite, negative=scene.negative)
         if scene.crop is not None:
             lf = lf.crop(*scene.crop)
         _SCENE_CACHE.clear()  # one scene per worker at a time bounds the memory

@@ -409,7 +409,8 @@ def _plot_best_worst(rows, bench_dir: Path, meta: dict, path: Path) -> None:
     for ax_row, (title, row) in zip(axes, (("best", best), ("worst", worst))):
         s = scenes[row["scene"]]
         scene = BenchScene(name=s["name"], path=s["path"], sha256=s["sha256"],
-                           crop=None if s["crop"] is None else tuple(s["crop"]), views=(0, 0), size=tuple(s["size"]))
+                           crop=None if s["crop"] is None else tuple(s["crop"]), views=(0, 0), size=tuple(s["size"]),
+                           nonfinite=s.get("nonfinite", "raise"), negative=s.get("negative", "raise"))
         truth_lf = load_scene(scene)
         truth = truth_lf.centre()
         rec = read_centre(bench_dir, row["cell_id"])

@@ -65,14 +65,24 @@ COLUMNS = (
 )
 
 
-def _scenes(paths, preset: Preset, dictionary) -> list[BenchScene]:
+def _policies(read_options: dict[str, str] | None) -> dict[str, str]:
+    """The scenes' value policies from ``run_bench(read_options=...)``, checked."""
+    options = dict(read_options or {})
+    unknown = sorted(set(options) - {"nonfinite", "negative"})
+    if unknown:
+        raise InputError(f"read_options: expected the keys nonfinite and negative, got {', '.join(unknown)}")
+    return {"nonfinite": check_choice("nonfinite", options.get("nonfinite", "raise"), ("raise", "zero", "clip")),
+            "negative": check_choice("negative", options.get("negative", "raise"), ("raise", "clip", "keep"))}
+
+
+def _scenes(paths, preset: Preset, dictionary, policies: dict[str, str]) -> list[BenchScene]:
     paths = [Path(p) for p in paths]
     if not paths:
         raise InputError("scenes: expected at least one light field (LF...), got none")
     v_n, u_n, size, _, c_n = dictionary.patch
     out, names = [], set()
     for path in paths:
-        lf = read_lightfield(path, nonfinite="raise", negative="raise")
+        lf = read_lightfield(path, **policies)
         if lf.views != (v_n, u_n):
             raise ShapeError(f"{path}: {lf.views[0]} x {lf.views[1]} views; the dictionary "
                              f"({dictionary.name or dictionary.preset}) needs {v_n} x {u_n}, like every scene of a "
@@ -94,7 +104,7 @@ def _scenes(paths, preset: Preset, dictionary) -> list[BenchScene]:
             name, i = f"{base}-{i}", i + 1
         names.add(name)
         out.append(BenchScene(name=name, path=str(path.resolve()), sha256=file_sha256(path) if path.is_file() else
-                              _folder_sha(path), crop=crop, views=lf.views, size=(h, w)))
+                              _folder_sha(path), crop=crop, views=lf.views, size=(h, w), **policies))
     return out
 
 
@@ -288,7 +298,8 @@ def _bench_meta(preset: Preset, recon, seed: int, dictionary, dict_id, bench_sce
         "exposure_s": preset.exposure_s, "recon": recon, "seed": int(seed), "dictionary": dict_id,
         "dictionary_patch": list(dictionary.patch), "dictionary_atoms": dictionary.n_atoms,
         "scenes": [{"name": s.name, "path": s.path, "given": str(g), "sha256": s.sha256, "crop": s.crop,
-                    "size": list(s.size)} for s, g in zip(bench_scenes, scenes)],
+                    "size": list(s.size), "nonfinite": s.nonfinite, "negative": s.negative}
+                   for s, g in zip(bench_scenes, scenes)],
     }
 
 
@@ -306,6 +317,7 @@ def run_bench(
     recon_options: dict[str, Any] | None = None,
     report: bool = True,
     progress_bar: bool | None = None,
+    read_options: dict[str, str] | None = None,
 ) -> dict[str, Any]:
     """Run the bench grid on light fields and write results.csv, report.md and plots (module notes).
 
@@ -336,6 +348,9 @@ def run_bench(
         Write report.md and the plots (results.csv is always written).
     progress_bar : bool, optional
         Show a progress bar of the jobs (None: when stderr is a terminal).
+    read_options : dict, optional
+        ``nonfinite`` and ``negative``, the scenes' value policies (:func:`lfproc.io.read_lightfield`;
+        default ``"raise"`` both). A policy other than the default is part of every cell's identity.
 
     Returns
     -------
@@ -362,7 +377,8 @@ def run_bench(
         raise InputError("scenes: expected at least one light field (LF...), got none")
     source = dictionary
     dictionary = load_dictionary(dictionary) if not isinstance(dictionary, Dictionary) else dictionary
-    bench_scenes = _scenes(scenes, preset, dictionary)
+    policies = _policies(read_options)
+    bench_scenes = _scenes(scenes, preset, dictionary, policies)
     out = Path(out_dir)
     cells_dir = _prepare_bench_dir(out, force=force)
 
@@ -382,7 +398,8 @@ def run_bench(
         context = {"scene_sha256": s.sha256, "crop": s.crop, "dictionary": dict_id, "recon": recon,
                    "mask_period": preset.mask_period, "exposure_s": preset.exposure_s, "seed": int(seed),
                    "defaults": defaults}
-        ids[c] = cell_id(c, context)
+        # a policy other than the default is part of the cell (the default's cells keep their ids)
+        ids[c] = cell_id(c, context | ({"values": policies} if set(policies.values()) != {"raise"} else {}))
     jobs = group_jobs(cells)
     # a job whose cells are partly done (killed between its cells) computes only the missing ones
     todo = [Job(key=j.key, cells=missing) for j in jobs

@@ -72,7 +72,7 @@ from ..errors import InputError, LfprocWarning, MissingFileError
 from .. import _untrusted as ut
 from .._shared.parallel import dask_client, max_workers
 from .._shared.progress import progress
-from .._shared.validation import check_count
+from .._shared.validation import check_choice, check_count
 from ..hdr import BRACKET_SUFFIXES, merge_files, read_exif_exposure
 from ..hdr._bracket import IMAGE_SUFFIXES_LDR, LYTRO_SUFFIXES
 from ..io import write_lightfield
@@ -380,6 +380,8 @@ def process_scene(
     method: str | None = None,
     profile=None,
     n_threads: int = 1,
+    nonfinite: str = "raise",
+    negative: str = "clip",
 ) -> dict[str, Any]:
     """Decode, merge and write one scene; return its manifest row (also written as records).
 
@@ -399,6 +401,8 @@ def process_scene(
         Camera profile of the inputs.
     n_threads : int, default 1
         Threads of the merge.
+    nonfinite, negative : str
+        Value policies of light-field inputs (EXR files, folders of views): see :func:`lfproc.hdr.merge_files`.
 
     Returns
     -------
@@ -452,7 +456,8 @@ def process_scene(
             warnings.simplefilter("always", LfprocWarning)
             try:
                 merged, info = merge_files(scene.inputs, method=method, profile=profile, white_db=white_db,
-                                           exposures_s=exposures, n_threads=n_threads)
+                                           exposures_s=exposures, n_threads=n_threads,
+                                           nonfinite=nonfinite, negative=negative)
             except InputError as exc:  # the command-line hint of lfproc merge does not apply here
                 message = str(exc).replace("give --exposures-s", f"write the bracket's times to "
                                            f"{scene.folder / EXPOSURE_FILES[0]}")
@@ -538,11 +543,12 @@ def read_manifest(dataset_dir: str | os.PathLike) -> list[dict[str, Any]]:
     return json.loads(path.read_text())["scenes"]
 
 
-def _run_scene(scene: Scene, out_dir: str, method, profile) -> dict[str, Any]:
+def _run_scene(scene: Scene, out_dir: str, method, profile, policies=None) -> dict[str, Any]:
     """Process one scene; a failure is returned as ``{"error": "Type: message"}`` (not raised, so
     that Dask workers do not log it with a traceback: the build reports it in one line)."""
     try:
-        return {"row": process_scene(scene, out_dir, method=method, profile=profile, n_threads=1)}
+        return {"row": process_scene(scene, out_dir, method=method, profile=profile, n_threads=1,
+                                     **(policies or {}))}
     except Exception as exc:  # noqa: BLE001 - a failed scene must not stop the others
         return {"error": f"{type(exc).__name__}: {exc}"}
 
@@ -556,6 +562,8 @@ def build_dataset(
     scheduler: str | None = None,
     workers: int | None = None,
     progress_bar: bool | None = None,
+    nonfinite: str = "raise",
+    negative: str = "clip",
 ) -> dict[str, Any]:
     """Process every scene of ``scenes_dir`` into ``out_dir`` in parallel with Dask (see the module notes).
 
@@ -575,6 +583,8 @@ def build_dataset(
         Processes of the local cluster (default: the CPU count, at most the number of scenes).
     progress_bar : bool, optional
         Show a progress bar (None: when stderr is a terminal).
+    nonfinite, negative : str
+        Value policies of light-field inputs (see :func:`process_scene`).
 
     Returns
     -------
@@ -585,6 +595,9 @@ def build_dataset(
     if workers is not None:  # before any folder is made or process started
         check_count("--workers", workers, high=max_workers(),
                     why=f"at most 4 per CPU core; this machine has {os.cpu_count() or 1}")
+    check_choice("nonfinite", nonfinite, ("raise", "zero", "clip"))
+    check_choice("negative", negative, ("raise", "clip", "keep"))
+    policies = {"nonfinite": nonfinite, "negative": negative}
     scenes = find_scenes(scenes_dir)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -601,14 +614,14 @@ def build_dataset(
         bar = progress(total=len(todo), desc="scenes", disable=None if progress_bar is None else not progress_bar)
         if scheduler == "synchronous":
             for scene in todo:
-                res = _run_scene(scene, str(out), method, profile)
+                res = _run_scene(scene, str(out), method, profile, policies)
                 if "error" in res:
                     failed[scene.name] = res["error"]
                 else:
                     processed.append(scene.name)
                 bar.update(1)
         else:
-            _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, failed)
+            _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, failed, policies)
         bar.close()
     rows = _write_manifest(out, scenes)
 
@@ -618,11 +631,11 @@ def build_dataset(
             "manifest": str(out / "manifest.json"), "rows": rows}
 
 
-def _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, failed) -> None:
+def _run_dask(todo, out, method, profile, scheduler, workers, bar, processed, failed, policies) -> None:
     from dask.distributed import as_completed
 
     with dask_client(scheduler=scheduler, workers=workers, jobs=len(todo)) as client:
-        futures = {client.submit(_run_scene, scene, str(out), method, profile, key=f"scene-{scene.name}-{i}",
+        futures = {client.submit(_run_scene, scene, str(out), method, profile, policies, key=f"scene-{scene.name}-{i}",
                                  pure=False): scene for i, scene in enumerate(todo)}
         for future in as_completed(futures):
             scene = futures[future]

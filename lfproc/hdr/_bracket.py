@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -313,6 +313,8 @@ def merge_files(
     the names used in messages (the CLI passes its options, e.g. ``{"profile": "--profile"}``).
     ``nonfinite`` and ``negative`` are the value policies of light-field inputs (:func:`read_bracket`).
     ``max_iter`` is the ML merge's fixed-point updates (the keyword ``n_iter`` is deprecated).
+    Parameters that have no effect only with the method chosen for these inputs (``max_iter`` with
+    ``debevec``...) are listed by :func:`unused_options` (``lfproc merge`` refuses them).
 
     Parameters
     ----------
@@ -386,6 +388,47 @@ def merge_files(
     merged = merged.replace(attrs=dict(merged.attrs) | {"sources": [str(p) for p in paths]})
     info["method"] = method
     return merged, info
+
+
+def unused_options(given: Collection[str], *, method: str, mapping: str) -> list[tuple[str, str]]:
+    """The parameters of ``given`` that :func:`merge_files` ignored: ``(name, why)`` pairs.
+
+    ``method`` and ``mapping`` are those of the merge (``info["method"]`` and the merged light field's
+    ``attrs["input_mapping"]``: ``"codes8"`` for 8-bit images, ``"input-variances"`` for inputs with
+    their own variances, ``"dn"`` for raw codes).
+
+    ``max_iter``: only the ML merges of sensor codes and of 8-bit images iterate (not ``debevec``,
+    not the ML merge of inputs with their own variances, which weighs by them in one pass).
+    ``random_state``: only the response recovery of 8-bit images samples pixels. ``isos``: the ML
+    merge of 8-bit images measures its noise on the bracket and scales by exposure time only.
+    ``profile``: ``debevec`` uses it only for raw (dn) inputs' levels; the ML merge of inputs with
+    their own variances does not use it (8-bit images are refused earlier, with their own message).
+
+    Examples
+    --------
+    >>> from lfproc.hdr._bracket import unused_options
+    >>> unused_options({"max_iter", "random_state"}, method="debevec", mapping="codes8")
+    [('max_iter', 'with method debevec (it does not iterate; ml weight updates only)')]
+    """
+    out = []
+    given = set(given)
+    codes8, own_variance, dn = mapping == "codes8", mapping == "input-variances", mapping == "dn"
+    iterates = method == "ml" and (codes8 or not own_variance)
+    if "max_iter" in given and not iterates:
+        out.append(("max_iter", "with method debevec (it does not iterate; ml weight updates only)"
+                    if method == "debevec" else "with method ml on inputs with their own variances (decoded "
+                    "captures: weighed by them in one pass, no updates)"))
+    if "random_state" in given and not codes8:
+        out.append(("random_state", f"on linear inputs (it seeds the camera-response recovery of 8-bit images; "
+                                    f"method {method} here needs none)"))
+    if "isos" in given and method == "ml" and codes8:
+        out.append(("isos", "with method ml on 8-bit images (their noise is measured on the bracket and the "
+                            "exposures scale by exposure time only)"))
+    if "profile" in given and not codes8 and ((method == "debevec" and not dn) or (method == "ml" and own_variance)):
+        out.append(("profile", "with method debevec on linear (non-raw) inputs (it gives raw inputs' black and "
+                               "white levels)" if method == "debevec" else
+                               "with method ml on inputs with their own variances (they set the weights)"))
+    return out
 
 
 # -- synthetic 8-bit brackets with a known answer --------------------------------------------------

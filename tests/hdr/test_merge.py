@@ -184,7 +184,8 @@ def test_frobisher_exif_and_response_recovery(frobisher):
         return np.array(out)
 
     ours, theirs = disagreement(g), disagreement(ref)
-    assert (ours < 0.9 * theirs).all(), (ours, theirs)  # measured: [0.078 0.096] against [0.107 0.127]
+    assert (ours < 0.9 * theirs).all(), (ours, theirs)  # measured: [0.083 0.095] against [0.107 0.127]
+    # (smoothness 3000; [0.078 0.096] with the former default 10)
 
 
 def test_frobisher_merge_radiance_ratios(frobisher):
@@ -476,12 +477,53 @@ def test_ml_8bit_frobisher_dark_deciles_agree_with_debevec_and_opencv(frobisher)
     assert sum(r is not None for r in vs_deb) >= 7  # measured: deciles 1-8 (0: 11 %, 9: 0 % well exposed twice)
     for q, (a, b) in enumerate(zip(vs_deb, vs_cv)):
         if a is not None:
-            assert abs(a - 1) < 0.10, (q, vs_deb)  # measured 0.997-1.003
-            assert abs(b - 1) < 0.20, (q, vs_cv)  # measured 0.86-1.01 (OpenCV's response differs, see above)
+            assert abs(a - 1) < 0.10, (q, vs_deb)  # measured 0.989-1.001 (0.997-1.003 with smoothness 10)
+            assert abs(b - 1) < 0.20, (q, vs_cv)  # measured 0.85-0.99 (OpenCV's response differs, see above)
     dark = {k: np.percentile(y, 10) / np.median(y) for k, y in lum.items()}
-    assert dark["ml"] == pytest.approx(dark["deb"], rel=0.10)  # measured 0.245 and 0.244
-    assert dark["ml"] == pytest.approx(dark["cv"], rel=0.15)  # measured 0.245 and 0.271
+    assert dark["ml"] == pytest.approx(dark["deb"], rel=0.10)  # measured 0.239 and 0.240
+    assert dark["ml"] == pytest.approx(dark["cv"], rel=0.15)  # measured 0.239 and 0.271
     assert np.isfinite(var).all() and (var > 0).all()
+
+
+def _ml_over_debevec_by_decile(ml, deb, codes) -> list[float]:
+    """Median ML / Debevec luminance (no gain: both are relative to g(128) = 0) in each decile of the
+    Debevec luminance taken among the pixels whose three channels two frames expose well (codes 8..247):
+    every decile holds a tenth of those pixels, the darkest included."""
+    w = np.array([0.2126, 0.7152, 0.0722])
+    y_ml, y_deb = ml @ w, deb @ w
+    two = ((codes >= 8) & (codes <= 247)).all(axis=-1).sum(axis=0) >= 2
+    edges = np.quantile(y_deb[two], np.linspace(0, 1, 11))
+    which = np.clip(np.searchsorted(edges, y_deb, side="right") - 1, 0, 9)
+    return [float(np.median(y_ml[two & (which == q)] / y_deb[two & (which == q)])) for q in range(10)]
+
+
+def test_ml_8bit_frobisher_every_decile_within_10_percent_of_debevec(frobisher):
+    """The done-when of issue 20 on the real 8-bit bracket: the ML merge within 10 % of the Debevec merge
+    in every brightness decile of the pixels at least two frames expose well, no numpy warning. The test
+    above takes deciles of all pixels and skips those under half exposed twice, so its darkest decile
+    (11 % exposed twice) was never compared; here the deciles are of the well-exposed pixels, and no gain
+    is fitted. The check itself must catch a dark bias: the ML merge 15 % too dark in the darkest fifth
+    of those pixels fails it."""
+    import warnings
+
+    from lfproc.hdr import merge_ml_codes8
+
+    paths, images = frobisher
+    t = [0.125, 1.0, 8.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no numpy RuntimeWarning may escape either merge
+        ml, _, _ = merge_ml_codes8(images, exposures_s=t, random_state=0)
+        deb, _ = merge_debevec(images, exposures_s=t, random_state=0)
+    ratios = _ml_over_debevec_by_decile(ml, deb, images)
+    # measured 0.989-1.000 (smoothness 3000); 0.997-1.004 with the former default 10
+    assert all(abs(r - 1) < 0.10 for r in ratios), ratios
+    assert all(abs(r - 1) < 0.03 for r in ratios[:3]), ratios  # the dark deciles: measured 0.989, 0.989, 0.993
+    # negative control: a merge 15 % too dark in the darkest fifth (Debevec luminance) is caught there
+    y_deb = deb @ np.array([0.2126, 0.7152, 0.0722])
+    two = ((images >= 8) & (images <= 247)).all(axis=-1).sum(axis=0) >= 2
+    dark = y_deb <= np.quantile(y_deb[two], 0.2)
+    biased = _ml_over_debevec_by_decile(np.where(dark[..., None], 0.85 * ml, ml), deb, images)
+    assert [abs(r - 1) >= 0.10 for r in biased] == [True, True] + [False] * 8, biased
 
 
 @pytest.mark.slow  # 16-exposure bracket
@@ -609,6 +651,46 @@ def test_cli_merge_refuses_options_without_effect(frobisher, tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and message in err, err
     assert not out.exists()
+
+
+def test_cli_merge_refuses_options_the_chosen_method_ignores(frobisher, tmp_path, capsys):
+    """Issue 20: options accepted but without effect in the mode the merge chose were silently ignored:
+    --iterations on 8-bit images (default method debevec) or on inputs with their own variances, --isos with
+    ml on 8-bit images, --seed on linear inputs (no response to recover), --profile with debevec on linear
+    (non-raw) inputs. Each is refused in one line naming the option and why; nothing is written."""
+    paths, _ = frobisher
+    jpegs = list(map(str, paths))
+    linear = []
+    radiance = np.geomspace(0.05, 20, 12 * 12 * 3, dtype=np.float32).reshape(1, 1, 12, 12, 3)
+    for i, t in enumerate([0.05, 0.5]):
+        linear.append(str(tmp_path / f"lin{i}.exr"))
+        write_lightfield(LightField(data=np.minimum(radiance * t, 1), saturation_level=1.0, exposure_s=t, iso=100),
+                         linear[-1])
+    with_var = []
+    for i, t in enumerate([0.05, 0.5]):
+        data = np.minimum(radiance * t, 1)
+        with_var.append(str(tmp_path / f"var{i}.exr"))
+        write_lightfield(LightField(data=data, variance=1e-4 + 1e-3 * data, saturation_level=1.0, exposure_s=t,
+                                    iso=100), with_var[-1])
+    out = tmp_path / "o.exr"
+    cases = (
+        (jpegs + ["--iterations", "3"], "--iterations: has no effect with method debevec"),
+        (with_var + ["--method", "ml", "--iterations", "3"], "--iterations: has no effect with method ml on inputs "
+                                                              "with their own variances"),
+        (jpegs + ["--method", "ml", "--isos", "100"], "--isos: has no effect with method ml on 8-bit images"),
+        (linear + ["--seed", "3"], "--seed: has no effect on linear inputs"),
+        (linear + ["--method", "debevec", "--profile", "illum"], "--profile: has no effect with method debevec on "
+                                                                 "linear (non-raw) inputs"),
+    )
+    for args, message in cases:
+        assert main(["merge", *args, "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith("lfproc merge: error: ") and message in err, (args, err)
+        assert "drop it" in err
+    assert not out.exists()
+    # the same options where they have an effect are accepted
+    assert main(["merge", *linear, "-o", str(out), "--method", "ml", "--profile", "illum", "--iterations", "3"]) == 0
+    capsys.readouterr()
 
 
 # -- issue 20 item 8: merge --response-out ----------------------------------------------------------------------
