@@ -184,7 +184,7 @@ def test_frobisher_exif_and_response_recovery(frobisher):
         return np.array(out)
 
     ours, theirs = disagreement(g), disagreement(ref)
-    assert (ours < 0.9 * theirs).all(), (ours, theirs)  # measured: [0.083 0.095] against [0.107 0.127]
+    assert (ours < 0.9 * theirs).all(), (ours, theirs)  # measured: [0.083 0.094] against [0.107 0.127]
     # (smoothness 3000; [0.078 0.096] with the former default 10)
 
 
@@ -385,7 +385,8 @@ def test_synthetic_8bit_bracket_lower_log_error_than_opencv(shared_data, name):
     err_deb = log_luminance_error(deb, hdr, mask=mask)
     ml, var, _ = merge_ml_codes8(codes, exposures_s=times, random_state=0)
     err_ml = log_luminance_error(ml, hdr, mask=mask)
-    assert err_deb < 0.95 * err_cv, (err_deb, err_cv)  # measured ratio 0.91 (courtyard), 0.73 (Desk)
+    assert err_deb < 0.95 * err_cv, (err_deb, err_cv)  # measured ratio 0.92 (courtyard), 0.72 (Desk)
+    # (smoothness 3000, 2026-11-25; 0.91 and 0.73 with the former default 10)
     assert err_ml < err_cv, (err_ml, err_cv)
     # the recovered response is close to the true one over the codes that carry data
     g_true = sim["response_g"]
@@ -532,9 +533,10 @@ def test_ml_8bit_noisy_16_exposure_bracket_is_not_biased_dark(shared_data):
     8-bit frames, 1/32 s to 1024 s. The ML merge weighted each sample by the variance of its own code,
     t^2 / V(z_i): samples that noise pushed down got the larger weights. Measured before the fix: 0.61-0.96
     of the Debevec merge per decile (darkest lowest), 0.95-1.22 of the truth after one gain, log error 0.21
-    (Debevec 0.20). With the variance taken at the estimate: 0.99-1.03 of the truth, log error 0.075. The
-    reference is the truth, not the Debevec merge: on so noisy a bracket Debevec's log-domain hat mean is
-    itself 0.88-1.30 of the truth (too bright in the shadows)."""
+    (Debevec 0.20). With the variance taken at the estimate: 0.99-1.04 of the truth, log error 0.075 (response
+    smoothness 3000; 0.99-1.03 with 10). The reference is the truth, not the Debevec merge: on so noisy a
+    bracket Debevec's log-domain hat mean is itself 0.88-1.29 of the truth after one gain (too bright in the
+    shadows; 0.88-1.30 with smoothness 10)."""
     from lfproc.hdr import simulate_ldr_bracket
     from lfproc.hdr import merge_ml_codes8
     from lfproc.metrics import log_luminance_error
@@ -555,10 +557,11 @@ def test_ml_8bit_noisy_16_exposure_bracket_is_not_biased_dark(shared_data):
     y = y / np.median(y[well] / truth[well])
     ratios = _decile_ratios(y, truth, codes)
     assert all(r is not None for r in ratios[:9])
-    assert all(abs(r - 1) < 0.10 for r in ratios if r is not None), ratios  # measured 0.988-1.034
+    # measured 0.988-1.037 (smoothness 3000; 0.988-1.034 with 10)
+    assert all(abs(r - 1) < 0.10 for r in ratios if r is not None), ratios
     err_ml = log_luminance_error(ml, hdr, mask=well)
     err_deb = log_luminance_error(deb, hdr, mask=well)
-    assert err_ml < 0.6 * err_deb, (err_ml, err_deb)  # measured 0.075 against 0.196
+    assert err_ml < 0.6 * err_deb, (err_ml, err_deb)  # measured 0.075 against 0.195 (0.196 with smoothness 10)
     assert np.isfinite(var).all() and (var > 0).all()
 
 
