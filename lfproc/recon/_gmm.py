@@ -44,6 +44,17 @@ resolves (the median of ``1 / (w r)``: without it, patches estimated near 0 in a
 noise floor outweigh their neighbours and print dark blobs), and the patch's reduced chi-square
 (a patch that fits its data badly, an occlusion edge, counts less).
 
+Refinement (consensus). The patches are estimated independently, each from its own ``8 x 8`` pixels of
+measurements, and their average is not one Lambertian light field: overlapping patches disagree,
+most where the views translate (at disparity 1 an ``E x E`` centre patch is seen through ``P x P``
+pixels of coded sums). A second pass re-estimates every patch from the first light field's samples
+in its window, all views, under the hypothesis it chose (:func:`_refine`): one step of expected
+patch log-likelihood (EPLL, Zoran and Weiss, ICCV 2011) with the sheared model, which makes the
+views of each patch agree. Pixels a shot saw saturated keep the larger of the two estimates: the
+prior pulls lights down. Measured on 128 x 160 crops of the three tune scenes (PU21-PSNR / detail
+ratio / energy of the brightest 1 %, means): 29.00 dB / 0.92 / 0.951 without the pass, 29.33 / 0.78
+/ 0.936 with it everywhere, 29.13 / 0.82 / 0.950 with the saturated pixels' larger estimate.
+
 The mask must be periodic (``mask_period``): every patch of a phase then shares ``A_d`` and
 ``A_d Sigma A_d^T`` (computed once per phase, disparity and component).
 """
@@ -84,6 +95,9 @@ SATURATION_MODES = ("bound", "ignore")
 SEARCHES = ("joint", "staged")
 #: Multipliers of the model's covariances tried per patch (a Gaussian scale mixture: smooth to high-contrast patches).
 DEFAULT_SCALES = (0.1, 1.0, 10.0)
+#: Relative standard deviation of the first estimate in the refinement pass (:func:`_refine`; 0: no refinement).
+#: Chosen on crops of the tune scenes (0.1, 0.3, 0.5, 1, 3): 1 gave the best PU21-PSNR and detail ratio.
+REFINE_SIGMA = 1.0
 #: Bayer weights of the patch level ``s``: the mean of R, G, G, B over the patch's P x P pixels.
 _LEVEL_WEIGHTS = np.array([0.25, 0.5, 0.25])
 _DATA = Path(__file__).resolve().parent / "data"
@@ -448,12 +462,7 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
                     data.T, data.W, g.ct[j[1]], g.cl[j[1]], p, phases[j[0]], log_pi, scales, first), cjobs)):
                 scores[sel] = out
                 bar.update(len(sel))
-            # the disparity: the evidence pooled over the neighbouring patches (one patch's evidence alone is
-            # noisy), read at the nearest search patch of every estimate patch
-            per_d = scores.reshape(len(g.ct), len(disparities), -1).max(axis=2)
-            pooled = _pool(per_d.reshape(len(g.ctops), len(g.clefts), -1), opt["pool_radius"])
-            iy, ix = _nearest(g.ctops, g.tops), _nearest(g.clefts, g.lefts)
-            chosen_d = pooled[iy[:, None], ix[None, :]].reshape(len(g.gt), -1).argmax(axis=1)
+            chosen_d = _chosen_disparity(scores, g, len(disparities), opt["pool_radius"])
 
             def solve(job):  # pass 2, estimate grid: the component and scale of largest evidence at that disparity
                 ph, sel = job
@@ -463,15 +472,20 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
                                  scales, alpha=alpha, norm=norm)
 
             # the estimates added in a fixed order (the output does not depend on the threads)
+            hyp, weight = np.zeros((len(g.gt), 3), np.intp), np.zeros(len(g.gt))
             for (ph, sel), est in zip(jobs, pool.map(solve, jobs)):
                 _add(acc, wacc, est, g.gt[sel], g.gl[sel], win)
+                hyp[sel], weight[sel] = est["hypothesis"], est["weight"]
                 bar.update(len(sel))
+            acc /= np.maximum(wacc, 1e-300)[None, None, :, :, None]
+            if REFINE_SIGMA:
+                acc = _refine(acc, g.gt, g.gl, (hyp, weight), model, shears_sparse, scales, win, pool, opt["chunk"],
+                              data.saturated.any(axis=0))
     finally:
         bar.close()
-    acc /= np.maximum(wacc, 1e-300)[None, None, :, :, None]
     record = {"lfproc_version": __version__, "method": "gmm", "model": repr(model), "model_attrs": model.attrs,
               **{k: opt[k] for k in ("stride", "search_stride", "disparities", "scales", "pool_radius")},
-              "search": search, "saturation": saturation,
+              "search": search, "saturation": saturation, "refine_sigma": REFINE_SIGMA,
               "disparity_counts": np.bincount(chosen_d, minlength=len(disparities)).tolist(), "patches": int(len(g.gt))}
     return _result(acc, capture, record, started)
 
@@ -508,6 +522,7 @@ class _Data(NamedTuple):
     T: np.ndarray  #: calibrated radiance (e-/s)
     W: np.ndarray  #: weights 1/std, 0 where unusable
     W_sat: np.ndarray  #: weights of saturated measurements used as bounds, 0 elsewhere
+    saturated: np.ndarray  #: saturated measurements (bounds or imputed), as 1.0, 0.0 elsewhere
 
 
 def _measurements(capture, saturation: str) -> _Data:
@@ -523,7 +538,7 @@ def _measurements(capture, saturation: str) -> _Data:
     if saturation == "bound":
         r = transmittance_map(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern, size=capture.size)
         T, W, W_sat = _impute_saturated(T, W, sat, W_sat, r)
-    return _Data(T, W, W_sat)
+    return _Data(T, W, W_sat, np.asarray(obs.saturated, np.float64))
 
 
 class _Grids:
@@ -541,13 +556,30 @@ class _Grids:
         self.phase, self.cphase = self.ops.index[:len(self.gt)], self.ops.index[len(self.gt):]
 
 
+def _chosen_disparity(scores: np.ndarray, g: _Grids, n_d: int, radius: int) -> np.ndarray:
+    """The disparity (index) of every estimate patch: the search grid's evidence pooled over the neighbouring
+    patches (one patch's evidence alone is noisy), read at the nearest search patch."""
+    per_d = scores.reshape(len(g.ct), n_d, -1).max(axis=2)
+    pooled = _pool(per_d.reshape(len(g.ctops), len(g.clefts), -1), radius)
+    iy, ix = _nearest(g.ctops, g.tops), _nearest(g.clefts, g.lefts)
+    return pooled[iy[:, None], ix[None, :]].reshape(len(g.gt), -1).argmax(axis=1)
+
+
 def _add(acc, wacc, est: dict, tops, lefts, win) -> None:
-    """Add patch estimates to the light field's sums ``acc`` and their weights ``window x patch weight`` to ``wacc``."""
+    """Add patch estimates to the light field's sums ``acc`` and their weights ``window x patch weight`` to ``wacc``.
+
+    Patches whose corners agree modulo the patch size do not overlap, so each such class is added
+    at once (fancy indexing without repeated indices); the classes in a fixed order.
+    """
     p = len(win)
-    for b, (t, l) in enumerate(zip(tops, lefts)):
-        q = win * est["weight"][b]
-        acc[:, :, t:t + p, l:l + p] += est["patches"][b] * q[None, None, :, :, None]
-        wacc[t:t + p, l:l + p] += q
+    ii = np.arange(p)
+    q = win[None] * est["weight"][:, None, None]  # (B, P, P)
+    cls = (tops % p) * p + lefts % p
+    for c in np.unique(cls):
+        b = np.flatnonzero(cls == c)
+        rows, cols = np.broadcast_arrays(tops[b, None, None] + ii[None, :, None], lefts[b, None, None] + ii[None, None, :])
+        acc[:, :, rows, cols] += est["patches"][b].transpose(1, 2, 0, 3, 4, 5) * q[b][None, None, ..., None]
+        wacc[rows, cols] += q[b]
 
 
 def _jobs(phase: np.ndarray, chunk: int) -> list:
@@ -733,7 +765,51 @@ def _estimate(data: _Data, tops, lefts, p, phase, chosen, shears_sparse, model, 
         # patch's usable measurements); else the patches estimated near 0 in a dark region outweigh the others
         noise = level[g] * _median_noise(wn[g], phase["rowsum"])
         weight[g] = 1.0 / ((top ** 2 + noise ** 2) * np.maximum(chi2, 1.0))
-    return {"patches": patches.reshape(b_n, *views, p, p, 3), "weight": weight}
+    j = chosen // n_s  # phase["hyp"] is ordered (disparity, component)
+    hypothesis = np.stack([j // model.components, j % model.components, chosen % n_s], axis=1)
+    return {"patches": patches.reshape(b_n, *views, p, p, 3), "weight": weight, "hypothesis": hypothesis}
+
+
+def _refine(first, tops, lefts, patch_info, model, shears_sparse, scales, win, pool, chunk, saturated) -> np.ndarray:
+    """Every estimate patch again, from the first light field's samples, under its chosen hypothesis (module notes).
+
+    The first light field's patch ``z`` (all views, divided by its level ``s``, the centre view's
+    as in :func:`_level`) is taken as data of relative standard deviation ``REFINE_SIGMA`` of the
+    patch's shear: ``c = (S^T S / r^2 + Sigma^-1)^-1 (S^T z / r^2 + Sigma^-1 mu)``, one ``E E 3``
+    square matrix per hypothesis (disparity, component, scale), and ``s S c`` is combined as in
+    the first pass (same window and weights, in a fixed order). Pixels a shot saw saturated
+    (``saturated``, ``(H, W)``) keep the larger of the two estimates: the prior pulls lights down.
+    """
+    hyp, weight = patch_info
+    nv, nu = first.shape[:2]
+    p = len(win)
+    r2 = REFINE_SIGMA ** 2
+    keys = [tuple(k) for k in np.unique(hyp, axis=0)]
+    mats = {}
+    for di, k, si in keys:
+        sh = shears_sparse[di]
+        ci = np.linalg.inv(scales[si] * model.covariances[k])
+        m = np.linalg.inv((sh.T @ sh).toarray() / r2 + ci)
+        mats[(di, k, si)] = (m / r2, m @ (ci @ model.means[k]))
+    windows = np.lib.stride_tricks.sliding_window_view(first, (p, p), axis=(2, 3))  # (V, U, H', W', 3, P, P)
+    jobs = [(key, members[start:start + chunk]) for key in keys
+            for members in [np.flatnonzero((hyp == np.array(key)).all(axis=1))]
+            for start in range(0, len(members), chunk)]
+
+    def solve(job):
+        (di, k, si), sel = job
+        z = windows[:, :, tops[sel], lefts[sel]].transpose(2, 0, 1, 4, 5, 3)  # (B, V, U, P, P, 3)
+        level = np.maximum(z[:, nv // 2, nu // 2].mean(axis=(1, 2)) @ _LEVEL_WEIGHTS, 1e-300)
+        m, offset = mats[(di, k, si)]
+        c = np.asarray((shears_sparse[di].T @ (z.reshape(len(sel), -1) / level[:, None]).T).T) @ m + offset[None]
+        x = np.asarray((shears_sparse[di] @ c.T).T) * level[:, None]
+        return {"patches": np.maximum(x, 0.0).reshape(len(sel), nv, nu, p, p, 3), "weight": weight[sel]}
+
+    acc, wacc = np.zeros_like(first), np.zeros(first.shape[2:4])
+    for (_, sel), est in zip(jobs, pool.map(solve, jobs)):
+        _add(acc, wacc, est, tops[sel], lefts[sel], win)
+    acc /= np.maximum(wacc, 1e-300)[None, None, :, :, None]
+    return np.where(saturated[None, None, :, :, None], np.maximum(first, acc), acc)
 
 
 def _median_noise(wn: np.ndarray, rowsum: np.ndarray) -> np.ndarray:
