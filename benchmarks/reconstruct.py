@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/reconstruct.py [--case lytro|paper|both] [--rows N] [--solver admm|fista|omp]
-                                     [--nonperiodic] [--max-iter N] [--tol T] [--threads N]
+                                     [--nonperiodic] [--max-iter N] [--tol T] [--threads N] [--save FILE]
 
 Cases (both from 2 shots, random ISO (100, 400, 800, 1600), medium noise, of a synthetic HDR
 scene, ``lfproc.synth`` ``layers``, 5 x 5 x 434 x 625 x 3):
@@ -26,7 +26,9 @@ and the process's max RSS, the solver's useful float32 work (two ``m x K`` GEMM 
 patch and iteration, plus the per-phase/per-patch ``Phi D`` and the final ``D a``) as a
 fraction of this machine's float32 GEMM rate measured in the same run (2048^3 SGEMM, best
 of 3): that fraction does not depend on how busy a shared machine is, the wall time does.
-PU21-PSNR against the ground truth is printed for the full-sensor runs.
+PU21-PSNR against the ground truth is printed for the full-sensor runs. ``--save FILE`` writes the
+reconstructed light field (``.npy``, float32; with ``--case both`` one file per case, the case's name
+added) to compare the outputs of two versions of the code.
 """
 
 from __future__ import annotations
@@ -120,6 +122,10 @@ def run_case(case: str, args, rate: float) -> None:
     print(f"  peak traced memory {peak / 2**30:.2f} GiB; max RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20:.2f} GiB")
     print(f"  useful float32 work {useful / 1e12:.2f} TFLOP at {achieved / 1e9:.1f} GFLOP/s = "
           f"{100 * achieved / rate:.0f} % of this machine's SGEMM rate")
+    if getattr(args, "save", None):
+        path = args.save if args.case != "both" else args.save.replace(".npy", "") + f"-{case}.npy"
+        np.save(path, np.asarray(lf.data, dtype=np.float32))
+        print(f"  saved the light field to {path}")
     if not args.rows:
         scores = evaluate(lf, truth)
         print(f"  PU21-PSNR {scores['pu21_psnr_db']:.2f} dB, PU21-SSIM {scores['pu21_ssim']:.4f}")
@@ -134,6 +140,7 @@ def main() -> None:
     parser.add_argument("--tol", type=float, default=None, help="paper: 3.0517578125e-05 (2^-15)")
     parser.add_argument("--threads", type=int, default=None, help="blocks solved at once (default: the CPUs)")
     parser.add_argument("--nonperiodic", action="store_true", help="the paper's non-periodic random mask")
+    parser.add_argument("--save", default=None, help="write the reconstructed light field to this .npy file")
     args = parser.parse_args()
     os.environ.setdefault("LFPROC_PROGRESS", "1")
     rate = gemm_rate()
