@@ -25,7 +25,9 @@ Printed: wall time, patches/s, the peak traced memory (tracemalloc: numpy buffer
 and the process's max RSS, the solver's useful float32 work (two ``m x K`` GEMM products per
 patch and iteration, plus the per-phase/per-patch ``Phi D`` and the final ``D a``) as a
 fraction of this machine's float32 GEMM rate measured in the same run (2048^3 SGEMM, best
-of 3): that fraction does not depend on how busy a shared machine is, the wall time does.
+of 3, at the start and again right after each case; the fraction is printed against the rate at the
+start, the rate after the case and their mean): that fraction depends much less on how busy a shared
+machine is than the wall time, but not at all only if the load stayed the same during the run.
 PU21-PSNR against the ground truth is printed for the full-sensor runs. ``--save FILE`` writes the
 reconstructed light field (``.npy``, float32; with ``--case both`` one file per case, the case's name
 added) to compare the outputs of two versions of the code.
@@ -122,6 +124,9 @@ def run_case(case: str, args, rate: float) -> None:
     print(f"  peak traced memory {peak / 2**30:.2f} GiB; max RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20:.2f} GiB")
     print(f"  useful float32 work {useful / 1e12:.2f} TFLOP at {achieved / 1e9:.1f} GFLOP/s = "
           f"{100 * achieved / rate:.0f} % of this machine's SGEMM rate")
+    end_rate = gemm_rate()  # the load of a shared machine changes during a run: the fraction against both
+    print(f"  SGEMM rate right after this case {end_rate / 1e9:.1f} GFLOP/s: {100 * achieved / end_rate:.0f} % of it, "
+          f"{200 * achieved / (rate + end_rate):.0f} % of the mean of the two")
     if getattr(args, "save", None):
         path = args.save if args.case != "both" else args.save.replace(".npy", "") + f"-{case}.npy"
         np.save(path, np.asarray(lf.data, dtype=np.float32))
