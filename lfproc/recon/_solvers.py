@@ -26,6 +26,7 @@ runs every block on one BLAS thread).
 from __future__ import annotations
 
 import numpy as np
+from scipy import sparse
 from scipy.linalg.blas import saxpy, sgemm
 
 __all__ = ["SharedOperator", "BatchOperator", "admm", "fista", "omp", "SOLVERS"]
@@ -97,6 +98,12 @@ class SharedOperator:
         """``A v_b`` for every column: ``(K, B) -> (m, B)`` (one GEMM, the column layout of :func:`admm`)."""
         return self.A @ V
 
+    def fwd_t_sparse(self, Z: np.ndarray) -> np.ndarray:
+        """:meth:`fwd_t` of a ``Z`` with few non-zeros: a sparse product (``m`` multiply-adds per non-zero)."""
+        k_idx, b_idx = np.nonzero(Z)
+        zs = sparse.csr_matrix((Z[k_idx, b_idx], (b_idx, k_idx)), shape=Z.shape[::-1])  # Z^T
+        return np.ascontiguousarray(np.asarray(zs @ self.AT, dtype=np.float32).T)
+
     def adj_t_add(self, E: np.ndarray, out: np.ndarray) -> None:
         """``out += A^T e_b`` for every column ``(m, B)`` of ``E``; ``out`` ``(K, B)`` C-contiguous float32.
 
@@ -144,6 +151,9 @@ class BatchOperator:
     def fwd_t(self, V: np.ndarray) -> np.ndarray:
         # stacked matmul (BLAS per patch): 15x faster than einsum("bmk,kb->mb") here (measured)
         return np.matmul(self.A, np.ascontiguousarray(V.T)[:, :, None])[:, :, 0].T
+
+    def fwd_t_sparse(self, Z: np.ndarray) -> np.ndarray:
+        return self.fwd_t(Z)
 
     def adj_t_add(self, E: np.ndarray, out: np.ndarray) -> None:
         out += np.matmul(np.ascontiguousarray(E.T)[:, None, :], self.A)[:, 0, :].T
@@ -224,9 +234,6 @@ class _Factor:
             return self
         return _Factor(self.beta[keep], self.N[keep], self.G[keep])
 
-
-#: Iterations between two exact ``A x`` of :func:`_admm_chunk` (a multiple of :data:`_BALANCE_EVERY`).
-_REFRESH_EVERY = 5
 
 #: Over-relaxation of :func:`admm` (Boyd et al. 2011, section 3.4.3: 1.5-1.8 speeds convergence).
 ADMM_ALPHA = 1.6
@@ -328,11 +335,9 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
     (``A x_new = A x - alpha A clip(x) + alpha G e``, ``G = A A^T``). The GEMMs are then
     ``A clip(x)`` and ``x += A^T e``, and the ``(K, B)`` passes besides them are one ``clip`` and one
     ``saxpy`` per iteration (five reads and writes of the state instead of eleven). ``A x`` is
-    recomputed every :data:`_REFRESH_EVERY` iterations (one more GEMM, not counted as useful work
-    by benchmarks/reconstruct.py): its running update alone collects rounding errors that nothing
-    damps (measured on the Lytro-size benchmark: twice the difference from the two-state form
-    that a 1-ulp change of the data makes, at 100 iterations without a refresh). A sparse ``A z``
-    (``z`` is ~1 % non-zero) was slower: ``np.nonzero`` of the state costs as much as the GEMM.
+    recomputed at every test (:data:`_BALANCE_EVERY` iterations) as ``A z + A c`` with the sparse
+    ``z`` (a sparse product, ``m`` flops per non-zero): its running update alone collects rounding
+    errors that nothing damps (measured: 30x larger differences from the two-state form).
     """
     b_n, m = w.shape
     k_n = op.shape[1]
@@ -366,7 +371,7 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
     act = _Active(b_n, k_n)
     out_t = np.zeros((k_n, b_n), dtype=np.float32)
     fresh = True  # c is clip(x) already (at the start and after a test)
-    rescale = None  # a change of units at the last test: applied to A x once A c is known
+    pz = None  # A z at the last test: A x = A z + A c afresh once A c is known
     pending = 0
     it = 0
     for it in range(1, max_iter + 1):
@@ -375,9 +380,9 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
             _clip_state(x, c, lsq_cols)
         fresh = False
         ac = op.fwd_t(c)  # A u
-        if rescale is not None:  # x became f (x - c) + c at the last test (c unchanged): A x likewise
-            p = rescale * (p - ac) + ac
-            rescale = None
+        if pz is not None:
+            p = pz + ac
+            pz = None
         t = p - 2 * ac
         t *= unit  # A v, v = z - u = x - 2 c
         e = fac.times(fac.N, (s - d) - t)  # the a step: a = v + A^T e
@@ -394,11 +399,9 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
         ah += d
         s = (w2y + rb * ah) / denom  # argmin 1/2 |w (s - y)|^2 + rho beta / 2 |s - ah|^2
         d = ah - s
-        refresh = check and it % _REFRESH_EVERY == 0
-        if not refresh:
+        if not check:
             p -= alpha * ac
             p += fac.times(fac.G, e_k)
-        if not check:
             continue
         _clip_state(x, c, lsq_cols)  # u_new; z_new = x - c
         fresh = True
@@ -416,6 +419,7 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
         pending += int(done.sum())
         if it == max_iter:
             break
+        pz = op.fwd_t_sparse(x_old)  # A z: z has few non-zeros (~1 % of K for the default dictionary)
         if balance:  # residual balancing (Boyd et al. 2011, 3.4.1); the factor does not depend on rho
             ds = s - s_old
             dual = (rb[0] / beta[0]) * np.sqrt(change * change + beta[0] * _sumsq(ds))
@@ -430,10 +434,8 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
                 # z / kappa with the new kappa: z f; u / kappa is unchanged (0 with threshold 0), and so is c
                 np.multiply(x_old, f_unit, out=x)
                 x += c
-                rescale = None if refresh else f_unit
+                pz *= f_unit
                 d = d / f
-        if refresh:
-            p = op.fwd_t(x)  # A x afresh (notes above)
         if pending and pending >= max(1, compact_fraction * len(act.rows)):
             out_t[:, act.rows[done]] = (x[:, done] - c[:, done]) * unit[:, done]
             act.iters[act.rows[done]] = it
@@ -442,10 +444,8 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
             pending = 0
             if not keep.any():
                 return out_t.T, act.iters
-            x, c, p, s, d, w2, w2y, denom = (np.ascontiguousarray(a[:, keep]) for a in (x, c, p, s, d, w2, w2y, denom))
+            x, c, pz, s, d, w2, w2y, denom = (np.ascontiguousarray(a[:, keep]) for a in (x, c, pz, s, d, w2, w2y, denom))
             beta, rb, unit, lsq, atol = beta[:, keep], rb[:, keep], unit[:, keep], lsq[:, keep], atol[keep]
-            if rescale is not None:
-                rescale = rescale[:, keep]
             lsq_cols = np.flatnonzero(lsq[0])
             x_old, c_old = np.empty_like(x), np.empty_like(x)
             op = op.subset(keep)

@@ -129,26 +129,30 @@ def _problem(seed, m=64, k=256, b=40):
 @pytest.mark.parametrize("operator", ["shared", "batch"])
 def test_one_state_admm_equals_the_two_state_form(monkeypatch, tol, operator):
     """Residual balancing (rho changes of the units), compaction (tol 1e-3: patches leave at different
-    iterations), a threshold-0 column and a zero code. 200 iterations: the same iteration counts and codes
-    equal to float32 rounding, within 10x of how far the two-state form's codes move when the data move by one
-    float32 ulp (the forms round differently at every iteration, not once). Stopped at tol 1e-3: the same
-    iteration counts but for a few tests at the edge, passed sooner or later, and codes equal to the tolerance."""
+    iterations), a threshold-0 column and a zero code: iteration counts equal, codes equal to float32 rounding:
+    within 10x of how far the two-state form's codes move when the data move by one float32 ulp (the forms
+    round differently at every iteration, not once; measured 2.5-5.5x in the median, 0.5-3x at the worst patch)."""
     A, w, y, mu = _problem(11)
     op = SharedOperator(A) if operator == "shared" else BatchOperator(np.stack([A] * len(w)))
     z_new, it_new = admm(op, w, y, mu, max_iter=200, tol=tol)
     monkeypatch.setattr(_solvers, "_admm_chunk", _two_state_chunk)
     z_old, it_old = admm(op, w, y, mu, max_iter=200, tol=tol)
-    scale = np.abs(z_old).max(axis=1) + 1e-30
-    rel = np.abs(z_new - z_old).max(axis=1) / scale  # per patch, relative to its largest coefficient
-    assert it_new[4] == it_old[4] == 0 and (np.delete(it_new, 4) < 200).any() == (tol > 0)
-    if tol > 0:  # a stopping test at the edge may pass sooner or later: codes then agree to the tolerance
-        assert (it_new == it_old).mean() >= 0.85 and (rel < 10 * tol).all(), (it_new - it_old, rel)
-    else:
-        assert (it_new == it_old).all()
-        y_ulp = y * (1 + np.float32(2.0**-23) * np.random.default_rng(0).choice([-1, 1], y.shape)).astype(np.float32)
-        z_ulp, _ = admm(op, w, y_ulp, mu, max_iter=200, tol=tol)
-        rel_ulp = np.abs(z_ulp - z_old).max(axis=1) / scale
-        assert rel.max() < max(10 * rel_ulp.max(), 1e-6), (rel.max(), rel_ulp.max())
-        assert np.median(rel) < max(10 * np.median(rel_ulp), 1e-6), (np.median(rel), np.median(rel_ulp))
+    assert (it_new == it_old).all() and it_new[4] == 0 and (np.delete(it_new, 4) < 200).any() == (tol > 0)
+    scale = np.abs(z_old).max(axis=1, keepdims=True) + 1e-30
+    y_ulp = y * (1 + np.float32(2.0**-23) * np.random.default_rng(0).choice([-1, 1], y.shape)).astype(np.float32)
+    z_ulp, _ = admm(op, w, y_ulp, mu, max_iter=200, tol=tol)
+    rel = np.abs(z_new - z_old).max(axis=1) / scale[:, 0]  # per patch, relative to its largest coefficient
+    rel_ulp = np.abs(z_ulp - z_old).max(axis=1) / scale[:, 0]
+    assert rel.max() < max(10 * rel_ulp.max(), 1e-6), (rel.max(), rel_ulp.max())
+    assert np.median(rel) < max(10 * np.median(rel_ulp), 1e-6), (np.median(rel), np.median(rel_ulp))
     assert not z_new[4].any()
 
+
+def test_the_sparse_product_equals_the_dense_one():
+    rng = np.random.default_rng(2)
+    A = rng.standard_normal((32, 300)).astype(np.float32)
+    Z = np.where(rng.random((300, 17)) < 0.02, rng.standard_normal((300, 17)), 0).astype(np.float32)
+    Z[:, 3] = 0  # an empty column
+    op = SharedOperator(A)
+    np.testing.assert_allclose(op.fwd_t_sparse(Z), op.fwd_t(Z), rtol=1e-5, atol=1e-5 * np.abs(op.fwd_t(Z)).max())
+    assert op.fwd_t_sparse(Z).flags.c_contiguous and op.fwd_t_sparse(Z).dtype == np.float32
