@@ -26,7 +26,6 @@ runs every block on one BLAS thread).
 from __future__ import annotations
 
 import numpy as np
-from scipy import sparse
 from scipy.linalg.blas import saxpy, sgemm
 
 __all__ = ["SharedOperator", "BatchOperator", "admm", "fista", "omp", "SOLVERS"]
@@ -98,12 +97,6 @@ class SharedOperator:
         """``A v_b`` for every column: ``(K, B) -> (m, B)`` (one GEMM, the column layout of :func:`admm`)."""
         return self.A @ V
 
-    def fwd_t_sparse(self, Z: np.ndarray) -> np.ndarray:
-        """:meth:`fwd_t` of a ``Z`` with few non-zeros: a sparse product (``m`` multiply-adds per non-zero)."""
-        k_idx, b_idx = np.nonzero(Z)
-        zs = sparse.csr_matrix((Z[k_idx, b_idx], (b_idx, k_idx)), shape=Z.shape[::-1])  # Z^T
-        return np.ascontiguousarray(np.asarray(zs @ self.AT, dtype=np.float32).T)
-
     def adj_t_add(self, E: np.ndarray, out: np.ndarray) -> None:
         """``out += A^T e_b`` for every column ``(m, B)`` of ``E``; ``out`` ``(K, B)`` C-contiguous float32.
 
@@ -151,9 +144,6 @@ class BatchOperator:
     def fwd_t(self, V: np.ndarray) -> np.ndarray:
         # stacked matmul (BLAS per patch): 15x faster than einsum("bmk,kb->mb") here (measured)
         return np.matmul(self.A, np.ascontiguousarray(V.T)[:, :, None])[:, :, 0].T
-
-    def fwd_t_sparse(self, Z: np.ndarray) -> np.ndarray:
-        return self.fwd_t(Z)
 
     def adj_t_add(self, E: np.ndarray, out: np.ndarray) -> None:
         out += np.matmul(np.ascontiguousarray(E.T)[:, None, :], self.A)[:, 0, :].T
@@ -266,8 +256,8 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
     Over-relaxation ``alpha`` (default 1.6) replaces ``a`` by ``alpha a + (1 - alpha) z_old``
     in the ``z``, ``s`` and dual steps. State arrays are kept as ``(K, B)`` columns, in units
     of each patch's threshold, and updated in place (``out=``, ``saxpy``, ``sgemm`` adding into
-    its output): one ``(K, B)`` state ``x = z + u`` (:func:`_admm_chunk`), so two element-wise
-    passes per iteration besides the two GEMMs; patches run in chunks that keep them small. A patch stops when ``||z_k - z_{k-1}||`` and its primal residual
+    its output): four element-wise passes per iteration besides the two GEMMs; patches run in
+    chunks that keep them small. A patch stops when ``||z_k - z_{k-1}||`` and its primal residual
     are at most ``tol ||z_k|| + eps_abs`` (relative plus absolute, Boyd et al. 2011, section
     3.3.1; ``eps_abs`` is ``0.01 tol`` times the patch's code scale, ``||W y||`` over the rms norm
     of the columns of ``W A``), checked every 5 iterations; converged patches leave the batch.
@@ -328,16 +318,6 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
     In those units the soft threshold is ``clip`` with scalar bounds (one fast pass; numpy's
     ``clip`` with per-column bounds is 10x slower, measured), ``kappa`` folds into the
     ``(m, B)`` side of the GEMMs, and a change of ``rho`` rescales ``z`` only.
-
-    One ``(K, B)`` state instead of two: ``x = z + u`` (the argument of the last soft threshold), so
-    that ``u = clip(x)``, ``z = x - clip(x)``; the next ``x`` is ``x - alpha clip(x) + alpha A^T e``
-    and the ``a`` step needs ``A v = A x - 2 A clip(x)``, with ``A x`` carried in ``(m, B)``
-    (``A x_new = A x - alpha A clip(x) + alpha G e``, ``G = A A^T``). The GEMMs are then
-    ``A clip(x)`` and ``x += A^T e``, and the ``(K, B)`` passes besides them are one ``clip`` and one
-    ``saxpy`` per iteration (five reads and writes of the state instead of eleven). ``A x`` is
-    recomputed at every test (:data:`_BALANCE_EVERY` iterations) as ``A z + A c`` with the sparse
-    ``z`` (a sparse product, ``m`` flops per non-zero): its running update alone collects rounding
-    errors that nothing damps (measured: 30x larger differences from the two-state form).
     """
     b_n, m = w.shape
     k_n = op.shape[1]
@@ -360,66 +340,50 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
     unit = np.where(lsq, ref, kappa).astype(np.float32)
     lsq_cols = np.flatnonzero(lsq[0])
     denom = w2 + rb
-    x = np.zeros((k_n, b_n), dtype=np.float32)  # (z + u) / kappa
-    c = np.zeros_like(x)  # clip(x): u / kappa (0 in a threshold-0 column)
-    x_old = np.empty_like(x)  # the tests' scratch
-    c_old = np.empty_like(x)
-    p = np.zeros((m, b_n), dtype=np.float32)  # A x
+    z = np.zeros((k_n, b_n), dtype=np.float32)  # z / kappa
+    u = np.zeros_like(z)  # u / kappa (scaled dual of a = z)
+    v = np.empty_like(z)
     s = np.zeros((m, b_n), dtype=np.float32)  # the noiseless measurements A a
     d = np.zeros_like(s)  # scaled dual of s = A a
     alpha = np.float32(alpha)
     act = _Active(b_n, k_n)
     out_t = np.zeros((k_n, b_n), dtype=np.float32)
-    fresh = True  # c is clip(x) already (at the start and after a test)
-    pz = None  # A z at the last test: A x = A z + A c afresh once A c is known
     pending = 0
     it = 0
     for it in range(1, max_iter + 1):
         check = it % _BALANCE_EVERY == 0 or it == max_iter
-        if not fresh:
-            _clip_state(x, c, lsq_cols)
-        fresh = False
-        ac = op.fwd_t(c)  # A u
-        if pz is not None:
-            p = pz + ac
-            pz = None
-        t = p - 2 * ac
-        t *= unit  # A v, v = z - u = x - 2 c
+        np.subtract(z, u, out=v)  # v = z - u
+        t = op.fwd_t(v)
+        t *= unit  # A v
         e = fac.times(fac.N, (s - d) - t)  # the a step: a = v + A^T e
         a_m = t + fac.times(fac.G, e)  # A a
         if check:
-            np.copyto(x_old, x)
-            np.copyto(c_old, c)
-            d_old, s_old = d, s
-        # x_new = alpha a + (1 - alpha) z + u = x - alpha c + alpha A^T e
-        _axpy(c, x, -alpha)
-        e_k = (alpha / unit) * e
-        op.adj_t_add(e_k, x)
+            z_old, u_old, d_old, s_old = z.copy(), u.copy(), d, s
+        # x = alpha a + (1 - alpha) z + u = v + (2 - alpha) u + alpha A^T e, built in v
+        _axpy(u, v, 2 - alpha)
+        op.adj_t_add((alpha / unit) * e, v)
+        np.clip(v, -1.0, 1.0, out=u)  # u_new = x - soft(x, kappa) = clip(x, -kappa, kappa)
+        if lsq_cols.size:
+            u[:, lsq_cols] = 0.0  # threshold 0
+        np.subtract(v, u, out=z)  # z_new = soft(x, kappa)
         ah = alpha * a_m + (1 - alpha) * s  # relaxed A a
         ah += d
         s = (w2y + rb * ah) / denom  # argmin 1/2 |w (s - y)|^2 + rho beta / 2 |s - ah|^2
         d = ah - s
         if not check:
-            p -= alpha * ac
-            p += fac.times(fac.G, e_k)
             continue
-        _clip_state(x, c, lsq_cols)  # u_new; z_new = x - c
-        fresh = True
         k_row = unit[0].astype(np.float64)
-        np.subtract(c, c_old, out=c_old)  # u_new - u_old
-        np.subtract(x, x_old, out=x_old)
-        x_old -= c_old  # z_new - z_old
-        change = k_row * np.sqrt(_sumsq(x_old))
+        np.subtract(z, z_old, out=z_old)
+        change = k_row * np.sqrt(_sumsq(z_old))
+        np.subtract(u, u_old, out=u_old)
         dd = d - d_old  # relaxed A a - s
-        primal = np.sqrt(k_row**2 * _sumsq(c_old) + beta[0] * _sumsq(dd))
-        np.subtract(x, c, out=x_old)  # z_new
+        primal = np.sqrt(k_row**2 * _sumsq(u_old) + beta[0] * _sumsq(dd))
         # relative plus absolute (Boyd et al. 2011, section 3.3.1): a code near 0 stops too
-        eps = tol * k_row * np.sqrt(_sumsq(x_old)) + atol
+        eps = tol * k_row * np.sqrt(_sumsq(z)) + atol
         done = (change <= eps) & (primal <= eps)
         pending += int(done.sum())
         if it == max_iter:
             break
-        pz = op.fwd_t_sparse(x_old)  # A z: z has few non-zeros (~1 % of K for the default dictionary)
         if balance:  # residual balancing (Boyd et al. 2011, 3.4.1); the factor does not depend on rho
             ds = s - s_old
             dual = (rb[0] / beta[0]) * np.sqrt(change * change + beta[0] * _sumsq(ds))
@@ -431,37 +395,25 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
                 f_unit = np.where(lsq, np.float32(1.0), f)  # a threshold-0 column keeps its units
                 unit = unit / f_unit
                 denom = w2 + rb
-                # z / kappa with the new kappa: z f; u / kappa is unchanged (0 with threshold 0), and so is c
-                np.multiply(x_old, f_unit, out=x)
-                x += c
-                pz *= f_unit
+                z *= f_unit  # z / kappa with the new kappa; u / kappa is unchanged (0 with threshold 0)
                 d = d / f
         if pending and pending >= max(1, compact_fraction * len(act.rows)):
-            out_t[:, act.rows[done]] = (x[:, done] - c[:, done]) * unit[:, done]
+            out_t[:, act.rows[done]] = z[:, done] * unit[:, done]
             act.iters[act.rows[done]] = it
             keep = ~done
             act.rows = act.rows[keep]
             pending = 0
             if not keep.any():
                 return out_t.T, act.iters
-            x, c, pz, s, d, w2, w2y, denom = (np.ascontiguousarray(a[:, keep]) for a in (x, c, pz, s, d, w2, w2y, denom))
+            z, u, s, d, w2, w2y, denom = (np.ascontiguousarray(x[:, keep]) for x in (z, u, s, d, w2, w2y, denom))
             beta, rb, unit, lsq, atol = beta[:, keep], rb[:, keep], unit[:, keep], lsq[:, keep], atol[keep]
             lsq_cols = np.flatnonzero(lsq[0])
-            x_old, c_old = np.empty_like(x), np.empty_like(x)
+            v = np.empty_like(z)
             op = op.subset(keep)
             fac = fac.subset(keep)
-    np.subtract(x, c, out=x)
-    x *= unit
-    out_t[:, act.rows] = x
+    out_t[:, act.rows] = z * unit
     act.iters[act.rows] = it
     return np.ascontiguousarray(out_t.T), act.iters
-
-
-def _clip_state(x: np.ndarray, c: np.ndarray, lsq_cols: np.ndarray) -> None:
-    """``c = clip(x, -1, 1)``: ``u`` of :func:`_admm_chunk`, 0 in the columns of threshold 0."""
-    np.clip(x, -1.0, 1.0, out=c)
-    if lsq_cols.size:
-        c[:, lsq_cols] = 0.0
 
 
 def _sumsq(x: np.ndarray) -> np.ndarray:
