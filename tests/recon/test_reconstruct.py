@@ -720,3 +720,25 @@ def test_admm_norms_do_not_overflow_for_large_data():
     zb, itb = admm(op, w, y * np.float32(1e20), 0.5e20, max_iter=500, tol=1e-5)
     assert np.isfinite(zb).all()
     np.testing.assert_allclose(zb / 1e20, z1, rtol=1e-3, atol=1e-4 * np.abs(z1).max())
+
+
+def test_shared_adjoint_adds_the_same_sums_as_blas_with_beta_1():
+    """SharedOperator.adj_t_add is numpy's GEMM into a scratch array plus one add (numpy releases the GIL; scipy's
+    f2py sgemm, which added into its output, held it for the whole product): the same float32 sums (to the bit
+    with the OpenBLAS of numpy's and scipy's wheels on the development machine; to rounding here, as the two
+    libraries may pick different kernels elsewhere)."""
+    from scipy.linalg.blas import sgemm
+
+    from lfproc.recon._solvers import SharedOperator
+
+    rng = np.random.default_rng(4)
+    for m, k, b in ((128, 2560, 117), (60, 120, 5)):
+        op = SharedOperator(rng.standard_normal((m, k)).astype(np.float32))
+        E = rng.standard_normal((m, b)).astype(np.float32)
+        out = rng.standard_normal((k, b)).astype(np.float32)
+        ref = sgemm(1.0, E.T, op.AT.T, beta=1.0, c=out.T.copy(order="F")).T
+        op.adj_t_add(E, out)
+        np.testing.assert_allclose(out, ref, rtol=0, atol=1e-6 * np.abs(ref).max())
+        scratch = np.empty_like(out)
+        op.adj_t_add(E, out, scratch)
+        np.testing.assert_array_equal(scratch, op.AT @ E)
