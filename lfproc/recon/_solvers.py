@@ -261,8 +261,9 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
 
     Over-relaxation ``alpha`` (default 1.6) replaces ``a`` by ``alpha a + (1 - alpha) z_old``
     in the ``z``, ``s`` and dual steps. State arrays are kept as ``(K, B)`` columns, in units
-    of each patch's threshold, and updated in place (``out=``, ``saxpy``, the adjoint GEMM into a
-    scratch array then added): five element-wise passes per iteration besides the two GEMMs; patches run in
+    of each patch's threshold, and updated in place (``out=``, the adjoint GEMM into a scratch array
+    then added; every step in numpy, which releases the GIL): six element-wise passes per iteration
+    besides the two GEMMs; patches run in
     chunks that keep them small. A patch stops when ``||z_k - z_{k-1}||`` and its primal residual
     are at most ``tol ||z_k|| + eps_abs`` (relative plus absolute, Boyd et al. 2011, section
     3.3.1; ``eps_abs`` is ``0.01 tol`` times the patch's code scale, ``||W y||`` over the rms norm
@@ -367,7 +368,7 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
         if check:
             z_old, u_old, d_old, s_old = z.copy(), u.copy(), d, s
         # x = alpha a + (1 - alpha) z + u = v + (2 - alpha) u + alpha A^T e, built in v
-        _axpy(u, v, 2 - alpha)
+        _axpy(u, v, 2 - alpha, g)  # g: scratch, then A^T e
         op.adj_t_add((alpha / unit) * e, v, g)
         np.clip(v, -1.0, 1.0, out=u)  # u_new = x - soft(x, kappa) = clip(x, -kappa, kappa)
         if lsq_cols.size:
@@ -431,10 +432,15 @@ def _sumsq(x: np.ndarray) -> np.ndarray:
     return out.astype(np.float64)
 
 
-def _axpy(x: np.ndarray, y: np.ndarray, a) -> None:
-    """``y += a x`` in place, one pass (BLAS ``saxpy``; numpy needs a temporary or two passes)."""
+def _axpy(x: np.ndarray, y: np.ndarray, a, scratch: np.ndarray | None = None) -> None:
+    """``y += a x`` in place: with a ``scratch`` array like ``x``, numpy's multiply into it and one add (two passes;
+    numpy releases the GIL), else BLAS ``saxpy`` (one pass, but scipy's f2py wrapper holds the GIL throughout:
+    :meth:`SharedOperator.adj_t_add`)."""
     if a == 1:
         y += x
+    elif scratch is not None:
+        np.multiply(x, np.float32(a), out=scratch)
+        y += scratch
     elif x.dtype == np.float32 and x.flags.c_contiguous and y.flags.c_contiguous:
         saxpy(x.reshape(-1), y.reshape(-1), a=float(a))
     else:

@@ -742,3 +742,17 @@ def test_shared_adjoint_adds_the_same_sums_as_blas_with_beta_1():
         scratch = np.empty_like(out)
         op.adj_t_add(E, out, scratch)
         np.testing.assert_array_equal(scratch, op.AT @ E)
+
+
+def test_axpy_with_a_scratch_array_equals_saxpy_to_rounding():
+    """admm's y += a x runs in numpy with a scratch array (GIL released; saxpy's f2py wrapper holds it)."""
+    from lfproc.recon._solvers import _axpy
+
+    rng = np.random.default_rng(5)
+    x = rng.standard_normal((300, 7)).astype(np.float32)
+    y0 = rng.standard_normal((300, 7)).astype(np.float32)
+    y_blas, y_np, scratch = y0.copy(), y0.copy(), np.empty_like(x)
+    _axpy(x, y_blas, 0.4)
+    _axpy(x, y_np, 0.4, scratch)
+    np.testing.assert_allclose(y_np, y0 + np.float32(0.4) * x, rtol=0, atol=0)
+    np.testing.assert_allclose(y_np, y_blas, rtol=0, atol=4 * np.finfo(np.float32).eps * np.abs(y_blas).max())
