@@ -756,3 +756,25 @@ def test_axpy_with_a_scratch_array_equals_saxpy_to_rounding():
     _axpy(x, y_np, 0.4, scratch)
     np.testing.assert_allclose(y_np, y0 + np.float32(0.4) * x, rtol=0, atol=0)
     np.testing.assert_allclose(y_np, y_blas, rtol=0, atol=4 * np.finfo(np.float32).eps * np.abs(y_blas).max())
+
+
+@pytest.mark.parametrize("stride", [4, 3, 8, 5])
+def test_overlap_add_groups_do_not_overlap_and_cover_every_used_patch(stride):
+    """_solve_block_here adds a block's estimates one group of non-overlapping patches at a time (an indexed add
+    each; it was one Python step per patch, holding the GIL): every patch with an estimate in exactly one group,
+    no two patches of a group sharing a pixel, the last row and column (flush with the border) included."""
+    from lfproc.recon._reconstruct import _disjoint_groups
+
+    size = 8
+    tops, lefts = patch_grid((37, 50), size, stride)
+    gt, gl = np.repeat(tops, len(lefts)), np.tile(lefts, len(tops))
+    use = np.random.default_rng(stride).random(len(gt)) > 0.1
+    groups = _disjoint_groups(gt, gl, use, size, stride)
+    listed = np.concatenate(groups)
+    assert sorted(listed) == list(np.flatnonzero(use))
+    for g in groups:
+        cover = np.zeros((37, 50), dtype=int)
+        for b in g:
+            cover[gt[b]:gt[b] + size, gl[b]:gl[b] + size] += 1
+        assert cover.max() == 1
+    assert len(groups) <= -(-size // stride) ** 2 + 37 + 50  # a few groups, not one per patch
