@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/reconstruct.py [--case lytro|paper|both] [--rows N] [--solver admm|fista|omp]
-                                     [--nonperiodic] [--max-iter N] [--tol T] [--threads N]
+                                     [--nonperiodic] [--max-iter N] [--tol T] [--threads N] [--save FILE]
 
 Cases (both from 2 shots, random ISO (100, 400, 800, 1600), medium noise, of a synthetic HDR
 scene, ``lfproc.synth`` ``layers``, 5 x 5 x 434 x 625 x 3):
@@ -25,8 +25,15 @@ Printed: wall time, patches/s, the peak traced memory (tracemalloc: numpy buffer
 and the process's max RSS, the solver's useful float32 work (two ``m x K`` GEMM products per
 patch and iteration, plus the per-phase/per-patch ``Phi D`` and the final ``D a``) as a
 fraction of this machine's float32 GEMM rate measured in the same run (2048^3 SGEMM, best
-of 3): that fraction does not depend on how busy a shared machine is, the wall time does.
-PU21-PSNR against the ground truth is printed for the full-sensor runs.
+of 3, at the start and again right after each case; the fraction is printed against the rate at the
+start, the rate after the case and their mean): that fraction depends much less on how busy a shared
+machine is than the wall time, but not at all only if the load stayed the same during the run. The
+same per second of the process's CPU time (the reconstruction's and the SGEMM's, both measured with
+``time.process_time``) depends still less on the load: a busy machine slows both through shared caches
+and memory, but the share of the cores the process gets cancels.
+PU21-PSNR against the ground truth is printed for the full-sensor runs. ``--save FILE`` writes the
+reconstructed light field (``.npy``, float32; with ``--case both`` one file per case, the case's name
+added) to compare the outputs of two versions of the code.
 """
 
 from __future__ import annotations
@@ -50,6 +57,20 @@ def gemm_rate(n: int = 2048, repeat: int = 3) -> float:
         a @ b
         best = min(best, time.perf_counter() - t)
     return 2 * n**3 / best
+
+
+def gemm_cpu_rate(n: int = 2048, repeat: int = 3) -> float:
+    """The same SGEMM's flops per second of this process's CPU time (all its threads): on a machine other jobs
+    load, the wall-time rate falls with the share of the cores the process gets, this one much less."""
+    rng = np.random.default_rng(0)
+    a = rng.standard_normal((n, n), dtype=np.float32)
+    b = rng.standard_normal((n, n), dtype=np.float32)
+    best = float("inf")
+    for _ in range(repeat):
+        t = time.process_time()
+        a @ b
+        best = min(best, time.process_time() - t)
+    return 2 * n**3 / max(best, 1e-9)
 
 
 def dictionary_for(case: str):
@@ -93,10 +114,13 @@ def run_case(case: str, args, rate: float) -> None:
         capture = dataclasses.replace(capture, dn=capture.dn[:, :r], iso=capture.iso[:, :r], mask=mask,
                                       bias_dn=None if capture.bias_dn is None else capture.bias_dn[:, :r])
     tracemalloc.start()
+    cpu_rate = gemm_cpu_rate()
     t0 = time.perf_counter()
+    cpu0 = time.process_time()
     lf = reconstruct(capture, dictionary, solver=args.solver, max_iter=args.max_iter, tol=args.tol,
                      threads=args.threads, progress_bar=True)
     seconds = time.perf_counter() - t0
+    cpu = time.process_time() - cpu0
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     rec = lf.attrs["reconstruction"]
@@ -120,6 +144,16 @@ def run_case(case: str, args, rate: float) -> None:
     print(f"  peak traced memory {peak / 2**30:.2f} GiB; max RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20:.2f} GiB")
     print(f"  useful float32 work {useful / 1e12:.2f} TFLOP at {achieved / 1e9:.1f} GFLOP/s = "
           f"{100 * achieved / rate:.0f} % of this machine's SGEMM rate")
+    end_rate = gemm_rate()  # the load of a shared machine changes during a run: the fraction against both
+    print(f"  SGEMM rate right after this case {end_rate / 1e9:.1f} GFLOP/s: {100 * achieved / end_rate:.0f} % of it, "
+          f"{200 * achieved / (rate + end_rate):.0f} % of the mean of the two")
+    cpu_rate = max(cpu_rate, gemm_cpu_rate())
+    print(f"  CPU time {cpu:.1f} s ({cpu / seconds:.2f} cores on average): {useful / cpu / 1e9:.1f} GFLOP per CPU-second "
+          f"= {100 * useful / cpu / cpu_rate:.0f} % of the SGEMM's {cpu_rate / 1e9:.1f} (the higher of before and after)")
+    if getattr(args, "save", None):
+        path = args.save if args.case != "both" else args.save.replace(".npy", "") + f"-{case}.npy"
+        np.save(path, np.asarray(lf.data, dtype=np.float32))
+        print(f"  saved the light field to {path}")
     if not args.rows:
         scores = evaluate(lf, truth)
         print(f"  PU21-PSNR {scores['pu21_psnr_db']:.2f} dB, PU21-SSIM {scores['pu21_ssim']:.4f}")
@@ -134,6 +168,7 @@ def main() -> None:
     parser.add_argument("--tol", type=float, default=None, help="paper: 3.0517578125e-05 (2^-15)")
     parser.add_argument("--threads", type=int, default=None, help="blocks solved at once (default: the CPUs)")
     parser.add_argument("--nonperiodic", action="store_true", help="the paper's non-periodic random mask")
+    parser.add_argument("--save", default=None, help="write the reconstructed light field to this .npy file")
     args = parser.parse_args()
     os.environ.setdefault("LFPROC_PROGRESS", "1")
     rate = gemm_rate()

@@ -351,17 +351,36 @@ def _solve_block_here(task: dict, shared: dict) -> dict:
     weight = _overlap_weights(settings.overlap, codes_scale / settings.c_median, size, chi2)  # (B, P, P) or None
     wacc = np.zeros((rows, width), dtype=np.float32)
     patches = estimates.reshape(b_n, v_n, u_n, size, size, c_n)
-    for b in range(b_n):  # fixed order: the block's patches as listed
-        if codes_scale[b] == 0:  # no usable measurement: no estimate (not a zero one) in any overlap mode
-            continue
-        t, l = int(tops[b] - row0), int(lefts[b])
-        if weight is None:
-            acc[:, :, t:t + size, l:l + size, :] += patches[b]
-            wacc[t:t + size, l:l + size] += 1.0
-        else:
-            acc[:, :, t:t + size, l:l + size, :] += patches[b] * weight[b][:, :, None]
-            wacc[t:t + size, l:l + size] += weight[b]
+    ii = np.arange(size)
+    for group in _disjoint_groups(tops, lefts, codes_scale != 0, size, shared.get("stride")):
+        # patches of a group do not overlap: one indexed add each (a fixed order: the groups', then the listed)
+        rows_ = (tops[group] - row0)[:, None, None] + ii[None, :, None]
+        cols_ = lefts[group][:, None, None] + ii[None, None, :]
+        part = patches[group]
+        wgt = np.ones((len(group), size, size), dtype=np.float32) if weight is None else weight[group]
+        if weight is not None:
+            part = part * wgt[:, None, None, :, :, None]
+        acc[:, :, rows_, cols_, :] += part.transpose(1, 2, 0, 3, 4, 5)
+        wacc[rows_, cols_] += wgt
     return {"row0": row0, "acc": acc, "weight": wacc, "empty": int((codes_scale == 0).sum()), "iterations": iters}
+
+
+def _disjoint_groups(tops, lefts, use, size: int, stride: int | None) -> list[np.ndarray]:
+    """The patches ``use`` of a block in groups whose patches do not overlap, in a fixed order.
+
+    On the grid of ``stride`` (corners multiples of it), the patches whose corner indices agree modulo
+    ``ceil(size / stride)`` lie at least ``size`` apart: one group each. The rest (the last row and column,
+    flush with the sensor's border) are groups of one, as listed.
+    """
+    idx = np.flatnonzero(use)
+    if not stride:
+        return [idx[i:i + 1] for i in range(len(idx))]
+    q = -(-size // stride)
+    regular = (tops[idx] % stride == 0) & (lefts[idx] % stride == 0)
+    reg = idx[regular]
+    key = ((tops[reg] // stride) % q) * q + (lefts[reg] // stride) % q
+    groups = [reg[key == k] for k in range(q * q) if (key == k).any()]
+    return groups + [idx[~regular][i:i + 1] for i in range(int((~regular).sum()))]
 
 
 def _overlap_weights(overlap: str, scale: np.ndarray, size: int, chi2=None) -> np.ndarray | None:
@@ -549,7 +568,7 @@ def _plan(capture, dictionary, solver_settings: _Settings, T, W, *, stride: int,
     rows_per_block = max(1, block_patches // len(lefts))
     atoms = realign(np.ascontiguousarray(dictionary.atoms, dtype=np.float32))  # a dictionary a Dask worker received (bench)
     shared: dict[str, Any] = {"atoms": atoms, "patch": dictionary.patch, "settings": solver_settings,
-                              "periodic": capture.mask.period is not None}
+                              "periodic": capture.mask.period is not None, "stride": int(stride)}
     if not shared["periodic"]:  # D's rows grouped by patch pixel and colour, for _operator_times
         shared["atoms_by_pixel"] = np.ascontiguousarray(
             atoms.reshape(v_n * u_n, size * size * c_n, -1).transpose(1, 0, 2))

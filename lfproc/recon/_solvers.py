@@ -26,7 +26,7 @@ runs every block on one BLAS thread).
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg.blas import saxpy, sgemm
+from scipy.linalg.blas import saxpy
 
 __all__ = ["SharedOperator", "BatchOperator", "admm", "fista", "omp", "SOLVERS"]
 
@@ -97,15 +97,21 @@ class SharedOperator:
         """``A v_b`` for every column: ``(K, B) -> (m, B)`` (one GEMM, the column layout of :func:`admm`)."""
         return self.A @ V
 
-    def adj_t_add(self, E: np.ndarray, out: np.ndarray) -> None:
+    def adj_t_add(self, E: np.ndarray, out: np.ndarray, scratch: np.ndarray | None = None) -> None:
         """``out += A^T e_b`` for every column ``(m, B)`` of ``E``; ``out`` ``(K, B)`` C-contiguous float32.
 
-        One GEMM that accumulates into ``out`` (BLAS ``sgemm`` with ``beta = 1``: numpy's
-        ``matmul`` cannot add to its output, which would cost a pass over ``(K, B)``).
+        numpy's GEMM into ``scratch`` (``(K, B)`` float32, C-contiguous; allocated if None), then one
+        add: numpy releases the GIL in both, so the blocks of a thread pool run their GEMMs at once.
+        (It was one BLAS ``sgemm`` adding into ``out``, one pass fewer, but scipy's f2py BLAS wrappers
+        hold the GIL for the whole product: with 2 threads, the other block's Python steps waited for
+        it, and 61 % of the samples in which a block held the GIL were in that call, py-spy --gil.)
+        The sums are those of BLAS with ``beta = 1`` (the product's sums, then one add): the Lytro-size
+        benchmark's output came out bit-identical.
         """
-        res = sgemm(1.0, np.asarray(E, dtype=np.float32).T, self.AT.T, beta=1.0, c=out.T, overwrite_c=1)
-        if not np.shares_memory(res, out):  # not expected with C-contiguous float32 arrays
-            out[...] = res.T
+        if scratch is None:
+            scratch = np.empty_like(out)
+        np.matmul(self.AT, E, out=scratch)
+        out += scratch
 
 
 class BatchOperator:
@@ -145,7 +151,7 @@ class BatchOperator:
         # stacked matmul (BLAS per patch): 15x faster than einsum("bmk,kb->mb") here (measured)
         return np.matmul(self.A, np.ascontiguousarray(V.T)[:, :, None])[:, :, 0].T
 
-    def adj_t_add(self, E: np.ndarray, out: np.ndarray) -> None:
+    def adj_t_add(self, E: np.ndarray, out: np.ndarray, scratch: np.ndarray | None = None) -> None:
         out += np.matmul(np.ascontiguousarray(E.T)[:, None, :], self.A)[:, 0, :].T
 
 
@@ -255,8 +261,9 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
 
     Over-relaxation ``alpha`` (default 1.6) replaces ``a`` by ``alpha a + (1 - alpha) z_old``
     in the ``z``, ``s`` and dual steps. State arrays are kept as ``(K, B)`` columns, in units
-    of each patch's threshold, and updated in place (``out=``, ``saxpy``, ``sgemm`` adding into
-    its output): four element-wise passes per iteration besides the two GEMMs; patches run in
+    of each patch's threshold, and updated in place (``out=``, the adjoint GEMM into a scratch array
+    then added; every step in numpy, which releases the GIL): six element-wise passes per iteration
+    besides the two GEMMs; patches run in
     chunks that keep them small. A patch stops when ``||z_k - z_{k-1}||`` and its primal residual
     are at most ``tol ||z_k|| + eps_abs`` (relative plus absolute, Boyd et al. 2011, section
     3.3.1; ``eps_abs`` is ``0.01 tol`` times the patch's code scale, ``||W y||`` over the rms norm
@@ -343,6 +350,7 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
     z = np.zeros((k_n, b_n), dtype=np.float32)  # z / kappa
     u = np.zeros_like(z)  # u / kappa (scaled dual of a = z)
     v = np.empty_like(z)
+    g = np.empty_like(z)  # A^T e (SharedOperator.adj_t_add)
     s = np.zeros((m, b_n), dtype=np.float32)  # the noiseless measurements A a
     d = np.zeros_like(s)  # scaled dual of s = A a
     alpha = np.float32(alpha)
@@ -360,8 +368,8 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
         if check:
             z_old, u_old, d_old, s_old = z.copy(), u.copy(), d, s
         # x = alpha a + (1 - alpha) z + u = v + (2 - alpha) u + alpha A^T e, built in v
-        _axpy(u, v, 2 - alpha)
-        op.adj_t_add((alpha / unit) * e, v)
+        _axpy(u, v, 2 - alpha, g)  # g: scratch, then A^T e
+        op.adj_t_add((alpha / unit) * e, v, g)
         np.clip(v, -1.0, 1.0, out=u)  # u_new = x - soft(x, kappa) = clip(x, -kappa, kappa)
         if lsq_cols.size:
             u[:, lsq_cols] = 0.0  # threshold 0
@@ -408,7 +416,7 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
             z, u, s, d, w2, w2y, denom = (np.ascontiguousarray(x[:, keep]) for x in (z, u, s, d, w2, w2y, denom))
             beta, rb, unit, lsq, atol = beta[:, keep], rb[:, keep], unit[:, keep], lsq[:, keep], atol[keep]
             lsq_cols = np.flatnonzero(lsq[0])
-            v = np.empty_like(z)
+            v, g = np.empty_like(z), np.empty_like(z)
             op = op.subset(keep)
             fac = fac.subset(keep)
     out_t[:, act.rows] = z * unit
@@ -424,10 +432,15 @@ def _sumsq(x: np.ndarray) -> np.ndarray:
     return out.astype(np.float64)
 
 
-def _axpy(x: np.ndarray, y: np.ndarray, a) -> None:
-    """``y += a x`` in place, one pass (BLAS ``saxpy``; numpy needs a temporary or two passes)."""
+def _axpy(x: np.ndarray, y: np.ndarray, a, scratch: np.ndarray | None = None) -> None:
+    """``y += a x`` in place: with a ``scratch`` array like ``x``, numpy's multiply into it and one add (two passes;
+    numpy releases the GIL), else BLAS ``saxpy`` (one pass, but scipy's f2py wrapper holds the GIL throughout:
+    :meth:`SharedOperator.adj_t_add`)."""
     if a == 1:
         y += x
+    elif scratch is not None:
+        np.multiply(x, np.float32(a), out=scratch)
+        y += scratch
     elif x.dtype == np.float32 and x.flags.c_contiguous and y.flags.c_contiguous:
         saxpy(x.reshape(-1), y.reshape(-1), a=float(a))
     else:

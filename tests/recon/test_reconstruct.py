@@ -720,3 +720,61 @@ def test_admm_norms_do_not_overflow_for_large_data():
     zb, itb = admm(op, w, y * np.float32(1e20), 0.5e20, max_iter=500, tol=1e-5)
     assert np.isfinite(zb).all()
     np.testing.assert_allclose(zb / 1e20, z1, rtol=1e-3, atol=1e-4 * np.abs(z1).max())
+
+
+def test_shared_adjoint_adds_the_same_sums_as_blas_with_beta_1():
+    """SharedOperator.adj_t_add is numpy's GEMM into a scratch array plus one add (numpy releases the GIL; scipy's
+    f2py sgemm, which added into its output, held it for the whole product): the same float32 sums (to the bit
+    with the OpenBLAS of numpy's and scipy's wheels on the development machine; to rounding here, as the two
+    libraries may pick different kernels elsewhere)."""
+    from scipy.linalg.blas import sgemm
+
+    from lfproc.recon._solvers import SharedOperator
+
+    rng = np.random.default_rng(4)
+    for m, k, b in ((128, 2560, 117), (60, 120, 5)):
+        op = SharedOperator(rng.standard_normal((m, k)).astype(np.float32))
+        E = rng.standard_normal((m, b)).astype(np.float32)
+        out = rng.standard_normal((k, b)).astype(np.float32)
+        ref = sgemm(1.0, E.T, op.AT.T, beta=1.0, c=out.T.copy(order="F")).T
+        op.adj_t_add(E, out)
+        np.testing.assert_allclose(out, ref, rtol=0, atol=1e-6 * np.abs(ref).max())
+        scratch = np.empty_like(out)
+        op.adj_t_add(E, out, scratch)
+        np.testing.assert_array_equal(scratch, op.AT @ E)
+
+
+def test_axpy_with_a_scratch_array_equals_saxpy_to_rounding():
+    """admm's y += a x runs in numpy with a scratch array (GIL released; saxpy's f2py wrapper holds it)."""
+    from lfproc.recon._solvers import _axpy
+
+    rng = np.random.default_rng(5)
+    x = rng.standard_normal((300, 7)).astype(np.float32)
+    y0 = rng.standard_normal((300, 7)).astype(np.float32)
+    y_blas, y_np, scratch = y0.copy(), y0.copy(), np.empty_like(x)
+    _axpy(x, y_blas, 0.4)
+    _axpy(x, y_np, 0.4, scratch)
+    np.testing.assert_allclose(y_np, y0 + np.float32(0.4) * x, rtol=0, atol=0)
+    np.testing.assert_allclose(y_np, y_blas, rtol=0, atol=4 * np.finfo(np.float32).eps * np.abs(y_blas).max())
+
+
+@pytest.mark.parametrize("stride", [4, 3, 8, 5])
+def test_overlap_add_groups_do_not_overlap_and_cover_every_used_patch(stride):
+    """_solve_block_here adds a block's estimates one group of non-overlapping patches at a time (an indexed add
+    each; it was one Python step per patch, holding the GIL): every patch with an estimate in exactly one group,
+    no two patches of a group sharing a pixel, the last row and column (flush with the border) included."""
+    from lfproc.recon._reconstruct import _disjoint_groups
+
+    size = 8
+    tops, lefts = patch_grid((37, 50), size, stride)
+    gt, gl = np.repeat(tops, len(lefts)), np.tile(lefts, len(tops))
+    use = np.random.default_rng(stride).random(len(gt)) > 0.1
+    groups = _disjoint_groups(gt, gl, use, size, stride)
+    listed = np.concatenate(groups)
+    assert sorted(listed) == list(np.flatnonzero(use))
+    for g in groups:
+        cover = np.zeros((37, 50), dtype=int)
+        for b in g:
+            cover[gt[b]:gt[b] + size, gl[b]:gl[b] + size] += 1
+        assert cover.max() == 1
+    assert len(groups) <= -(-size // stride) ** 2 + 37 + 50  # a few groups, not one per patch
