@@ -228,7 +228,8 @@ def _codes_matrix(idx: np.ndarray, val: np.ndarray, n_atoms: int):
 
 def _residual_energy(x: np.ndarray, idx: np.ndarray, val: np.ndarray, atoms_t: np.ndarray) -> np.ndarray:
     """``||x_i - D c_i||^2`` of each row (float64); ``D c`` as one sparse-times-dense product (reads the used atoms)."""
-    r = x - _codes_matrix(idx, val, atoms_t.shape[0]) @ atoms_t
+    r = _codes_matrix(idx, val, atoms_t.shape[0]) @ atoms_t
+    np.subtract(x, r, out=r)
     return np.einsum("ij,ij->i", r, r, dtype=np.float64)
 
 

@@ -169,7 +169,7 @@ def _omp_steps(G, gsub, alpha_buf, xnorm2, t, tol):
     live = np.arange(b)  # rows still being coded; finished ones leave the batch
     keep = xnorm2 > (0.0 if tol is None else tol)
     if not keep.all():
-        gsub = np.ascontiguousarray(gsub[:, keep])
+        gsub = _compact(gsub, keep, 1)
         live, alpha0, xnorm2 = live[keep], gsub[0], xnorm2[keep]
     alpha = alpha0
     na = len(live)
@@ -199,7 +199,7 @@ def _omp_steps(G, gsub, alpha_buf, xnorm2, t, tol):
             schur = g_jj - np.einsum("bi,bi->b", w, w)
             ok &= schur > _DEPENDENT * g_jj  # dependent on the support at float32 precision: done
         if not ok.all():
-            gsub = np.ascontiguousarray(gsub[:, ok])
+            gsub = _compact(gsub, ok, k + 2)
             alpha0 = gsub[0]
             live, sel, chol, a0_sel, fwd, xnorm2, tiny, j, g_jj = (
                 v[ok] for v in (live, sel, chol, a0_sel, fwd, xnorm2, tiny, j, g_jj))
@@ -231,12 +231,23 @@ def _omp_steps(G, gsub, alpha_buf, xnorm2, t, tol):
         if tol is not None:
             more = xnorm2 - np.einsum("bi,bi->b", c, a0_sel[:, :k + 1]) > tol
             if not more.all():
-                gsub = np.ascontiguousarray(gsub[:, more])
+                gsub = _compact(gsub, more, k + 2)
                 alpha0 = gsub[0]
                 live, alpha, sel, chol, a0_sel, fwd, xnorm2, tiny = (
                     v[more] for v in (live, alpha, sel, chol, a0_sel, fwd, xnorm2, tiny))
                 na = len(live)
     return out_idx, out_val
+
+
+def _compact(gsub, keep, filled):
+    """The signals ``keep`` (a mask over ``gsub``'s axis 1) moved to the front of ``gsub``, in place; returns the
+    view of them. Only the ``filled`` leading slices hold data. (A fancy-indexed copy of the whole buffer,
+    a fresh allocation each time some signals finish, took a quarter of the coding time at the paper's size.)"""
+    kept = np.flatnonzero(keep)
+    for dest, src in enumerate(kept.tolist()):
+        if dest != src:  # dest < src: a forward copy never overwrites a row still to move
+            gsub[:filled, dest] = gsub[:filled, src]
+    return gsub[:, :len(kept)]
 
 
 def codes_to_dense(indices: np.ndarray, values: np.ndarray, n_atoms: int) -> np.ndarray:

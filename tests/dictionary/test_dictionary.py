@@ -269,21 +269,18 @@ def test_ksvd_atom_update_without_the_residual_matches_the_residual_formula(monk
     np.testing.assert_allclose(val[used], codes[np.nonzero(used)[0], idx[used]], atol=1e-4)
 
 
-def test_ksvd_from_a_file_keeps_no_copy_of_the_signals(tmp_path, monkeypatch):
+def test_ksvd_from_a_file_keeps_no_copy_of_the_signals(tmp_path):
     """One K-SVD iteration on signals in a .npy file: peak allocations far below the signals' size (before: the
     N x n residual, as large as the signals, was kept through the iteration), and the result of training on the
     same signals in memory."""
     import tracemalloc
 
-    from lfproc.dictionary import _ksvd
-
-    monkeypatch.setattr(_ksvd, "_UPDATE_CHUNK_BYTES", 2**20, raising=False)
     rng = np.random.default_rng(4)
-    x = rng.standard_normal((40000, 128)).astype(np.float32)
+    x = rng.standard_normal((10000, 512)).astype(np.float32)
     np.save(tmp_path / "x.npy", x)
-    in_memory = ksvd(x, 32, 3, 1, random_state=0)
+    in_memory = ksvd(x, 16, 2, 1, random_state=0, chunk_size=500)
     tracemalloc.start()
-    from_file = ksvd(tmp_path / "x.npy", 32, 3, 1, random_state=0)
+    from_file = ksvd(tmp_path / "x.npy", 16, 2, 1, random_state=0, chunk_size=500)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     assert peak < 0.3 * x.nbytes, (peak, x.nbytes)
