@@ -312,9 +312,9 @@ def _update_atoms(atoms_t, idx, val, signals: TrainingSignals, rng, sparsity) ->
     ``d = X_I^T g - D_S (Gamma_S g)``, ``d /= ||d||``, ``g <- X_I d - Gamma_S^T (D_S^T d)``. This is the update on
     the residual without atom ``j`` (``d = E_I^T g + d_j (g . g)``, ``g <- E_I d + g (d_j . d)``), with the current
     atoms and coefficients, so atoms updated earlier in the sweep are seen by later ones. Memory: the rows
-    ``X_I`` and the atoms ``D_S`` are gathered into two buffers of :data:`_UPDATE_CHUNK_BYTES`; an atom with
-    more users (or more neighbouring atoms) than fit is done in chunks, reading them twice. No ``N x n``
-    residual is kept (7.3 GB at the paper's size).
+    ``X_I`` are gathered into a buffer of at most :data:`_UPDATE_CHUNK_BYTES` (an atom with more users than fit
+    is done in chunks, reading them twice), the atoms ``D_S`` in blocks of :data:`_ATOM_BLOCK` (read twice).
+    No ``N x n`` residual is kept (7.3 GB at the paper's size).
     """
     n_atoms, n = atoms_t.shape
     order, bounds = _atom_users(idx, n_atoms)
