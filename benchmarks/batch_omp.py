@@ -1,7 +1,9 @@
 """Batch-OMP against scikit-learn's ``orthogonal_mp_gram`` on the same problem, in one process.
 
 Prints, for each size, the time of both on the same signals, signals per second, the speed
-ratio and the share of signals whose supports agree. The dictionary is random (unit-norm
+ratio and the share of signals whose supports agree. lfproc is timed before and after
+scikit-learn's (much longer) run and the slower of the two is compared, so a change of load
+on a shared machine cannot flatter the ratio. The dictionary is random (unit-norm
 Gaussian atoms); signals are sparse combinations of 10 atoms plus noise at 20 dB SNR, so
 the supports are meaningful.
 
@@ -10,6 +12,9 @@ measured in the same run (``D^T X`` for a block of the same signals, best of thr
 solver's signals per second times ``2 n K`` (the flops of the signal's correlations with the
 atoms, the one product every OMP needs) over the GEMM's flops per second. 1.0 would be OMP at
 the cost of its correlations alone; the rest is the greedy steps.
+
+Both times include the Gram matrix ``D^T D`` (``2 n K^2`` flops: at the paper's size more
+than the correlations of 10,000 signals; K-SVD computes it once per iteration for 300,000).
 
 scikit-learn is skipped (``-``) above ``--max-sklearn-atoms`` atoms (it copies the ``K x K``
 float64 Gram matrix for each signal: 2.2 GB at the paper's K = 16402).
@@ -74,6 +79,16 @@ def main():
             gram = d64.T @ d64  # scikit-learn is given the Gram matrix and D^T X, as Batch-OMP computes them
             ref = orthogonal_mp_gram(gram, d64.T @ x.astype(np.float64), n_nonzero_coefs=args.sparsity)
             t_ref = time.perf_counter() - t0
+            # lfproc again after scikit-learn's long run: the load may have changed meanwhile (a shared machine);
+            # the slower of the two lfproc runs is the one compared (conservative)
+            t0 = time.perf_counter()
+            again = batch_omp(d, x, args.sparsity)
+            t_again = time.perf_counter() - t0
+            assert np.array_equal(again, ours)
+            print(f"  (lfproc {t_ours:.2f} s before scikit-learn, {t_again:.2f} s after; "
+                  f"load average now {os.getloadavg()[0]:.2f})")
+            t_ours = max(t_ours, t_again)
+            rate_ours = args.signals / t_ours
             same = ((ours != 0) == (ref != 0)).all(axis=0).mean()
             rate_ref = args.signals / t_ref
             ref_cols = (f"{t_ref:>9.1f} {rate_ours:>12.0f} {rate_ref:>13.0f} {t_ref / t_ours:>6.1f} {100 * same:>11.2f}%"
