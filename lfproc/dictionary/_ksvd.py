@@ -7,24 +7,22 @@ coefficients).
 Each iteration:
 
 1. sparse coding of every training signal with Batch-OMP (:func:`lfproc.dictionary.omp_codes`),
-   in chunks, optionally on a Dask cluster (``scheduler=``), and the residual
-   ``E = X - D Gamma`` (signals as rows, float32);
+   streaming the signals in chunks, optionally on a Dask cluster (``scheduler=``); the codes
+   are kept compactly (``N x T`` indices and values), the residual energy is summed per chunk;
 2. the approximate K-SVD update of Rubinstein et al. (2008) for every atom ``j`` in a random
-   order, written on the residual so no product with the whole dictionary is needed: for
-   the signals ``I`` that use ``j`` with coefficients ``g``, ``d = E_I^T g + d_j (g . g)`` (that is
-   ``X_I^T g - D Gamma_I g + d_j (g . g)``), normalised, ``g <- E_I d + g (d_j . d)``, then
-   ``E_I <- E_I + g_old d_j^T - g d^T``, reading ``E_I`` in bounded chunks;
+   order, written without the residual: for the signals ``I`` that use ``j`` with coefficients
+   ``g`` and the other atoms ``S`` they use, ``d = X_I^T g - D_S (Gamma_S g)``, normalised, then
+   ``g <- X_I d - Gamma_S^T (D_S^T d)`` (the same as the update on the residual without atom ``j``);
 3. atoms used by no signal, used by fewer than ``min_usage`` signals, or too close to
    another atom (``|<d_i, d_j>| > max_coherence``) are replaced by the training signals with
    the largest residual among all of them, skipping a signal within ``max_coherence`` of an
-   atom (KSVD-box's ``cleardict``).
+   atom (KSVD-box's ``cleardict``); the residual energies come from one more streaming pass.
 
-Memory: the training signals can be a ``.npy`` file read in chunks; what stays in memory is
-the residual (``N x n`` float32), the dictionary, its Gram matrix and the codes. The atom
-update reads the residual rows of an atom's users in chunks of 32 MiB and never copies
-``E_I`` (the previous update did, with two outer-product temporaries of the same size: the
-peak of 10.3 GB measured at the paper's size, README). For the paper's preset (300,000 x 6075)
-the residual alone is 7.3 GB.
+Memory: the training signals can be a ``.npy`` file, read with explicit reads (chunks for the
+coding, the rows of an atom's users for its update), so they are never resident as a whole.
+What stays in memory is the dictionary (``K x n``), its Gram matrix (``K x K``, during the
+coding), the codes (``N x T``) and buffers of bounded size. An earlier version kept the residual
+``E = X - D Gamma`` (``N x n`` float32: 7.3 GB for the paper's 300,000 x 6075, peak 9.6 GiB).
 
 Checkpoints: after every finished iteration the dictionary, the iteration count, the random
 generator's state and the error history are written (atomically) to ``checkpoint``; a run
@@ -51,6 +49,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.sparse import csr_array
 
 from .._shared.deprecate import renamed_keywords
 from .._shared.deps import require
@@ -68,23 +67,39 @@ CHECKPOINT_NAME = "ksvd-checkpoint.npz"
 
 
 class TrainingSignals:
-    """Training signals as rows ``(N, n)`` float32: an array in memory or a ``.npy`` file read in chunks."""
+    """Training signals as rows ``(N, n)`` float32: an array in memory or a ``.npy`` file read in chunks.
+
+    A file is read with explicit reads (``os.preadv`` into the caller's buffers), never memory-mapped while
+    training: mapped pages that were touched count in the process's resident memory, and the paper's
+    300,000 patches are 7.3 GB."""
 
     def __init__(self, source):
+        self._fd = None
         if isinstance(source, TrainingSignals):
             self.array, self.path, self.shape = source.array, source.path, source.shape
+            self._offset = source._offset
             return
+        self._offset = 0
         if isinstance(source, (str, os.PathLike)):
             self.path = Path(source)
             try:
-                mm = np.load(self.path, mmap_mode="r", allow_pickle=False)
+                with open(self.path, "rb") as fh:
+                    version = np.lib.format.read_magic(fh)
+                    read_header = {(1, 0): np.lib.format.read_array_header_1_0,
+                                   (2, 0): np.lib.format.read_array_header_2_0}.get(version)
+                    if read_header is None:
+                        raise ValueError(f".npy format version {version}")
+                    shape, fortran, dtype = read_header(fh)
+                    self._offset = fh.tell()
             except (OSError, ValueError) as exc:
                 raise FileFormatError(f"{self.path}: not a readable .npy array of training signals ({exc})") from None
-            if mm.ndim != 2 or mm.dtype != np.float32:
-                raise FileFormatError(f"{self.path}: expected a 2-D float32 array (N, n), found {mm.dtype} {mm.shape}")
-            self.shape = mm.shape
+            if len(shape) != 2 or dtype != np.float32 or fortran:
+                raise FileFormatError(f"{self.path}: expected a 2-D float32 array (N, n), found {dtype} {shape}"
+                                      + (" in Fortran order" if fortran else ""))
+            self.shape = tuple(int(v) for v in shape)
+            if self.path.stat().st_size < self._offset + 4 * self.shape[0] * self.shape[1]:
+                raise FileFormatError(f"{self.path}: truncated .npy array of training signals")
             self.array = None
-            del mm
         else:
             array = np.asarray(source)
             if array.ndim != 2:
@@ -95,12 +110,65 @@ class TrainingSignals:
             self.path = None
             self.shape = self.array.shape
 
-    def rows(self, start: int, stop: int) -> np.ndarray:
-        if self.array is not None:
+    def _file(self) -> int:
+        if self._fd is None:
+            self._fd = os.open(self.path, os.O_RDONLY | getattr(os, "O_BINARY", 0))
+        return self._fd
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # interpreter shutdown
+            pass
+
+    def _read(self, row: int, out: np.ndarray) -> None:
+        """Rows ``row .. row + len(out)`` of the file into ``out`` (C-contiguous float32)."""
+        view = memoryview(out.reshape(-1).view(np.uint8))
+        pos, want = self._offset + 4 * row * self.shape[1], view.nbytes
+        while want:
+            got = os.preadv(self._file(), [view[view.nbytes - want:]], pos) if hasattr(os, "preadv") else None
+            if got is None:  # no preadv (not POSIX): seek and read
+                os.lseek(self._file(), pos, os.SEEK_SET)
+                got = os.readv(self._file(), [view[view.nbytes - want:]])
+            if got <= 0:
+                raise FileFormatError(f"{self.path}: truncated .npy array of training signals")
+            pos += got
+            want -= got
+
+    def rows(self, start: int, stop: int, out: np.ndarray | None = None) -> np.ndarray:
+        """Rows ``start:stop`` (a copy for a file; into ``out`` if given)."""
+        if self.array is not None and out is None:
             return self.array[start:stop]
-        mm = np.load(self.path, mmap_mode="r", allow_pickle=False)
-        out = np.array(mm[start:stop], dtype=np.float32)
-        del mm
+        stop = min(stop, self.shape[0])
+        if out is None:
+            out = np.empty((max(0, stop - start), self.shape[1]), dtype=np.float32)
+        else:
+            out = out[:max(0, stop - start)]
+        if self.array is not None:
+            out[...] = self.array[start:stop]
+        elif len(out):
+            self._read(start, out)
+        return out
+
+    def take(self, rows: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """The rows ``rows`` (increasing) into ``out[:len(rows)]``; runs of consecutive rows are one read each."""
+        out = out[:len(rows)]
+        if self.array is not None:
+            np.take(self.array, rows, axis=0, out=out, mode="clip")  # "clip": no hidden temporary copy
+            return out
+        if not len(rows):
+            return out
+        breaks = np.flatnonzero(np.diff(rows) != 1) + 1
+        starts = np.concatenate([[0], breaks]).tolist()
+        stops = np.concatenate([breaks, [len(rows)]]).tolist()
+        first = rows[starts].tolist()
+        for a, b, r in zip(starts, stops, first):
+            self._read(r, out[a:b])
         return out
 
     def fingerprint(self) -> str:
@@ -108,7 +176,7 @@ class TrainingSignals:
         h = hashlib.sha256(json.dumps(list(self.shape)).encode())
         n = self.shape[0]
         for i in sorted({0, n // 3, n // 2, n - 1}):
-            h.update(self.rows(i, i + 1).tobytes())
+            h.update(np.ascontiguousarray(self.rows(i, i + 1)).tobytes())
         return h.hexdigest()[:16]
 
 
@@ -152,16 +220,30 @@ def _code_chunk(atoms, gram, rows, sparsity):
     return omp_codes(atoms, rows, sparsity, gram=gram)
 
 
-def _code_all(signals: TrainingSignals, atoms: np.ndarray, sparsity: int, chunk: int, client, bar_desc: str):
-    """Codes (N, T) and the residual E (N, n) of every signal; also ||X||^2."""
+def _codes_matrix(idx: np.ndarray, val: np.ndarray, n_atoms: int):
+    """Codes ``(B, T)`` as a CSR matrix ``(B, K)`` (unused slots: index 0, value 0)."""
+    b, t = idx.shape
+    return csr_array((val.reshape(-1), np.maximum(idx, 0).reshape(-1), np.arange(0, b * t + 1, t)), shape=(b, n_atoms))
+
+
+def _residual_energy(x: np.ndarray, idx: np.ndarray, val: np.ndarray, atoms_t: np.ndarray) -> np.ndarray:
+    """``||x_i - D c_i||^2`` of each row (float64); ``D c`` as one sparse-times-dense product (reads the used atoms)."""
+    r = _codes_matrix(idx, val, atoms_t.shape[0]) @ atoms_t
+    np.subtract(x, r, out=r)
+    return np.einsum("ij,ij->i", r, r, dtype=np.float64)
+
+
+def _code_all(signals: TrainingSignals, atoms_t: np.ndarray, sparsity: int, chunk: int, client, bar_desc: str):
+    """Codes (N, T) of every signal, streaming the signals in chunks; also the total residual energy
+    ``||X - D Gamma||^2`` and ``||X||^2``. Memory: the Gram matrix, the codes and one chunk (no residual)."""
     n_sig, n = signals.shape
+    atoms = atoms_t.T  # (n, K), a view
     gram = gram_matrix(atoms)
     idx = np.empty((n_sig, sparsity), dtype=np.int32)
     val = np.empty((n_sig, sparsity), dtype=np.float32)
-    resid = np.empty((n_sig, n), dtype=np.float32)
-    x_norm2 = 0.0
+    x_norm2 = err2 = 0.0
     starts = list(range(0, n_sig, chunk))
-    atoms_t = np.ascontiguousarray(atoms.T)  # (K, n): one atom per row
+    buf = np.empty((min(chunk, n_sig), n), dtype=np.float32) if signals.array is None else None
     pending: dict[int, Any] = {}
     if client is not None:
         # a window of chunks in flight, so the signals are never all in memory at once
@@ -179,20 +261,29 @@ def _code_all(signals: TrainingSignals, atoms: np.ndarray, sparsity: int, chunk:
             submit_next()
     for s in progress(starts, desc=bar_desc):
         e = min(s + chunk, n_sig)
-        x = signals.rows(s, e)
         if client is None:
+            x = signals.rows(s, e, out=buf)
             i, v = omp_codes(atoms, x, sparsity, gram=gram)
         else:
             i, v = pending.pop(s).result()
             submit_next()
+            x = signals.rows(s, e, out=buf)
         idx[s:e], val[s:e] = i, v
-        r = resid[s:e]
-        r[...] = x
-        for t in range(sparsity):  # subtract D Gamma, one selection slot at a time (bounded memory)
-            used = i[:, t] >= 0
-            r[used] -= v[used, t, None] * atoms_t[i[used, t]]
+        err2 += float(_residual_energy(x, i, v, atoms_t).sum())
         x_norm2 += float(np.einsum("ij,ij->", x, x, dtype=np.float64))
-    return idx, val, resid, x_norm2, gram
+    del gram
+    return idx, val, err2, x_norm2
+
+
+def _signal_errors(signals: TrainingSignals, atoms_t, idx, val, chunk: int) -> np.ndarray:
+    """``||x_i - D c_i||^2`` of every signal (float64, ``N``), streaming the signals in chunks."""
+    n_sig, n = signals.shape
+    buf = np.empty((min(chunk, n_sig), n), dtype=np.float32) if signals.array is None else None
+    out = np.empty(n_sig)
+    for s in range(0, n_sig, chunk):
+        e = min(s + chunk, n_sig)
+        out[s:e] = _residual_energy(signals.rows(s, e, out=buf), idx[s:e], val[s:e], atoms_t)
+    return out
 
 
 def _atom_users(idx: np.ndarray, n_atoms: int) -> tuple[np.ndarray, np.ndarray]:
@@ -205,60 +296,81 @@ def _atom_users(idx: np.ndarray, n_atoms: int) -> tuple[np.ndarray, np.ndarray]:
     return order, bounds
 
 
-#: Bytes of residual rows gathered at once by the atom update (:func:`_update_atoms`).
-_UPDATE_CHUNK_BYTES = 32 * 2**20
+#: Bytes of training-signal rows gathered at once by the atom update (:func:`_update_atoms`).
+_UPDATE_CHUNK_BYTES = 64 * 2**20
+#: Atoms gathered at once by the atom update: a block that stays in cache for its product (gathering all of
+#: ``D_S``, 40 MB for an average atom at the paper's size, then two products over it read it three times from
+#: memory; measured 45 vs 50-100 ms per such atom, the larger figure with two BLAS threads under load).
+_ATOM_BLOCK = 64
 
 
-def _update_atoms(atoms_t, idx, val, resid, rng, sparsity) -> list[int]:
-    """The approximate K-SVD update of every atom (in place on atoms_t, val, resid); returns unused atoms.
+def _update_atoms(atoms_t, idx, val, signals: TrainingSignals, rng, sparsity) -> list[int]:
+    """The approximate K-SVD update of every atom (in place on atoms_t and val); returns unused atoms.
 
-    For atom ``j``, its users ``I`` and their coefficients ``g`` (Rubinstein et al. 2008; KSVD-box's
-    ``optimize_atom``): ``d = E_I^T g + d_j (g . g)`` (``E_I^T g = X_I^T g - D Gamma_I g``: the residual without
-    atom ``j`` times ``g``), ``d /= ||d||``, ``g <- E_I d + g (d_j . d)``, ``E_I <- E_I + g_old d_j^T - g d^T``.
-    The residual rows of ``I`` are read in bounded chunks (two passes): ``E_I`` is never copied whole
-    (a popular atom's ``E_I`` and its outer-product temporaries were gigabytes at the paper's size).
+    For atom ``j``, its users ``I``, their coefficients ``g`` and the other atoms ``S`` they use with
+    coefficients ``Gamma_S`` (Rubinstein et al. 2008, written without the residual):
+    ``d = X_I^T g - D_S (Gamma_S g)``, ``d /= ||d||``, ``g <- X_I d - Gamma_S^T (D_S^T d)``. This is the update on
+    the residual without atom ``j`` (``d = E_I^T g + d_j (g . g)``, ``g <- E_I d + g (d_j . d)``), with the current
+    atoms and coefficients, so atoms updated earlier in the sweep are seen by later ones. Memory: the rows
+    ``X_I`` are gathered into a buffer of at most :data:`_UPDATE_CHUNK_BYTES` (an atom with more users than fit
+    is done in chunks, reading them twice), the atoms ``D_S`` in blocks of :data:`_ATOM_BLOCK` (read twice).
+    No ``N x n`` residual is kept (7.3 GB at the paper's size).
     """
     n_atoms, n = atoms_t.shape
     order, bounds = _atom_users(idx, n_atoms)
     val_flat = val.reshape(-1)
     step = max(1, _UPDATE_CHUNK_BYTES // (4 * n))
+    most = int(np.diff(bounds).max(initial=0))  # users of the most popular atom
+    xbuf = np.empty((min(step, most), n), dtype=np.float32)
+    dbuf = np.empty((_ATOM_BLOCK, n), dtype=np.float32)
     unused = []
     for j in rng.permutation(n_atoms):
         pos = order[bounds[j]:bounds[j + 1]]
         if pos.size == 0:
             unused.append(int(j))
             continue
-        sig = pos // sparsity
+        sig = pos // sparsity  # increasing
         g = val_flat[pos]
-        dj = atoms_t[j].copy()
-        d = dj * np.float32(np.dot(g, g))
-        for s0 in range(0, len(sig), step):  # d = E_I^T g + d_j (g . g)
-            d += resid[sig[s0:s0 + step]].T @ g[s0:s0 + step]
+        ci, cv = idx[sig], val[sig]  # (|I|, T): the users' codes
+        other = (ci != j) & (ci >= 0)
+        atoms_s, inv = np.unique(ci[other], return_inverse=True)
+        h = np.bincount(inv, weights=(cv * g[:, None])[other].astype(np.float64), minlength=len(atoms_s))
+        h = h.astype(np.float32)
+        x_once = len(sig) <= step
+        d = np.zeros(n, dtype=np.float32)
+        for s0 in range(0, len(sig), step):  # X_I^T g
+            x = signals.take(sig[s0:s0 + step], xbuf)
+            d += g[s0:s0 + step] @ x
+        for a0 in range(0, len(atoms_s), _ATOM_BLOCK):  # - D_S (Gamma_S g)
+            part = atoms_s[a0:a0 + _ATOM_BLOCK]
+            d -= h[a0:a0 + _ATOM_BLOCK] @ np.take(atoms_t, part, axis=0, out=dbuf[:len(part)], mode="clip")
         nd = float(np.linalg.norm(d.astype(np.float64)))
         if not nd > 0:
             unused.append(int(j))
             continue
         d /= np.float32(nd)
-        djd = np.float32(np.dot(dj, d))
+        p = np.empty(len(atoms_s), dtype=np.float32)  # D_S^T d
+        for a0 in range(0, len(atoms_s), _ATOM_BLOCK):
+            part = atoms_s[a0:a0 + _ATOM_BLOCK]
+            p[a0:a0 + len(part)] = np.take(atoms_t, part, axis=0, out=dbuf[:len(part)], mode="clip") @ d
+        q = np.zeros(cv.shape, dtype=np.float32)
+        q[other] = cv[other] * p[inv]
         g_new = np.empty_like(g)
-        pair = np.stack([dj, d])  # (2, n)
-        for s0 in range(0, len(sig), step):  # g = E_I d + g (d_j . d); E_I <- E_I + g_old d_j^T - g d^T
+        for s0 in range(0, len(sig), step):  # X_I d - Gamma_S^T (D_S^T d)
             rows = sig[s0:s0 + step]
-            part = resid[rows]
-            gc = g[s0:s0 + step]
-            gn = part @ d + gc * djd
-            part += np.stack([gc, -gn], axis=1) @ pair
-            resid[rows] = part
-            g_new[s0:s0 + step] = gn
+            x = xbuf[:len(rows)] if x_once else signals.take(rows, xbuf)
+            g_new[s0:s0 + len(rows)] = x @ d
+        g_new -= q.sum(axis=1)
         atoms_t[j] = d
         val_flat[pos] = g_new
     return unused
 
 
-def _clear_atoms(atoms_t, signals: TrainingSignals, resid, idx, unused, *, min_usage, max_coherence):
+def _clear_atoms(atoms_t, signals: TrainingSignals, errors, idx, unused, *, min_usage, max_coherence):
     """Replace unused, rarely used and near-duplicate atoms with the worst-represented signals (KSVD-box's ``cleardict``).
 
-    The candidates are all training signals in decreasing order of their residual energy; a candidate
+    ``errors``: each signal's residual energy ``||x - D c||^2``, or a function returning them (called only if an
+    atom is to be replaced). The candidates are all training signals in decreasing order of it; a candidate
     whose normalised signal has ``|<x, d_i>| > max_coherence`` with an atom that stays (or one already put in)
     is skipped, so the replacements are neither duplicates of each other nor of the dictionary.
     """
@@ -273,10 +385,7 @@ def _clear_atoms(atoms_t, signals: TrainingSignals, resid, idx, unused, *, min_u
         replace |= {int(j) for j in b[b > a + r0]}
     if not replace:
         return []
-    n_sig = resid.shape[0]
-    step = max(1, _UPDATE_CHUNK_BYTES // (4 * n))
-    err = np.concatenate([np.einsum("ij,ij->i", resid[s0:s0 + step], resid[s0:s0 + step], dtype=np.float64)
-                          for s0 in range(0, n_sig, step)])
+    err = np.asarray(errors() if callable(errors) else errors, dtype=np.float64)
     worst = np.argsort(-err, kind="stable")
     worst = worst[err[worst] > 0]
     todo = sorted(replace)
@@ -453,25 +562,27 @@ def ksvd(
         client = Client(scheduler, set_as_default=False)
     try:
         for it in range(done, int(n_iter)):
-            idx, val, resid, x_norm2, _ = _code_all(signals, atoms_t.T, int(sparsity), int(chunk_size), client,
-                                                   f"K-SVD {it + 1}/{n_iter}: coding")
-            err = float(np.einsum("ij,ij->", resid, resid, dtype=np.float64)) / max(x_norm2, 1e-300)
+            idx, val, err2, x_norm2 = _code_all(signals, atoms_t, int(sparsity), int(chunk_size), client,
+                                                f"K-SVD {it + 1}/{n_iter}: coding")
+            err = err2 / max(x_norm2, 1e-300)
             errors.append(err)
-            unused = _update_atoms(atoms_t, idx, val, resid, rng, int(sparsity))
-            cleared = _clear_atoms(atoms_t, signals, resid, idx, unused, min_usage=int(min_usage),
-                                   max_coherence=float(max_coherence))
+            unused = _update_atoms(atoms_t, idx, val, signals, rng, int(sparsity))
+            cleared = _clear_atoms(atoms_t, signals,
+                                   lambda: _signal_errors(signals, atoms_t, idx, val, int(chunk_size)),
+                                   idx, unused, min_usage=int(min_usage), max_coherence=float(max_coherence))
             replaced.append(len(cleared))
-            del idx, val, resid
+            del idx, val
             if ckpt is not None:
                 _save_checkpoint(ckpt, atoms_t, it + 1, rng, errors, replaced, params)
             if callback is not None:
                 callback(it + 1, err)
-        idx, val, resid, x_norm2, _ = _code_all(signals, atoms_t.T, int(sparsity), int(chunk_size), client,
-                                               "K-SVD: final coding")
+        idx, val, err2, x_norm2 = _code_all(signals, atoms_t, int(sparsity), int(chunk_size), client,
+                                            "K-SVD: final coding")
     finally:
         if client is not None:
             client.close()
-    final = float(np.einsum("ij,ij->", resid, resid, dtype=np.float64)) / max(x_norm2, 1e-300)
+        signals.close()
+    final = err2 / max(x_norm2, 1e-300)
     usage = np.bincount(idx[idx >= 0], minlength=int(n_atoms))
     return KsvdResult(atoms=np.ascontiguousarray(atoms_t.T), errors=errors, final_error=final, usage=usage,
                       iterations=int(n_iter), replaced=replaced, seconds=time.perf_counter() - start_time,

@@ -219,42 +219,73 @@ def test_ksvd_on_a_dask_cluster_gives_the_in_process_result():
     np.testing.assert_array_equal(remote.atoms, local.atoms)
 
 
-def test_ksvd_atom_update_reads_the_residual_in_chunks_and_matches_the_formula(monkeypatch):
-    """The approximate K-SVD update of an atom every signal uses: the result of the formula (float64 reference:
-    E_j = E_I + g d_j^T, d = E_j^T g / ||.||, g = E_j d, E_I = E_j - g d^T) with a peak of extra memory far below
-    the residual's size (before: E_I copied whole, plus two outer-product temporaries of its size)."""
+@pytest.mark.parametrize("from_file", [False, True])
+def test_ksvd_atom_update_without_the_residual_matches_the_residual_formula(monkeypatch, tmp_path, from_file):
+    """The approximate K-SVD update written on X and the codes (d = X_I^T g - D_S Gamma_S g, g = X_I d - Gamma_S^T D_S^T d)
+    is the update on the residual (float64 reference: E_j = E_I + g d_j^T, d = E_j^T g / ||.||, g = E_j d,
+    E_I = E_j - g d^T, atoms in the same order); the users' rows read in chunks (popular atoms), from memory or a
+    file, with a peak of extra memory far below the signals' size."""
     import tracemalloc
 
     from lfproc.dictionary import _ksvd
 
     monkeypatch.setattr(_ksvd, "_UPDATE_CHUNK_BYTES", 2**20, raising=False)
     rng = np.random.default_rng(9)
-    n_sig, n, k = 40000, 128, 4
+    n_sig, n, k, t = 40000, 128, 6, 3
     atoms_t = _random_dictionary(n, k, seed=9).T.copy()
-    idx = np.tile(np.arange(2, dtype=np.int32), (n_sig, 1))  # atoms 0 and 1 used by every signal
-    val = rng.standard_normal((n_sig, 2)).astype(np.float32)
-    resid = (0.1 * rng.standard_normal((n_sig, n))).astype(np.float32)
-    ref_atoms, ref_resid, ref_val = atoms_t.astype(np.float64), resid.astype(np.float64), val.astype(np.float64)
-    order = np.random.default_rng(1).permutation(k)
-    for j in order:
-        if j > 1:
+    idx = np.stack([rng.permutation(5)[:t] for _ in range(n_sig)]).astype(np.int32)  # atoms 0..4, 5 unused
+    idx[::7, 2] = -1  # some signals use fewer atoms
+    val = rng.standard_normal((n_sig, t)).astype(np.float32)
+    val[idx < 0] = 0
+    x = (_ksvd._codes_matrix(idx, val, k) @ atoms_t + 0.1 * rng.standard_normal((n_sig, n))).astype(np.float32)
+    ref_atoms, ref_val = atoms_t.astype(np.float64), val.astype(np.float64)
+    codes = np.zeros((n_sig, k))
+    np.add.at(codes, (np.arange(n_sig)[:, None].repeat(t, 1)[idx >= 0], idx[idx >= 0]), ref_val[idx >= 0])
+    ref_resid = x - codes @ ref_atoms
+    for j in np.random.default_rng(1).permutation(k):
+        users = np.flatnonzero(codes[:, j])
+        if not len(users):
             continue
-        g = ref_val[:, j]
-        e = ref_resid + np.outer(g, ref_atoms[j])
+        g = codes[users, j]
+        e = ref_resid[users] + np.outer(g, ref_atoms[j])
         d = e.T @ g
         d /= np.linalg.norm(d)
         g = e @ d
-        ref_resid = e - np.outer(g, d)
-        ref_atoms[j], ref_val[:, j] = d, g
+        ref_resid[users] = e - np.outer(g, d)
+        ref_atoms[j], codes[users, j] = d, g
+    if from_file:
+        np.save(tmp_path / "x.npy", x)
+        signals = _ksvd.TrainingSignals(tmp_path / "x.npy")
+    else:
+        signals = _ksvd.TrainingSignals(x)
     tracemalloc.start()
-    unused = _ksvd._update_atoms(atoms_t, idx, val, resid, np.random.default_rng(1), 2)
+    unused = _ksvd._update_atoms(atoms_t, idx, val, signals, np.random.default_rng(1), t)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    assert sorted(unused) == [2, 3]
-    assert peak < 0.25 * resid.nbytes, (peak, resid.nbytes)
-    np.testing.assert_allclose(atoms_t[:2], ref_atoms[:2], atol=1e-5)
-    np.testing.assert_allclose(val, ref_val, atol=1e-4)
-    np.testing.assert_allclose(resid, ref_resid, atol=1e-4)
+    assert unused == [5]
+    assert peak < 0.3 * x.nbytes, (peak, x.nbytes)  # per-user bookkeeping (N T entries), no N x n array
+    np.testing.assert_allclose(atoms_t[:5], ref_atoms[:5], atol=1e-5)
+    used = idx >= 0
+    np.testing.assert_allclose(val[used], codes[np.nonzero(used)[0], idx[used]], atol=1e-4)
+
+
+def test_ksvd_from_a_file_keeps_no_copy_of_the_signals(tmp_path):
+    """One K-SVD iteration on signals in a .npy file: peak allocations far below the signals' size (before: the
+    N x n residual, as large as the signals, was kept through the iteration), and the result of training on the
+    same signals in memory."""
+    import tracemalloc
+
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal((10000, 512)).astype(np.float32)
+    np.save(tmp_path / "x.npy", x)
+    in_memory = ksvd(x, 16, 2, 1, random_state=0, chunk_size=500)
+    tracemalloc.start()
+    from_file = ksvd(tmp_path / "x.npy", 16, 2, 1, random_state=0, chunk_size=500)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 0.3 * x.nbytes, (peak, x.nbytes)
+    np.testing.assert_array_equal(from_file.atoms, in_memory.atoms)
+    assert from_file.errors == in_memory.errors and from_file.final_error == in_memory.final_error
 
 
 def test_ksvd_replaces_atoms_by_the_worst_represented_signals_without_duplicates():
@@ -269,13 +300,13 @@ def test_ksvd_replaces_atoms_by_the_worst_represented_signals_without_duplicates
     atoms_t = _random_dictionary(n, k, seed=11).T.copy()
     x[5] = 2 * x[7]
     x[11] = 3 * atoms_t[0]
-    resid = np.full((n_sig, n), 0.01, np.float32)
+    err = np.full(n_sig, 0.01)
     for rank, s in enumerate([7, 3, 5, 11, 2]):
-        resid[s] = 1.0 - 0.1 * rank
+        err[s] = 1.0 - 0.1 * rank
     idx = np.zeros((n_sig, 1), np.int32)  # atoms 0, 1 and 5 used, 2..4 unused
     idx[:8] = 1
     idx[8:12] = 5
-    done = _clear_atoms(atoms_t, TrainingSignals(x), resid, idx, [2, 3, 4], min_usage=1, max_coherence=0.99)
+    done = _clear_atoms(atoms_t, TrainingSignals(x), err, idx, [2, 3, 4], min_usage=1, max_coherence=0.99)
     assert done == [2, 3, 4]
     for j, s in zip(done, [7, 3, 2]):
         np.testing.assert_allclose(atoms_t[j], x[s] / np.linalg.norm(x[s]), rtol=1e-5, atol=1e-6)
