@@ -473,7 +473,7 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
 
             # the estimates added in a fixed order (the output does not depend on the threads)
             hyp, weight = np.zeros((len(g.gt), 3), np.intp), np.zeros(len(g.gt))
-            for (ph, sel), est in zip(jobs, pool.map(solve, jobs)):
+            for (ph, sel), est in zip(jobs, _in_order(pool, solve, jobs)):
                 _add(acc, wacc, est, g.gt[sel], g.gl[sel], win)
                 hyp[sel], weight[sel] = est["hypothesis"], est["weight"]
                 bar.update(len(sel))
@@ -563,6 +563,20 @@ def _chosen_disparity(scores: np.ndarray, g: _Grids, n_d: int, radius: int) -> n
     pooled = _pool(per_d.reshape(len(g.ctops), len(g.clefts), -1), radius)
     iy, ix = _nearest(g.ctops, g.tops), _nearest(g.clefts, g.lefts)
     return pooled[iy[:, None], ix[None, :]].reshape(len(g.gt), -1).argmax(axis=1)
+
+
+def _in_order(pool, fn, jobs, ahead: int = 8):
+    """``pool.map(fn, jobs)`` with at most ``ahead`` results waiting: the patch estimates of a whole
+    light field would otherwise pile up in memory when they are made faster than they are added."""
+    from collections import deque
+
+    pending = deque()
+    for job in jobs:
+        pending.append(pool.submit(fn, job))
+        if len(pending) >= ahead:
+            yield pending.popleft().result()
+    while pending:
+        yield pending.popleft().result()
 
 
 def _add(acc, wacc, est: dict, tops, lefts, win) -> None:
@@ -806,7 +820,7 @@ def _refine(first, tops, lefts, patch_info, model, shears_sparse, scales, win, p
         return {"patches": np.maximum(x, 0.0).reshape(len(sel), nv, nu, p, p, 3), "weight": weight[sel]}
 
     acc, wacc = np.zeros_like(first), np.zeros(first.shape[2:4])
-    for (_, sel), est in zip(jobs, pool.map(solve, jobs)):
+    for (_, sel), est in zip(jobs, _in_order(pool, solve, jobs)):
         _add(acc, wacc, est, tops[sel], lefts[sel], win)
     acc /= np.maximum(wacc, 1e-300)[None, None, :, :, None]
     return np.where(saturated[None, None, :, :, None], np.maximum(first, acc), acc)
