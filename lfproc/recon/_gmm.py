@@ -64,6 +64,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -568,8 +569,6 @@ def _chosen_disparity(scores: np.ndarray, g: _Grids, n_d: int, radius: int) -> n
 def _in_order(pool, fn, jobs, ahead: int = 8):
     """``pool.map(fn, jobs)`` with at most ``ahead`` results waiting: the patch estimates of a whole
     light field would otherwise pile up in memory when they are made faster than they are added."""
-    from collections import deque
-
     pending = deque()
     for job in jobs:
         pending.append(pool.submit(fn, job))
@@ -799,10 +798,11 @@ def _refine(first, tops, lefts, patch_info, model, shears_sparse, scales, win, p
     p = len(win)
     r2 = REFINE_SIGMA ** 2
     keys = [tuple(k) for k in np.unique(hyp, axis=0)]
+    cov_inv = {k: np.linalg.inv(model.covariances[k]) for k in {key[1] for key in keys}}  # once per component
     mats = {}
     for di, k, si in keys:
         sh = shears_sparse[di]
-        ci = np.linalg.inv(scales[si] * model.covariances[k])
+        ci = cov_inv[k] / scales[si]
         m = np.linalg.inv((sh.T @ sh).toarray() / r2 + ci)
         mats[(di, k, si)] = (m / r2, m @ (ci @ model.means[k]))
     windows = np.lib.stride_tricks.sliding_window_view(first, (p, p), axis=(2, 3))  # (V, U, H', W', 3, P, P)
@@ -813,7 +813,7 @@ def _refine(first, tops, lefts, patch_info, model, shears_sparse, scales, win, p
     def solve(job):
         (di, k, si), sel = job
         z = windows[:, :, tops[sel], lefts[sel]].transpose(2, 0, 1, 4, 5, 3)  # (B, V, U, P, P, 3)
-        level = np.maximum(z[:, nv // 2, nu // 2].mean(axis=(1, 2)) @ _LEVEL_WEIGHTS, 1e-300)
+        level = np.maximum(_level(z[:, nv // 2, nu // 2].reshape(len(sel), -1), p, 0), 1e-300)
         m, offset = mats[(di, k, si)]
         c = np.asarray((shears_sparse[di].T @ (z.reshape(len(sel), -1) / level[:, None]).T).T) @ m + offset[None]
         x = np.asarray((shears_sparse[di] @ c.T).T) * level[:, None]
