@@ -10,7 +10,14 @@ import numpy as np
 from ..errors import InputError
 from .deps import require
 
-__all__ = ["max_workers", "realign", "dask_client"]
+__all__ = ["available_cpus", "max_workers", "realign", "dask_client"]
+
+
+def available_cpus() -> int:
+    """The CPUs this process may run on (its affinity mask where the OS has one, else the CPU count), >= 1."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
 
 
 def max_workers() -> int:

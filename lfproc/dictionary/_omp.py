@@ -28,12 +28,12 @@ References
 
 from __future__ import annotations
 
-import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from .._shared.parallel import available_cpus
 from ..errors import InputError, ShapeError
 
 __all__ = ["batch_omp", "omp_codes", "codes_to_dense", "gram_matrix"]
@@ -109,13 +109,6 @@ def omp_codes(D, X_rows, n_nonzero_coefs: int, *, tol: float | None = None, gram
     return indices, values
 
 
-def _omp_threads() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on Linux
-        return max(1, os.cpu_count() or 1)
-
-
 _POOL: ThreadPoolExecutor | None = None
 _POOL_LOCK = threading.Lock()
 
@@ -145,7 +138,7 @@ def _omp_chunk(D32, G, X, t, tol, work, threads=None):
     gsub = work[0][:, :b]
     np.matmul(X32, D32, out=gsub[0])  # (B, K): the one GEMM of the chunk
     xnorm2 = np.einsum("ij,ij->i", X32, X32, dtype=np.float64)
-    threads = _omp_threads() if threads is None else threads
+    threads = available_cpus() if threads is None else threads
     parts = max(1, min(threads, b // _MIN_ROWS_PER_THREAD))
     if parts == 1:
         return _omp_steps(G, gsub, work[1][:b], xnorm2, t, tol)

@@ -79,7 +79,8 @@ from .._shared.progress import progress
 from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError, option_name
 from ..lightfield import LightField
-from ._reconstruct import _default_threads, _gather, _int_option
+from .._shared.parallel import available_cpus
+from ._reconstruct import _gather, _int_option
 from .. import _untrusted as ut
 from .._shared.patches import patch_grid
 from .._shared.random import check_random_state
@@ -496,7 +497,7 @@ def _checked_options(capture, model, *, stride, search_stride, disparities, scal
     """The options of :func:`reconstruct_gmm`, checked (one line naming the option) and normalised."""
     check_choice("saturation", saturation, SATURATION_MODES)
     check_choice("search", search, SEARCHES)
-    out = {"threads": _int_option("threads", _default_threads() if threads is None else threads),
+    out = {"threads": _int_option("threads", available_cpus() if threads is None else threads),
            "chunk": _int_option("chunk", chunk), "stride": _int_option("stride", stride),
            "search_stride": _int_option("search_stride", model.patch // 2 if search_stride is None else search_stride),
            "pool_radius": _int_option("pool_radius", pool_radius, low=0)}

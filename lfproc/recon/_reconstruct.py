@@ -75,7 +75,7 @@ import numpy as np
 from .._shared.deprecate import resolve_options
 from .._shared.validation import check_choice
 from .._shared.progress import progress
-from .._shared.parallel import dask_client, realign
+from .._shared.parallel import available_cpus, dask_client, realign
 from .._version import __version__
 from ..errors import InputError, ShapeError
 from ..lightfield import LightField
@@ -150,11 +150,6 @@ def patch_count(size: tuple[int, int], patch: int, stride: int) -> int:
     """
     tops, lefts = patch_grid(size, patch, stride)
     return len(tops) * len(lefts)
-
-
-def _default_threads() -> int:
-    """The CPUs this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 def _int_option(name: str, value, *, low: int = 1) -> int:
@@ -520,7 +515,7 @@ def _execution(workers, threads) -> tuple[int | None, int]:
     if workers is not None:
         workers = _int_option("workers", workers)
     if threads is None:
-        threads = _default_threads()
+        threads = available_cpus()
     return workers, _int_option("threads", threads)
 
 
