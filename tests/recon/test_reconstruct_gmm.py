@@ -365,6 +365,54 @@ def test_median_noise_of_a_patch_is_one_measurements_radiance_std():
     np.testing.assert_allclose(_median_noise(wn, rowsum), [0.25, 0.0])  # median of 1/2, 1/4, 1/8
 
 
+def test_positive_is_the_mean_of_the_truncated_gaussian():
+    """_positive(x, s) = E[X | X > 0] for X ~ N(x, s^2); reference: scipy.stats.truncnorm's mean. Far below 0 it
+    stays positive (s^2 / |x|, where max(x, 0) gave 0), far above it is x; std 0 is max(x, 0)."""
+    from scipy.stats import truncnorm
+
+    from lfproc.recon._gmm import _positive
+
+    x = np.array([-40.0, -3.0, -0.5, 0.0, 0.7, 2.0, 50.0])
+    s = np.array([1.0, 2.0, 0.5, 1.0, 0.1, 3.0, 1.0])
+    ref = truncnorm.mean(-x / s, np.inf, loc=x, scale=s)
+    np.testing.assert_allclose(_positive(x, s), ref, rtol=1e-9)
+    assert (_positive(x, s) > 0).all()
+    np.testing.assert_allclose(_positive(np.array([-1e3]), 1.0), 1e-3, rtol=1e-5)  # s^2 / |x|
+    np.testing.assert_array_equal(_positive(x, 0.0), np.maximum(x, 0.0))
+
+
+def test_a_dark_scene_has_no_zeros_above_the_noise_floor():
+    """Samples above the capture's noise floor never come back as exactly 0 (each patch's samples are the mean of
+    their estimate truncated at 0, POSITIVE_STD of the patch's noise as its std). The control: with plain clipping
+    (std 0) this scene (a textured plane, its left half 8 stops brighter and above the noise floor, the right half
+    below it, a light setting the exposure) returned 2 samples as 0 above the floor."""
+    import lfproc.recon._gmm as gmm
+    from scipy.ndimage import gaussian_filter
+
+    from lfproc.camera.capture import noise_floor
+
+    rng = np.random.default_rng(3)
+    tex = gaussian_filter(rng.random((32, 32, 3)), (1.0, 1.0, 0)).astype(np.float32)
+    tex = (tex - tex.min()) / np.ptp(tex)
+    scene = np.broadcast_to(np.float32(2.0) ** (2 * tex), (5, 5, 32, 32, 3)).copy()
+    scene[:, :, :, :16] *= 2.0**8
+    scene[2, 2, 0, 0] = 2.0**20  # a light sets the exposure
+    lf = LightField(scene, units="relative")
+    cap = simulate_capture(lf, mask_period=4, shots=2, random_state=1, profile="paper-medium")
+    floor = noise_floor(cap)
+    above = lf.data.mean(axis=-1) > floor
+    out = reconstruct_gmm(cap, progress_bar=False).data.mean(axis=-1)
+    old = gmm.POSITIVE_STD
+    try:
+        gmm.POSITIVE_STD = 0.0
+        clipped = reconstruct_gmm(cap, progress_bar=False).data.mean(axis=-1)
+    finally:
+        gmm.POSITIVE_STD = old
+    assert 0.4 < above.mean() < 0.6, above.mean()
+    assert ((clipped <= 0) & above).any(), "the control: plain clipping returns zeros on this scene"
+    assert not ((out <= 0) & above).any(), ((out <= 0) & above).mean()
+
+
 def _refine_inputs(first, model):
     from concurrent.futures import ThreadPoolExecutor
 
@@ -375,7 +423,7 @@ def _refine_inputs(first, model):
     tops, lefts = patch_grid(first.shape[2:4], 8, 2)
     gt, gl = np.repeat(tops, len(lefts)), np.tile(lefts, len(tops))
     shears = [sparse.csr_matrix(np.kron(shear_matrix((5, 5), 8, 2, 0.0), np.eye(3)))]
-    info = (np.zeros((len(gt), 3), np.intp), np.ones(len(gt)))
+    info = (np.zeros((len(gt), 3), np.intp), np.ones(len(gt)), np.zeros(len(gt)))  # noise 0: max(x, 0)
     return gt, gl, info, shears, ThreadPoolExecutor(2)
 
 
