@@ -501,3 +501,63 @@ def test_results_are_added_in_order_with_a_bounded_number_waiting():
             taken.append(value)
             assert len(submitted) - len(taken) <= 3
     assert taken == [i * i for i in range(40)]
+
+
+def test_point_sources_find_planted_lights():
+    """Known answer of _point_sources (the Gaussian plus a sparse layer of point sources, reweighted least squares):
+    measurements of two planted white lights (40 random measurements of 36 pixels x 3 colours, no noise, a weak
+    Gaussian part) come back at the planted pixels with their energy, where the Gaussian alone (the control)
+    spreads them: its two brightest pixels keep less than half of it."""
+    from lfproc.recon._gmm import _point_sources
+
+    rng = np.random.default_rng(5)
+    n_pix, m = 36, 40
+    a = rng.random((m, n_pix * 3))
+    cov = 0.01 * np.eye(n_pix * 3)
+    truth = np.zeros((n_pix, 3))
+    truth[[7, 22]] = [[20.0, 20.0, 20.0], [12.0, 12.0, 12.0]]
+    y = a @ truth.ravel()
+    w = np.full((1, m), 10.0)
+    x, spike, chi2, score = _point_sources(a, a @ cov @ a.T, np.zeros(m), a @ cov, np.zeros(n_pix * 3), y[None], w)
+    lum = x.reshape(n_pix, 3).mean(axis=1)
+    assert set(np.argsort(lum)[-2:]) == {7, 22}, np.argsort(lum)[-4:]
+    np.testing.assert_allclose(lum[[7, 22]], [20.0, 12.0], rtol=0.1)
+    assert chi2[0] < 1.0
+    gauss = (cov @ a.T @ np.linalg.solve(a @ cov @ a.T + np.eye(m) / 100.0, y)).reshape(n_pix, 3).mean(axis=1)
+    assert np.sort(gauss)[-2:].sum() < 0.5 * 32.0, np.sort(gauss)[-2:]
+
+
+def test_a_small_light_keeps_its_energy():
+    """A light of 2 x 2 pixels at disparity 1 in front of a dim textured plane (exposure so that nothing saturates):
+    the Gaussian patch model alone explains the coded sums by a blob at another disparity (measured: 20 % of the
+    light's energy kept on city-interior's lamp); with the point sources (LIGHTS) the samples at the light keep
+    more of it. Both reconstructions of the same capture; measured 0.65 without, 0.76 with."""
+    import lfproc.recon._gmm as gmm
+    from scipy.ndimage import gaussian_filter
+
+    rng = np.random.default_rng(11)
+    size, m = (32, 32), 6
+    tex = gaussian_filter(rng.random((size[0] + 2 * m, size[1] + 2 * m, 3)), (1.0, 1.0, 0)).astype(np.float32) + 0.5
+    light = np.zeros_like(tex)
+    alpha = np.zeros(tex.shape[:2], np.float32)
+    light[21:23, 21:23] = 400.0
+    alpha[21:23, 21:23] = 1.0
+    data, _ = render_layers([Layer(tex, np.ones_like(alpha), 0.0), Layer(light, alpha, 1.0)], size=size, views=5)
+    lf = LightField(data, units="relative")
+    cap = simulate_capture(lf, mask_period=4, shots=2, random_state=2, profile="paper-low")
+    cap = simulate_capture(lf, mask_period=4, shots=2, random_state=2, profile="paper-low",
+                           radiance_scale=cap.radiance_scale / 8)  # 3 stops below saturation
+    lum = lf.data.mean(axis=-1)
+    at = lum >= 0.1 * lum.max()
+
+    def kept(on):
+        old = gmm.LIGHTS
+        try:
+            gmm.LIGHTS = on
+            out = reconstruct_gmm(cap, progress_bar=False).data.mean(axis=-1)
+        finally:
+            gmm.LIGHTS = old
+        return out[at].sum() / lum[at].sum()
+
+    without, with_ = kept(False), kept(True)
+    assert with_ > without + 0.08 and 0.7 < with_ < 1.25, (without, with_)
