@@ -63,7 +63,8 @@ sums by a blob, at whatever disparity fits (at disparity 0 any coded sums are fi
 and the light's energy spreads over its neighbours. Measured on the 2 x 2 pixel lamp of the test
 scene city-interior (a 64 x 64 crop, disparity 1): 53 % of its energy kept at the default exposure,
 20 % when nothing saturates. So a patch with a measurement brighter than ``LIGHTS_BRIGHT`` times its
-level (a saturated one at its bound) by ``LIGHTS_SIGNIFICANCE`` of its standard deviations is also fitted as the Gaussian plus a sparse layer of point sources
+level (a saturated one at its bound) by ``LIGHTS_SIGNIFICANCE`` of its standard deviations is also
+fitted as the Gaussian plus a sparse layer of point sources
 (:func:`_point_sources`: each pixel a source of its own variance, re-estimated from the data, as in
 sparse Bayesian learning, Tipping 2001; Wipf and Rao 2004), at every other disparity of the search,
 and the fit of largest evidence replaces the Gaussian one when its evidence is larger. The sources
@@ -71,8 +72,9 @@ bypass the refinement pass (its Gaussian prior would spread them again). Measure
 58 % (51 % when nothing saturates); the tune scenes at 96 x 128 (means): PU21-PSNR 25.47 -> 25.82 dB,
 detail ratio 0.84 -> 0.77, energy of the brightest 1 % (smallest) 0.59 -> 0.66. Settings chosen on
 the tune scenes: without the significance, the noise of dark patches triggered the fit (city-interior
-at Lytro size took twice the time, for +0.05 dB at 96 x 128); a bad fit (chi-square > 4) as a further trigger gained nothing for 10 % more time;
-every disparity instead of every other +0.03 dB for 40 % more; any saturated measurement as a trigger
+at Lytro size took twice the time, for +0.05 dB at 96 x 128); a bad fit (chi-square > 4) as a
+further trigger gained nothing for 10 % more time; every disparity instead of every other +0.03 dB
+for 40 % more; any saturated measurement as a trigger
 +0.15 dB at 96 x 128 but -0.2 dB on the layered scene of tests/recon/test_reconstruct_gmm.py (bright
 regions are saturated at the high ISOs without being lights). Cost at Lytro size (quiet machine):
 city-interior 53.9 s without, 59.3 s with (44.29 -> 44.76 dB, detail ratio 1.18 -> 1.00).
@@ -834,12 +836,14 @@ def _estimate(data: _Data, tops, lefts, p, phase, chosen, shears_sparse, model, 
             "noise": noise, "sources": sources.reshape(b_n, *views, p, p, 3)}
 
 
-#: Small lights (module notes): patches with a measurement brighter than LIGHTS_BRIGHT times their level (``T / r``
-#: in level units) by LIGHTS_SIGNIFICANCE standard deviations are also fitted as the Gaussian plus point sources (:func:`_point_sources`:
-#: LIGHTS_ITERS solves, the first with a prior std LIGHTS_TAU per pixel, then the LIGHTS_ACTIVE strongest pixels;
-#: _LIGHT_COLOUR: a factor of a source's colour covariance, mostly grey). LIGHTS = False: the Gaussian alone.
-#: Chosen on the tune scenes at 96 x 128 (LIGHTS_BRIGHT 3 / 6 / 12: 26.17 / 26.02 / 25.88 dB, 1.8 / 1.3 / 0.9 x
-#: the time of the pass).
+#: Small lights (module notes): patches with a measurement brighter than LIGHTS_BRIGHT times their level
+#: (``T / r`` in level units) by LIGHTS_SIGNIFICANCE standard deviations are also fitted as the Gaussian plus
+#: point sources (:func:`_point_sources`: LIGHTS_ITERS solves, the first with a prior std LIGHTS_TAU per pixel,
+#: then the LIGHTS_ACTIVE strongest pixels; _LIGHT_COLOUR: a factor of a source's colour covariance, mostly
+#: grey). LIGHTS = False: the Gaussian alone. LIGHTS_BRIGHT chosen on the tune scenes at 96 x 128 (3 / 6 / 12:
+#: 26.17 / 26.02 / 25.88 dB, 1.8 / 1.3 / 0.9 x the time of the first pass; measured before the significance
+#: condition, with saturated measurements as a further trigger). A patch whose sources win keeps the
+#: hypothesis of its Gaussian fit for the refinement (which sees the light field without the sources).
 LIGHTS = True
 LIGHTS_SIGNIFICANCE = 3.0
 LIGHTS_BRIGHT = 6.0
