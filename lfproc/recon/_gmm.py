@@ -466,9 +466,6 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
                      for d in disparities]
     data = _measurements(capture, saturation)
     g = _Grids(capture, p, opt["stride"], opt["search_stride"])
-    acc = np.zeros((nv, nu, *capture.size, 3))
-    lights = np.zeros_like(acc)  # the point sources' share of acc (module notes: small lights)
-    wacc = np.zeros(capture.size)
     x1 = (np.arange(p) + 0.5) / p
     win = np.outer(np.sin(np.pi * x1) ** 2 + 1e-3, np.sin(np.pi * x1) ** 2 + 1e-3)
     bar = progress(total=len(g.gt) + len(g.ct), desc="reconstruct (gmm)", unit="patch",
@@ -498,20 +495,10 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
                 return _estimate(data, g.gt[sel], g.gl[sel], p, phases[ph], chosen, shears_sparse, model, (nv, nu),
                                  scales, alpha=alpha, norm=norm)
 
-            # the estimates added in a fixed order (the output does not depend on the threads)
-            hyp, weight, noise = np.zeros((len(g.gt), 3), np.intp), np.zeros(len(g.gt)), np.zeros(len(g.gt))
-            for (ph, sel), est in zip(jobs, _in_order(pool, solve, jobs)):
-                _add(acc, wacc, est, g.gt[sel], g.gl[sel], win)
-                if est["sources"].any():
-                    _add(lights, np.zeros(capture.size), est, g.gt[sel], g.gl[sel], win, key="sources")
-                hyp[sel], weight[sel], noise[sel] = est["hypothesis"], est["weight"], est["noise"]
-                bar.update(len(sel))
-            acc /= np.maximum(wacc, 1e-300)[None, None, :, :, None]
-            lights /= np.maximum(wacc, 1e-300)[None, None, :, :, None]
-            np.maximum(lights, 0.0, out=lights)
+            acc, lights, info = _combined(jobs, _in_order(pool, solve, jobs), g, win, (nv, nu, *capture.size, 3), bar)
             if REFINE_SIGMA:
-                acc = _refine(acc - lights, g.gt, g.gl, (hyp, weight, noise), model, shears_sparse, scales, win, pool,
-                              opt["chunk"], data.saturated.any(axis=0)) + lights
+                acc = _refine(acc - lights, g.gt, g.gl, info, model, shears_sparse, scales, win, pool, opt["chunk"],
+                              data.saturated.any(axis=0)) + lights
     finally:
         bar.close()
     record = {"lfproc_version": __version__, "method": "gmm", "model": repr(model), "model_attrs": model.attrs,
@@ -520,6 +507,23 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
               "lights": LIGHTS,
               "disparity_counts": np.bincount(chosen_d, minlength=len(disparities)).tolist(), "patches": int(len(g.gt))}
     return _result(acc, capture, record, started)
+
+
+def _combined(jobs, estimates, g, win, shape, bar):
+    """The first light field: the patch estimates added in the jobs' fixed order (the output does not depend on the
+    threads), divided by their weights; the point sources' share of it (module notes: small lights); and each
+    patch's hypothesis, weight and noise (for :func:`_refine`)."""
+    acc, lights, wacc = np.zeros(shape), np.zeros(shape), np.zeros(shape[2:4])
+    hyp, weight, noise = np.zeros((len(g.gt), 3), np.intp), np.zeros(len(g.gt)), np.zeros(len(g.gt))
+    for (_, sel), est in zip(jobs, estimates):
+        _add(acc, wacc, est, g.gt[sel], g.gl[sel], win)
+        if est["sources"].any():
+            _add(lights, np.zeros(shape[2:4]), est, g.gt[sel], g.gl[sel], win, key="sources")
+        hyp[sel], weight[sel], noise[sel] = est["hypothesis"], est["weight"], est["noise"]
+        bar.update(len(sel))
+    acc /= np.maximum(wacc, 1e-300)[None, None, :, :, None]
+    lights /= np.maximum(wacc, 1e-300)[None, None, :, :, None]
+    return acc, np.maximum(lights, 0.0, out=lights), (hyp, weight, noise)
 
 
 def _checked_options(capture, model, *, stride, search_stride, disparities, scales, pool_radius, search, saturation,
