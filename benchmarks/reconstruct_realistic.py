@@ -116,6 +116,8 @@ def main() -> None:
     parser.add_argument("--options", default="{}", help="JSON keywords for the reconstruction function")
     parser.add_argument("--seeds", type=int, default=1, help="captures per cell (seeds: scene's + 1000 i); means")
     args = parser.parse_args()
+    if args.seeds < 1:
+        parser.error(f"--seeds: expected a number of captures >= 1, got {args.seeds}")
     os.environ.setdefault("LFPROC_PROGRESS", "0")
     warnings.simplefilter("ignore")  # saturation warnings of the brightest scenes: expected
     period = None if args.mask_period.lower() == "none" else int(args.mask_period)
@@ -138,7 +140,7 @@ def main() -> None:
         cells = []
         for name in names:
             runs = []
-            for i in range(max(1, args.seeds)):
+            for i in range(args.seeds):
                 cap = simulate_capture(lf, mask_period=period, random_state=seed + 1000 * i, **parse_capture(name))
                 t = time.perf_counter()
                 out = reconstruct_capture(cap, args.method, options)

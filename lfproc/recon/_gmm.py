@@ -868,8 +868,6 @@ def _point_sources(a, kmat, a_mu, a_cov, mu, y, w):
     the estimate, its source layer (both ``(B, E E 3)``, level units), the reduced chi-square and the log
     evidence of the last solve (comparable with :func:`_wiener`'s).
     """
-    import scipy.linalg as sl
-
     b_n, m = y.shape
     n_pix = a.shape[1] // 3
     ac = a.reshape(m, n_pix, 3) @ _LIGHT_COLOUR  # (m, n_pix, 3)
@@ -878,7 +876,6 @@ def _point_sources(a, kmat, a_mu, a_cov, mu, y, w):
     wa = w * alpha
     sw = LIGHTS_TAU ** 2 * np.einsum("mpc,bm->bpc", ac, wa)  # whitened sources (B, n_pix, 3)
     act = np.broadcast_to(np.arange(n_pix), (b_n, n_pix))
-    r = w * (y - a_mu[None])
     k_n = min(LIGHTS_ACTIVE, n_pix)
     for _ in range(LIGHTS_ITERS - 1):
         d2 = np.where((sw @ _LIGHT_COLOUR.T).mean(axis=2) > 0, (sw * sw).sum(axis=2), 0.0)
@@ -887,15 +884,9 @@ def _point_sources(a, kmat, a_mu, a_cov, mu, y, w):
         d2 = np.take_along_axis(d2, top, axis=1) + 1e-12
         aca = ac[:, act].transpose(1, 0, 2, 3)  # (B, m, K, 3)
         acd = (aca * np.sqrt(d2)[:, None, :, None]).reshape(b_n, m, -1)
-        c = np.matmul(acd, acd.transpose(0, 2, 1))
-        c += kmat[None]
-        c *= w[:, :, None]
-        c *= w[:, None, :]
-        c.reshape(b_n, -1)[:, ::m + 1] += 1.0
-        chol = np.linalg.cholesky(c)
-        z = sl.solve_triangular(chol, r[..., None], lower=True)[..., 0]
-        alpha = sl.solve_triangular(chol, z[..., None], lower=True, trans="T")[..., 0]
-        score = -0.5 * (z * z).sum(axis=1) - np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
+        k_b = np.matmul(acd, acd.transpose(0, 2, 1))
+        k_b += kmat[None]
+        score, alpha = _wiener(k_b, a_mu, y, w, 0.0)  # one covariance per patch
         wa = w * alpha
         sw = d2[..., None] * np.einsum("bmkc,bm->bkc", aca, wa)  # (B, K, 3)
     spike = np.zeros((b_n, n_pix, 3))
@@ -923,7 +914,8 @@ def _refine(first, tops, lefts, patch_info, model, shears_sparse, scales, win, p
     nv, nu = first.shape[:2]
     p = len(win)
     r2 = REFINE_SIGMA ** 2
-    keys = [tuple(k) for k in np.unique(hyp, axis=0)]
+    unique, which = np.unique(hyp, axis=0, return_inverse=True)
+    keys = [tuple(k) for k in unique]
     cov_inv = {k: np.linalg.inv(model.covariances[k]) for k in {key[1] for key in keys}}  # once per component
     mats = {}
     for di, k, si in keys:
@@ -932,12 +924,10 @@ def _refine(first, tops, lefts, patch_info, model, shears_sparse, scales, win, p
         m = np.linalg.inv((sh.T @ sh).toarray() / r2 + ci)
         mats[(di, k, si)] = (m / r2, m @ (ci @ model.means[k]))
     windows = np.lib.stride_tricks.sliding_window_view(first, (p, p), axis=(2, 3))  # (V, U, H', W', 3, P, P)
-    jobs = [(key, members[start:start + chunk]) for key in keys
-            for members in [np.flatnonzero((hyp == np.array(key)).all(axis=1))]
-            for start in range(0, len(members), chunk)]
+    jobs = _jobs(which.reshape(-1), chunk)  # (index into keys, patches)
 
     def solve(job):
-        (di, k, si), sel = job
+        (di, k, si), sel = keys[job[0]], job[1]
         z = windows[:, :, tops[sel], lefts[sel]].transpose(2, 0, 1, 4, 5, 3)  # (B, V, U, P, P, 3)
         level = np.maximum(_level(z[:, nv // 2, nu // 2].reshape(len(sel), -1), p, 0), 1e-300)
         m, offset = mats[(di, k, si)]
@@ -981,12 +971,13 @@ def _median_noise(wn: np.ndarray, rowsum: np.ndarray) -> np.ndarray:
 
 
 def _wiener(kmat, a_mu, y, w, log_prior, want_solution=True):
-    """Evidence of ``y`` under ``N(A mu, K + W^-2)`` and ``alpha = (W K W + I)^-1 W (y - A mu)``, batched."""
+    """Evidence of ``y`` under ``N(A mu, K + W^-2)`` and ``alpha = (W K W + I)^-1 W (y - A mu)``, batched
+    (``kmat``: ``(m, m)`` shared by the batch, or ``(B, m, m)``, one per patch)."""
     import scipy.linalg as sl
 
-    m = len(kmat)
+    m = kmat.shape[-1]
     c = np.empty((len(w), m, m))  # W K W + I, formed in place (no (B, m, m) temporaries)
-    np.multiply(kmat[None], w[:, :, None], out=c)
+    np.multiply(kmat if kmat.ndim == 3 else kmat[None], w[:, :, None], out=c)
     c *= w[:, None, :]
     c.reshape(len(w), -1)[:, ::m + 1] += 1.0
     chol = np.linalg.cholesky(c)
