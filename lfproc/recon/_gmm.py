@@ -79,6 +79,15 @@ for 40 % more; any saturated measurement as a trigger
 regions are saturated at the high ISOs without being lights). Cost at Lytro size (quiet machine):
 city-interior 53.9 s without, 59.3 s with (44.29 -> 44.76 dB, detail ratio 1.18 -> 1.00).
 
+Lights refitted against the measurements (:mod:`lfproc.recon._lights`, ``LIGHTS_REFIT``). The point sources
+keep a light's energy near it, but the overlapping patches still blur it (the lamp above: the centre view peaks
+at 0.35-0.40 of the truth, the energy spread over 4 x 4 pixels). After the refinement, each small light of the
+centre view (8 times the median of its 9 x 9 neighbourhood) is refitted in a window of at most 20 pixels from
+that window's own measurements: the centre view at one disparity as a background near the estimate plus a
+non-negative light layer on the light's pixels (non-negative least squares), accepted when it halves the
+chi-square. Measured on the tune scenes at Lytro size: 35.13 -> 36.23 dB, detail ratio 0.87 -> 0.73, the lamp
+of city-interior's crop 58 % -> 90 % of its energy on its pixels.
+
 The mask must be periodic (``mask_period``): every patch of a phase then shares ``A_d`` and
 ``A_d Sigma A_d^T`` (computed once per phase, disparity and component).
 """
@@ -104,12 +113,13 @@ from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError, option_name
 from ..lightfield import LightField
 from .._shared.parallel import available_cpus
+from ._lights import refit_lights
 from ._reconstruct import _gather, _int_option
 from .. import _untrusted as ut
 from .._shared.patches import patch_grid
 from .._shared.random import check_random_state
 from ..camera.capture import Capture, load_capture, observations
-from ..camera.projection import patch_operators, transmittance_map
+from ..camera.projection import build_operator, patch_operators, transmittance_map
 from ..io._atomic import atomic_file
 
 __all__ = ["PatchModel", "train_patch_model", "load_patch_model", "reconstruct_gmm", "gmm_fits", "shear_matrix",
@@ -499,12 +509,19 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
             if REFINE_SIGMA:
                 acc = _refine(acc - lights, g.gt, g.gl, info, model, shears_sparse, scales, win, pool, opt["chunk"],
                               data.saturated.any(axis=0)) + lights
+            refit = {"windows": 0, "refitted": 0}
+            if LIGHTS_REFIT:  # small lights against the measurements themselves (lfproc.recon._lights)
+                op = build_operator(capture.mask, views=(nv, nu), size=capture.size, cfa_pattern=capture.cfa_pattern)
+                shears = [lambda q, d=d: shear_matrix((nv, nu), q, model.margin, d).reshape(nv, nu, q, q, -1)
+                          for d in disparities]
+                acc, refit = refit_lights(acc, *data.raw, np.asarray(op.weights), np.asarray(op.cfa_index), shears,
+                                          model.margin, pool)
     finally:
         bar.close()
     record = {"lfproc_version": __version__, "method": "gmm", "model": repr(model), "model_attrs": model.attrs,
               **{k: opt[k] for k in ("stride", "search_stride", "disparities", "scales", "pool_radius")},
               "search": search, "saturation": saturation, "refine_sigma": REFINE_SIGMA, "positive_std": POSITIVE_STD,
-              "lights": LIGHTS,
+              "lights": LIGHTS, "lights_refit": refit,
               "disparity_counts": np.bincount(chosen_d, minlength=len(disparities)).tolist(), "patches": int(len(g.gt))}
     return _result(acc, capture, record, started)
 
@@ -559,6 +576,7 @@ class _Data(NamedTuple):
     W: np.ndarray  #: weights 1/std, 0 where unusable
     W_sat: np.ndarray  #: weights of saturated measurements used as bounds, 0 elsewhere
     saturated: np.ndarray  #: saturated measurements (bounds or imputed), as 1.0, 0.0 elsewhere
+    raw: tuple  #: (T, W, W_sat) before the imputation (saturated measurements as bounds only; :mod:`._lights`)
 
 
 def _measurements(capture, saturation: str) -> _Data:
@@ -571,10 +589,11 @@ def _measurements(capture, saturation: str) -> _Data:
                          "reconstruct from")
     sat = np.asarray(obs.saturated) & (saturation == "bound")
     W_sat = np.where(sat, 1.0 / np.sqrt(np.maximum(np.asarray(obs.variance, np.float64), 1e-30)), 0.0)
+    raw = (T, W, W_sat)
     if saturation == "bound":
         r = transmittance_map(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern, size=capture.size)
         T, W, W_sat = _impute_saturated(T, W, sat, W_sat, r)
-    return _Data(T, W, W_sat, np.asarray(obs.saturated, np.float64))
+    return _Data(T, W, W_sat, np.asarray(obs.saturated, np.float64), raw)
 
 
 class _Grids:
@@ -854,6 +873,8 @@ LIGHTS_BRIGHT = 6.0
 LIGHTS_ITERS = 4
 LIGHTS_TAU = 3.0
 LIGHTS_ACTIVE = 16
+#: Small lights refitted in windows against the measurements after the refinement (:mod:`lfproc.recon._lights`).
+LIGHTS_REFIT = True
 _LIGHT_COLOUR = np.linalg.cholesky(np.full((3, 3), 1.0) + 0.25 * np.eye(3)) / math.sqrt(3.25)
 
 
