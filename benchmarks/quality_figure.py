@@ -47,6 +47,8 @@ def main() -> None:
     parser.add_argument("--scenes", required=True)
     parser.add_argument("--capture", default="2 random")
     parser.add_argument("--labels", default="before: dictionary (lfproc reconstruct),after: --method gmm")
+    parser.add_argument("--zoom", type=int, default=0,
+                        help="show N x N pixels around the truth's brightest centre-view pixel (white: its maximum)")
     parser.add_argument("-o", "--output", type=Path, required=True)
     args = parser.parse_args()
     scenes = args.scenes.split(",")
@@ -57,14 +59,22 @@ def main() -> None:
         truth = np.load(args.before / f"{scene}__truth.npy")
         results = [np.load(args.before / f"{scene}__{tag}.npy"), np.load(args.after / f"{scene}__{tag}.npy")]
         white = float(np.percentile(luminance(truth[2, 2]), 99))
+        if args.zoom:  # a window around the brightest light, at its own white point
+            lum = luminance(truth[2, 2])
+            iy, ix = np.unravel_index(np.argmax(lum), lum.shape)
+            y0 = int(np.clip(iy - args.zoom // 2, 0, lum.shape[0] - args.zoom))
+            x0 = int(np.clip(ix - args.zoom // 2, 0, lum.shape[1] - args.zoom))
+            window = (slice(None), slice(None), slice(y0, y0 + args.zoom), slice(x0, x0 + args.zoom))
+            truth, results = truth[window], [r[window] for r in results]
+            white = float(luminance(truth[2, 2]).max())
         panels = [("truth", truth)] + list(zip(labels, results))
         for ax, (name, lf) in zip(row[:3], panels):
-            ax.imshow(np.vstack([_tone(lf[2, 2], white), _tone(_epi(lf), white)]))
+            ax.imshow(np.vstack([_tone(lf[2, 2], white), _tone(_epi(lf), white)]), interpolation="nearest")
             ax.set_title(f"{scene}: {name}", fontsize=9)
             ax.axis("off")
         for ax, (name, lf) in zip(row[3:], panels[1:]):
             err = np.log2(np.maximum(luminance(lf[2, 2]), 1e-30) / np.maximum(luminance(truth[2, 2]), 1e-30))
-            im = ax.imshow(np.clip(err, -2, 2), cmap="RdBu_r", vmin=-2, vmax=2)
+            im = ax.imshow(np.clip(err, -2, 2), cmap="RdBu_r", vmin=-2, vmax=2, interpolation="nearest")
             ax.set_title(f"error in stops, {name.split(':')[0]} (median |e| {np.median(np.abs(err)):.2f})", fontsize=9)
             ax.axis("off")
         fig.colorbar(im, ax=row[3:], fraction=0.04, label="log2(result / truth)")
