@@ -88,19 +88,22 @@ def _window_matrix(weights, cfa, shear, top, left, p, e):
 
 
 def _fit(m, y, w, w_bound, x0, cols, passes):
-    """``x = b + l`` (module notes) on one window: ``(x, chi-square)``, or None when the solver fails."""
+    """``x = b + l`` (module notes) on one window: ``(x, chi-square)``, or None when there is nothing to fit or
+    the solver fails (the window then keeps the first estimate)."""
     sb2 = (KAPPA * x0 + TAU * max(float(x0.max()), 1e-300)) ** 2
     ww = w
     for _ in range(passes):
         k = ww > 0  # the usable measurements (a saturated one only as a bound the fit missed)
+        if not k.any():  # every measurement of the window saturated and no bound missed: nothing to fit
+            return None
         mk, rk = m[k], (y - m @ x0)[k]
         c = (mk * sb2) @ mk.T
         c.flat[::len(c) + 1] += 1.0 / ww[k] ** 2
-        chol = np.linalg.cholesky(c)
         try:
+            chol = np.linalg.cholesky(c)
             lc, _ = nnls(sl.solve_triangular(chol, mk[:, cols], lower=True), sl.solve_triangular(chol, rk, lower=True),
                          maxiter=50 * len(cols))
-        except RuntimeError:  # no convergence
+        except (np.linalg.LinAlgError, RuntimeError):  # not positive definite in floating point; no convergence
             return None
         l = np.zeros_like(x0)
         l[cols] = lc

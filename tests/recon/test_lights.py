@@ -109,3 +109,19 @@ def test_reconstruction_of_a_small_light_keeps_its_energy_with_the_refit(profile
         kept[on] = out.data.mean(axis=-1)[at].sum() / lum[at].sum()
         assert out.attrs["reconstruction"]["lights_refit"]["refitted"] == int(on)
     assert kept[True] > max(0.9, kept[False] + 0.05) and kept[True] < 1.1, kept
+
+
+def test_a_window_the_solver_cannot_fit_is_skipped_not_raised():
+    """_fit returns None (the window keeps its first estimate) when no measurement is usable (every one saturated)
+    and when the whitened system is not positive definite in floating point (weights so large (1e150) that the noise
+    variances, 1e-300, are negligible and the measurements are rank deficient), instead of raising LinAlgError."""
+    from lfproc.recon._lights import _fit
+
+    rng = np.random.default_rng(0)
+    m = rng.random((6, 12))
+    y, x0, cols = m @ np.ones(12), np.ones(12), np.arange(12)
+    assert _fit(m, y, np.zeros(6), np.ones(6), x0, cols, 3) is None  # all saturated: bounds only
+    rank1 = np.outer(np.ones(6), m[0])  # six copies of one row
+    assert _fit(rank1, rank1 @ np.ones(12), np.full(6, 1e150), np.zeros(6), x0, cols, 1) is None
+    x, chi2 = _fit(m, y + 0.1, np.ones(6), np.zeros(6), x0, cols, 1)  # the control: a solvable window
+    assert x.shape == (12,) and np.isfinite(chi2)
