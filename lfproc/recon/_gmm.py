@@ -119,7 +119,7 @@ from .. import _untrusted as ut
 from .._shared.patches import patch_grid
 from .._shared.random import check_random_state
 from ..camera.capture import Capture, load_capture, observations
-from ..camera.projection import build_operator, patch_operators, transmittance_map
+from ..camera.projection import patch_operators, transmittance_map
 from ..io._atomic import atomic_file
 
 __all__ = ["PatchModel", "train_patch_model", "load_patch_model", "reconstruct_gmm", "gmm_fits", "shear_matrix",
@@ -511,11 +511,8 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
                               data.saturated.any(axis=0)) + lights
             refit = {"windows": 0, "refitted": 0}
             if LIGHTS_REFIT:  # small lights against the measurements themselves (lfproc.recon._lights)
-                op = build_operator(capture.mask, views=(nv, nu), size=capture.size, cfa_pattern=capture.cfa_pattern)
-                shears = [lambda q, d=d: shear_matrix((nv, nu), q, model.margin, d).reshape(nv, nu, q, q, -1)
-                          for d in disparities]
-                acc, refit = refit_lights(acc, *data.raw, np.asarray(op.weights), np.asarray(op.cfa_index), shears,
-                                          model.margin, pool)
+                shears = [lambda q, d=d: shear_matrix((nv, nu), q, model.margin, d) for d in disparities]
+                acc, refit = refit_lights(acc, *data.raw, capture, shears, model.margin, pool)
     finally:
         bar.close()
     record = {"lfproc_version": __version__, "method": "gmm", "model": repr(model), "model_attrs": model.attrs,

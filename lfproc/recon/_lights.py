@@ -48,6 +48,8 @@ import scipy.linalg as sl
 from scipy import ndimage
 from scipy.optimize import nnls
 
+from ..camera.projection import patch_operators, transmittance_map
+
 #: A light: the centre view above RATIO times the median of a BG x BG square around it ...
 RATIO = 8.0
 BG = 9
@@ -75,16 +77,19 @@ def candidates(centre: np.ndarray, noise: float) -> list[tuple[slice, slice]]:
     return [b for b in ndimage.find_objects(labels) if b is not None], light
 
 
-def _window_matrix(weights, cfa, shear, top, left, p, e):
-    """The measurements of the ``p x p`` sensor pixels at ``(top, left)`` (every shot) as a matrix on the centre
-    view's extended window ``(E E 3)`` at the disparity of ``shear`` ``(V, U, P, P, E E)``."""
-    a = weights[:, :, :, top:top + p, left:left + p].astype(np.float64)  # (S, V, U, P, P)
-    per_pixel = np.einsum("svuhw,vuhwe->shwe", a, shear)  # (S, P, P, E E)
-    colour = cfa[top:top + p, left:left + p]
-    m = np.zeros(per_pixel.shape + (3,))
-    for c in range(3):
-        m[..., c] = np.where((colour == c)[None, :, :, None], per_pixel, 0.0)
-    return m.reshape(a.shape[0] * p * p, -1)
+def _window_matrix(cols, vals, shear):
+    """The window's measurements as a matrix on the centre view's extended window ``(E E 3)``.
+
+    ``cols, vals``: the window's patch matrix in gather form (:class:`lfproc.camera.projection.PatchOperators`,
+    ``(m, V U)``, columns ``(v, u, i, j, c)``); ``shear``: ``S_d`` ``(V U P P, E E)``. Row ``r`` is
+    ``sum_k vals[r, k] S_d[cols[r, k] // 3]`` in the colour ``cols[r, k] % 3``.
+    """
+    m_n = len(cols)
+    out = np.zeros((m_n, shear.shape[1], 3))
+    rows, e = np.arange(m_n)[:, None], np.arange(shear.shape[1])[None, :]
+    for k in range(cols.shape[1]):  # one view at a time: each row gets one colour
+        out[rows, e, cols[:, k, None] % 3] += vals[:, k, None] * shear[cols[:, k] // 3]
+    return out.reshape(m_n, -1)
 
 
 def _fit(m, y, w, w_bound, x0, cols, passes):
@@ -123,18 +128,19 @@ def _chi2(pred, y, w, w_bound):
     return float(e[ww > 0].mean()) if (ww > 0).any() else np.inf
 
 
-def refit_lights(first, T, W, W_bound, weights, cfa, shears, margin, pool=None):
+def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
     """The light field ``first`` ``(V, U, H, W, 3)`` with its small lights refitted (module notes).
 
     ``T, W, W_bound``: the measurements ``(S, H, W)``, their weights (0 where saturated) and the saturated
-    ones' weights as bounds; ``weights, cfa``: the projection operator's (``(S, V, U, H, W)``, ``(H, W)``);
-    ``shears``: per disparity, ``callable(p) -> (V, U, P, P, E E)``; ``margin``: ``R``. Windows are solved on
-    ``pool`` (a ``concurrent.futures`` executor) and applied in a fixed order: the output does not depend on it.
-    Returns the new light field (``first`` is not modified) and ``{"windows": n, "refitted": k}``.
+    ones' weights as bounds; ``capture``: their :class:`~lfproc.camera.capture.Capture` (mask, CFA);
+    ``shears``: per disparity, ``callable(p) -> S_d`` ``(V U P P, E E)``; ``margin``: ``R``. Windows are solved
+    on ``pool`` (a ``concurrent.futures`` executor) and applied in a fixed order: the output does not depend on
+    it. Returns the new light field (``first`` is not modified) and ``{"windows": n, "refitted": k}``.
     """
     nv, nu, h, w_ = first.shape[:4]
     centre = first[nv // 2, nu // 2]
-    rowsum = float(weights.sum(axis=(1, 2)).mean())
+    rowsum = float(transmittance_map(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern,
+                                     size=capture.size).mean())
     usable = W[W > 0]
     noise = float(np.median(1.0 / usable)) / max(rowsum, 1e-300) if usable.size else np.inf
     boxes, light = candidates(centre, noise)
@@ -158,15 +164,15 @@ def refit_lights(first, T, W, W_bound, weights, cfa, shears, margin, pool=None):
         cols = np.flatnonzero(np.repeat(support[top - r:top + p + r, left - r:left + p + r].reshape(-1), 3))
         if not len(cols):
             return None
-        views = first[:, :, top:top + p, left:left + p]
-        colour = np.broadcast_to(cfa[top:top + p, left:left + p][None, None, :, :, None], views.shape[:4] + (1,))
-        pred = np.einsum("svuhw,vuhw->shw", weights[:, :, :, top:top + p, left:left + p],
-                         np.take_along_axis(views, colour, axis=4)[..., 0]).reshape(-1)
+        ops = patch_operators(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern, tops=[top],
+                              lefts=[left], size=p, sensor_size=capture.size)
+        pcols, pvals = ops.cols[0].astype(np.intp), ops.vals[0].astype(np.float64)  # (m, V U)
+        pred = (pvals * first[:, :, top:top + p, left:left + p].reshape(-1)[pcols]).sum(axis=1)  # Phi x
         before = _chi2(pred, y, w, wb)
         best = None
         for make in shears:  # the disparity: least chi-square without the bounds
             shear = make(p)
-            m = _window_matrix(weights, cfa, shear, top, left, p, e)
+            m = _window_matrix(pcols, pvals, shear)
             out = _fit(m, y, w, wb, x0, cols, 1)
             if out is not None and (best is None or out[1] < best[0]):
                 best = (out[1], m, shear)
@@ -175,7 +181,7 @@ def refit_lights(first, T, W, W_bound, weights, cfa, shears, margin, pool=None):
         out = _fit(best[1], y, w, wb, x0, cols, _BOUND_PASSES)
         if out is None or not out[1] < ACCEPT * before:
             return None
-        return np.einsum("vuhwe,ec->vuhwc", best[2], out[0].reshape(e * e, 3))
+        return (best[2] @ out[0].reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
 
     results = list(pool.map(solve, jobs)) if pool is not None else [solve(j) for j in jobs]
     out = first.copy()

@@ -13,7 +13,6 @@ from scipy.ndimage import gaussian_filter
 
 import lfproc.recon._gmm as gmm
 from lfproc import LightField
-from lfproc.camera.projection import build_operator
 from lfproc.camera.simulate import simulate_capture
 from lfproc.recon import reconstruct_gmm
 from lfproc.recon._gmm import DEFAULT_DISPARITIES, _measurements, shear_matrix
@@ -43,11 +42,10 @@ def _capture(lf, profile="paper-none", stops_below=3):
 def _refit(first_lf, cap):
     rs = float(cap.radiance_scale)
     first = first_lf.astype(np.float64) * rs
-    op = build_operator(cap.mask, views=cap.views, size=cap.size, cfa_pattern=cap.cfa_pattern)
-    shears = [lambda q, d=d: shear_matrix(cap.views, q, 2, d).reshape(*cap.views, q, q, -1) for d in DEFAULT_DISPARITIES]
+    shears = [lambda q, d=d: shear_matrix(cap.views, q, 2, d) for d in DEFAULT_DISPARITIES]
     raw = _measurements(cap, "bound").raw
     before = first.copy()
-    out, info = refit_lights(first, *raw, np.asarray(op.weights), np.asarray(op.cfa_index), shears, 2)
+    out, info = refit_lights(first, *raw, cap, shears, 2)
     np.testing.assert_array_equal(first, before)  # the input is not modified
     return out / rs, info
 
@@ -125,3 +123,24 @@ def test_a_window_the_solver_cannot_fit_is_skipped_not_raised():
     assert _fit(rank1, rank1 @ np.ones(12), np.full(6, 1e150), np.zeros(6), x0, cols, 1) is None
     x, chi2 = _fit(m, y + 0.1, np.ones(6), np.zeros(6), x0, cols, 1)  # the control: a solvable window
     assert x.shape == (12,) and np.isfinite(chi2)
+
+
+def test_window_matrix_is_the_projection_of_the_sheared_window():
+    """Reference: lfproc.camera.projection.build_operator's forward model of the whole sensor. A light field that
+    is the shear S_d of a random centre window inside the window and 0 elsewhere, projected, equals the window
+    matrix times that centre window on the window's sensor pixels (every shot)."""
+    from lfproc.camera.projection import build_operator, patch_operators
+    from lfproc.recon._lights import _window_matrix
+
+    cap = _capture(_scene())
+    top, left, p, r, d = 9, 11, 10, 2, 0.75
+    shear = shear_matrix(cap.views, p, r, d)
+    x = np.random.default_rng(3).random(((p + 2 * r) ** 2, 3))
+    lf = np.zeros((*cap.views, *cap.size, 3))
+    lf[:, :, top:top + p, left:left + p] = (shear @ x).reshape(*cap.views, p, p, 3)
+    expected = build_operator(cap.mask, views=cap.views, size=cap.size, cfa_pattern=cap.cfa_pattern,
+                              dtype=np.float64).forward(lf)[:, top:top + p, left:left + p]
+    ops = patch_operators(cap.mask, views=cap.views, cfa_pattern=cap.cfa_pattern, tops=[top], lefts=[left], size=p,
+                          sensor_size=cap.size)
+    m = _window_matrix(ops.cols[0].astype(np.intp), ops.vals[0].astype(np.float64), shear)
+    np.testing.assert_allclose(m @ x.reshape(-1), expected.reshape(-1), rtol=1e-6)
