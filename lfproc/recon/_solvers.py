@@ -472,9 +472,10 @@ def _z_u_step(z, u, g, lim, a, v, stats, check):  # pragma: no cover - compiled 
                 u[i, j] = c
                 z[i, j] = zn
                 v[i, j] = zn - c
-                stats[0, j] += (zn - z0) * (zn - z0)
-                stats[1, j] += (c - u0) * (c - u0)
-                stats[2, j] += zn * zn
+                dz, du, zf = float(zn) - float(z0), float(c) - float(u0), float(zn)  # float64: no overflow
+                stats[0, j] += dz * dz
+                stats[1, j] += du * du
+                stats[2, j] += zf * zf
     else:
         for i in range(k_n):
             for j in range(b_n):
