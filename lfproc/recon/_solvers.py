@@ -228,8 +228,10 @@ ADMM_RHO = 1.0
 _ABS_TOL = 1e-2
 #: A soft threshold below this fraction of a patch's code scale is under float32's resolution: taken as 0.
 _LSQ_THRESHOLD = 1e-7
-#: Patches iterated together in :func:`admm`: the ``(K, B)`` state arrays stay small enough for the cache.
-_ADMM_CHUNK_BYTES = 8 * 2**20
+#: Patches iterated together in :func:`admm` (the ``(K, B)`` state arrays' bytes). With the state touched once an
+#: iteration (:func:`_z_u_step`) larger chunks pay: the Lytro-size benchmark (``benchmarks/reconstruct.py``, one
+#: quiet run each, 2026-11-25) took 22.9 / 21.6 / 20.7 / 21.1 s with 4 / 8 / 16 / 32 MiB.
+_ADMM_CHUNK_BYTES = 16 * 2**20
 
 
 def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho=None, alpha: float = ADMM_ALPHA,
@@ -277,7 +279,7 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
     alpha : float
         Over-relaxation (1: plain ADMM).
     chunk : int, optional
-        Patches iterated together (default: state arrays of about 8 MiB).
+        Patches iterated together (default: state arrays of about 16 MiB).
 
     Returns
     -------
