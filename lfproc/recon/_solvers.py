@@ -25,8 +25,8 @@ runs every block on one BLAS thread).
 
 from __future__ import annotations
 
+import numba
 import numpy as np
-from scipy.linalg.blas import saxpy
 
 __all__ = ["SharedOperator", "BatchOperator", "admm", "fista", "omp", "SOLVERS"]
 
@@ -97,21 +97,10 @@ class SharedOperator:
         """``A v_b`` for every column: ``(K, B) -> (m, B)`` (one GEMM, the column layout of :func:`admm`)."""
         return self.A @ V
 
-    def adj_t_add(self, E: np.ndarray, out: np.ndarray, scratch: np.ndarray | None = None) -> None:
-        """``out += A^T e_b`` for every column ``(m, B)`` of ``E``; ``out`` ``(K, B)`` C-contiguous float32.
-
-        numpy's GEMM into ``scratch`` (``(K, B)`` float32, C-contiguous; allocated if None), then one
-        add: numpy releases the GIL in both, so the blocks of a thread pool run their GEMMs at once.
-        (It was one BLAS ``sgemm`` adding into ``out``, one pass fewer, but scipy's f2py BLAS wrappers
-        hold the GIL for the whole product: with 2 threads, the other block's Python steps waited for
-        it, and 61 % of the samples in which a block held the GIL were in that call, py-spy --gil.)
-        The sums are those of BLAS with ``beta = 1`` (the product's sums, then one add): the Lytro-size
-        benchmark's output came out bit-identical.
-        """
-        if scratch is None:
-            scratch = np.empty_like(out)
-        np.matmul(self.AT, E, out=scratch)
-        out += scratch
+    def adj_t(self, E: np.ndarray, out: np.ndarray) -> None:
+        """``out = A^T e_b`` for every column ``(m, B)`` of ``E``; ``out`` ``(K, B)`` C-contiguous float32 (one GEMM;
+        numpy releases the GIL)."""
+        np.matmul(self.AT, E, out=out)
 
 
 class BatchOperator:
@@ -151,8 +140,8 @@ class BatchOperator:
         # stacked matmul (BLAS per patch): 15x faster than einsum("bmk,kb->mb") here (measured)
         return np.matmul(self.A, np.ascontiguousarray(V.T)[:, :, None])[:, :, 0].T
 
-    def adj_t_add(self, E: np.ndarray, out: np.ndarray, scratch: np.ndarray | None = None) -> None:
-        out += np.matmul(np.ascontiguousarray(E.T)[:, None, :], self.A)[:, 0, :].T
+    def adj_t(self, E: np.ndarray, out: np.ndarray) -> None:
+        out[...] = np.matmul(np.ascontiguousarray(E.T)[:, None, :], self.A)[:, 0, :].T
 
 
 def _soft(x: np.ndarray, kappa: np.ndarray) -> np.ndarray:
@@ -239,8 +228,10 @@ ADMM_RHO = 1.0
 _ABS_TOL = 1e-2
 #: A soft threshold below this fraction of a patch's code scale is under float32's resolution: taken as 0.
 _LSQ_THRESHOLD = 1e-7
-#: Patches iterated together in :func:`admm`: the ``(K, B)`` state arrays stay small enough for the cache.
-_ADMM_CHUNK_BYTES = 8 * 2**20
+#: Patches iterated together in :func:`admm` (the ``(K, B)`` state arrays' bytes). With the state touched once an
+#: iteration (:func:`_z_u_step`) larger chunks pay: the Lytro-size benchmark (``benchmarks/reconstruct.py``, one
+#: quiet run each, 2026-11-25) took 22.9 / 21.6 / 20.7 / 21.1 s with 4 / 8 / 16 / 32 MiB.
+_ADMM_CHUNK_BYTES = 16 * 2**20
 
 
 def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho=None, alpha: float = ADMM_ALPHA,
@@ -261,9 +252,10 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
 
     Over-relaxation ``alpha`` (default 1.6) replaces ``a`` by ``alpha a + (1 - alpha) z_old``
     in the ``z``, ``s`` and dual steps. State arrays are kept as ``(K, B)`` columns, in units
-    of each patch's threshold, and updated in place (``out=``, the adjoint GEMM into a scratch array
-    then added; every step in numpy, which releases the GIL): six element-wise passes per iteration
-    besides the two GEMMs; patches run in
+    of each patch's threshold, and updated in place: besides the two ``m x K`` GEMMs and two ``m x m`` ones,
+    one compiled pass over the ``(K, B)`` state per iteration (:func:`_z_u_step`, which also keeps the
+    stopping rule's norms) and two over the ``(m, B)`` measurements (:func:`_scale_residual`,
+    :func:`_s_d_step`), all releasing the GIL (numba, ``nogil``); patches run in
     chunks that keep them small. A patch stops when ``||z_k - z_{k-1}||`` and its primal residual
     are at most ``tol ||z_k|| + eps_abs`` (relative plus absolute, Boyd et al. 2011, section
     3.3.1; ``eps_abs`` is ``0.01 tol`` times the patch's code scale, ``||W y||`` over the rms norm
@@ -287,7 +279,7 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
     alpha : float
         Over-relaxation (1: plain ADMM).
     chunk : int, optional
-        Patches iterated together (default: state arrays of about 8 MiB).
+        Patches iterated together (default: state arrays of about 16 MiB).
 
     Returns
     -------
@@ -345,49 +337,48 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
     # their threshold is 0, so no state overflows (mu = 0 gave inf norms and a wrong answer "converged")
     lsq = ~(kappa > _LSQ_THRESHOLD * ref)
     unit = np.where(lsq, ref, kappa).astype(np.float32)
-    lsq_cols = np.flatnonzero(lsq[0])
     denom = w2 + rb
     z = np.zeros((k_n, b_n), dtype=np.float32)  # z / kappa
     u = np.zeros_like(z)  # u / kappa (scaled dual of a = z)
-    v = np.empty_like(z)
-    g = np.empty_like(z)  # A^T e (SharedOperator.adj_t_add)
+    v = np.zeros_like(z)  # z - u
+    stats = no_stats = np.zeros((3, 1))  # the stopping rule's norms (_z_u_step), in check iterations only
+    g = np.empty_like(z)  # alpha A^T e (adj_t)
     s = np.zeros((m, b_n), dtype=np.float32)  # the noiseless measurements A a
     d = np.zeros_like(s)  # scaled dual of s = A a
+    r = np.empty_like(s)
     alpha = np.float32(alpha)
+    one_minus_alpha = np.float32(1 - alpha)
+    lim = np.where(lsq[0], np.float32(0), np.float32(1)).astype(np.float32)
     act = _Active(b_n, k_n)
     out_t = np.zeros((k_n, b_n), dtype=np.float32)
     pending = 0
     it = 0
     for it in range(1, max_iter + 1):
         check = it % _BALANCE_EVERY == 0 or it == max_iter
-        np.subtract(z, u, out=v)  # v = z - u
-        t = op.fwd_t(v)
-        t *= unit  # A v
-        e = fac.times(fac.N, (s - d) - t)  # the a step: a = v + A^T e
-        a_m = t + fac.times(fac.G, e)  # A a
+        t = op.fwd_t(v)  # v = z - u (kept by _z_u_step)
+        _scale_residual(t, s, d, unit[0], r)  # t = A v, r = s - d - A v
+        e = fac.times(fac.N, r)  # the a step: a = v + A^T e
+        q = fac.times(fac.G, e)  # A a = A v + G e
+        stats = no_stats
         if check:
-            z_old, u_old, d_old, s_old = z.copy(), u.copy(), d, s
-        # x = alpha a + (1 - alpha) z + u = v + (2 - alpha) u + alpha A^T e, built in v
-        _axpy(u, v, 2 - alpha, g)  # g: scratch, then A^T e
-        op.adj_t_add((alpha / unit) * e, v, g)
-        np.clip(v, -1.0, 1.0, out=u)  # u_new = x - soft(x, kappa) = clip(x, -kappa, kappa)
-        if lsq_cols.size:
-            u[:, lsq_cols] = 0.0  # threshold 0
-        np.subtract(v, u, out=z)  # z_new = soft(x, kappa)
-        ah = alpha * a_m + (1 - alpha) * s  # relaxed A a
-        ah += d
-        s = (w2y + rb * ah) / denom  # argmin 1/2 |w (s - y)|^2 + rho beta / 2 |s - ah|^2
-        d = ah - s
+            d_old, s_old = d.copy(), s.copy()
+            stats = np.zeros((3, z.shape[1]))
+        # x = alpha a + (1 - alpha) z + u = z + (1 - alpha) u + alpha A^T e; u_new = x - soft(x, kappa) =
+        # clip(x, -kappa, kappa) (0 with threshold 0), z_new = soft(x, kappa): one compiled pass
+        e *= alpha / unit
+        op.adj_t(e, g)
+        _z_u_step(z, u, g, lim, one_minus_alpha, v, stats, check)
+        # the relaxed A a, alpha (A v + G e) + (1 - alpha) s, plus d; s = argmin 1/2 |w (s - y)|^2 + rho beta / 2
+        # |s - (that)|^2 and the new d, in place
+        _s_d_step(t, q, s, d, w2y, rb[0], denom, alpha)
         if not check:
             continue
         k_row = unit[0].astype(np.float64)
-        np.subtract(z, z_old, out=z_old)
-        change = k_row * np.sqrt(_sumsq(z_old))
-        np.subtract(u, u_old, out=u_old)
+        change = k_row * np.sqrt(stats[0])  # ||z_k - z_{k-1}||
         dd = d - d_old  # relaxed A a - s
-        primal = np.sqrt(k_row**2 * _sumsq(u_old) + beta[0] * _sumsq(dd))
+        primal = np.sqrt(k_row**2 * stats[1] + beta[0] * _sumsq(dd))
         # relative plus absolute (Boyd et al. 2011, section 3.3.1): a code near 0 stops too
-        eps = tol * k_row * np.sqrt(_sumsq(z)) + atol
+        eps = tol * k_row * np.sqrt(stats[2]) + atol
         done = (change <= eps) & (primal <= eps)
         pending += int(done.sum())
         if it == max_iter:
@@ -404,6 +395,7 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
                 unit = unit / f_unit
                 denom = w2 + rb
                 z *= f_unit  # z / kappa with the new kappa; u / kappa is unchanged (0 with threshold 0)
+                np.subtract(z, u, out=v)
                 d = d / f
         if pending and pending >= max(1, compact_fraction * len(act.rows)):
             out_t[:, act.rows[done]] = z[:, done] * unit[:, done]
@@ -414,9 +406,10 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
             if not keep.any():
                 return out_t.T, act.iters
             z, u, s, d, w2, w2y, denom = (np.ascontiguousarray(x[:, keep]) for x in (z, u, s, d, w2, w2y, denom))
+            r = np.empty_like(s)
             beta, rb, unit, lsq, atol = beta[:, keep], rb[:, keep], unit[:, keep], lsq[:, keep], atol[keep]
-            lsq_cols = np.flatnonzero(lsq[0])
-            v, g = np.empty_like(z), np.empty_like(z)
+            lim = np.ascontiguousarray(lim[keep])
+            v, g = z - u, np.empty_like(z)
             op = op.subset(keep)
             fac = fac.subset(keep)
     out_t[:, act.rows] = z * unit
@@ -432,19 +425,67 @@ def _sumsq(x: np.ndarray) -> np.ndarray:
     return out.astype(np.float64)
 
 
-def _axpy(x: np.ndarray, y: np.ndarray, a, scratch: np.ndarray | None = None) -> None:
-    """``y += a x`` in place: with a ``scratch`` array like ``x``, numpy's multiply into it and one add (two passes;
-    numpy releases the GIL), else BLAS ``saxpy`` (one pass, but scipy's f2py wrapper holds the GIL throughout:
-    :meth:`SharedOperator.adj_t_add`)."""
-    if a == 1:
-        y += x
-    elif scratch is not None:
-        np.multiply(x, np.float32(a), out=scratch)
-        y += scratch
-    elif x.dtype == np.float32 and x.flags.c_contiguous and y.flags.c_contiguous:
-        saxpy(x.reshape(-1), y.reshape(-1), a=float(a))
+@numba.njit(nogil=True, cache=True)
+def _scale_residual(t, s, d, unit, r):  # pragma: no cover - compiled (tests compare it with numpy)
+    """:func:`admm`'s ``t *= unit`` (``A v`` from the state in units of the threshold) and ``r = s - d - t``, one
+    pass over ``(m, B)``."""
+    m_n, b_n = t.shape
+    for i in range(m_n):
+        for j in range(b_n):
+            x = t[i, j] * unit[j]
+            t[i, j] = x
+            r[i, j] = s[i, j] - d[i, j] - x
+
+
+@numba.njit(nogil=True, cache=True)
+def _s_d_step(t, q, s, d, w2y, rb, denom, alpha):  # pragma: no cover - compiled (tests compare it with numpy)
+    """:func:`admm`'s ``s`` and dual steps in one pass over ``(m, B)``, in place: ``h = alpha (t + q) + (1 - alpha) s
+    + d`` (the relaxed ``A a`` plus the dual), ``s = (w2y + rb h) / denom``, ``d = h - s``."""
+    m_n, b_n = t.shape
+    for i in range(m_n):
+        for j in range(b_n):
+            h = alpha * (t[i, j] + q[i, j]) + (1 - alpha) * s[i, j] + d[i, j]
+            x = (w2y[i, j] + rb[j] * h) / denom[i, j]
+            s[i, j] = x
+            d[i, j] = h - x
+
+
+@numba.njit(nogil=True, cache=True)
+def _z_u_step(z, u, g, lim, a, v, stats, check):  # pragma: no cover - compiled (tests compare it with numpy)
+    """The ``z`` and dual steps of :func:`admm` in one pass (units of the threshold), in place:
+    ``x = z + a u + g`` (``a = 1 - alpha``, ``g = alpha A^T e``), ``u = clip(x, -lim, lim)``, ``z = x - u``, and
+    ``v = z - u`` (the next iteration's GEMM input). With ``check``, adds per column to ``stats`` ``(3, B)``
+    (float64) the squared norms of the change of ``z``, of the change of ``u`` and of the new ``z``: the stopping
+    rule's, without copies of the old state.
+
+    Why compiled: numpy needed seven passes over the ``(K, B)`` state for this (two multiply-adds, a clip, two
+    subtractions, and two copies plus three norms every fifth iteration). ``lim`` ``(B,)``: 1, or 0 for a
+    threshold-0 (least-squares) column. ``nogil``: the thread pool's blocks run it at once.
+    """
+    k_n, b_n = z.shape
+    if check:
+        for i in range(k_n):
+            for j in range(b_n):
+                z0 = z[i, j]
+                u0 = u[i, j]
+                x = z0 + a * u0 + g[i, j]
+                c = min(max(x, -lim[j]), lim[j])
+                zn = x - c
+                u[i, j] = c
+                z[i, j] = zn
+                v[i, j] = zn - c
+                dz, du, zf = float(zn) - float(z0), float(c) - float(u0), float(zn)  # float64: no overflow
+                stats[0, j] += dz * dz
+                stats[1, j] += du * du
+                stats[2, j] += zf * zf
     else:
-        y += np.float32(a) * x
+        for i in range(k_n):
+            for j in range(b_n):
+                x = z[i, j] + a * u[i, j] + g[i, j]
+                c = min(max(x, -lim[j]), lim[j])
+                u[i, j] = c
+                z[i, j] = x - c
+                v[i, j] = x - c - c
 
 
 def fista(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float,

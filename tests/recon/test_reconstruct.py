@@ -722,40 +722,74 @@ def test_admm_norms_do_not_overflow_for_large_data():
     np.testing.assert_allclose(zb / 1e20, z1, rtol=1e-3, atol=1e-4 * np.abs(z1).max())
 
 
-def test_shared_adjoint_adds_the_same_sums_as_blas_with_beta_1():
-    """SharedOperator.adj_t_add is numpy's GEMM into a scratch array plus one add (numpy releases the GIL; scipy's
-    f2py sgemm, which added into its output, held it for the whole product): the same float32 sums (to the bit
-    with the OpenBLAS of numpy's and scipy's wheels on the development machine; to rounding here, as the two
-    libraries may pick different kernels elsewhere)."""
-    from scipy.linalg.blas import sgemm
-
-    from lfproc.recon._solvers import SharedOperator
+def test_adjoint_into_an_array_is_the_gemm_for_both_operators():
+    """SharedOperator.adj_t (numpy's GEMM into the output, GIL released) and BatchOperator.adj_t (one matrix per
+    patch) against numpy's float64 product: ``A^T e_b`` for every column."""
+    from lfproc.recon._solvers import BatchOperator, SharedOperator
 
     rng = np.random.default_rng(4)
     for m, k, b in ((128, 2560, 117), (60, 120, 5)):
-        op = SharedOperator(rng.standard_normal((m, k)).astype(np.float32))
+        a = rng.standard_normal((m, k)).astype(np.float32)
         E = rng.standard_normal((m, b)).astype(np.float32)
-        out = rng.standard_normal((k, b)).astype(np.float32)
-        ref = sgemm(1.0, E.T, op.AT.T, beta=1.0, c=out.T.copy(order="F")).T
-        op.adj_t_add(E, out)
-        np.testing.assert_allclose(out, ref, rtol=0, atol=1e-6 * np.abs(ref).max())
-        scratch = np.empty_like(out)
-        op.adj_t_add(E, out, scratch)
-        np.testing.assert_array_equal(scratch, op.AT @ E)
+        ref = a.astype(np.float64).T @ E.astype(np.float64)
+        for op in (SharedOperator(a), BatchOperator(np.broadcast_to(a, (b, m, k)))):
+            out = rng.standard_normal((k, b)).astype(np.float32)  # overwritten, not added to
+            op.adj_t(E, out)
+            np.testing.assert_allclose(out, ref, rtol=0, atol=1e-5 * np.abs(ref).max())
 
 
-def test_axpy_with_a_scratch_array_equals_saxpy_to_rounding():
-    """admm's y += a x runs in numpy with a scratch array (GIL released; saxpy's f2py wrapper holds it)."""
-    from lfproc.recon._solvers import _axpy
+def test_compiled_z_u_step_equals_numpy():
+    """admm's compiled z and dual step against the numpy steps it replaced: x = z + (1 - alpha) u + g,
+    u = clip(x, -1, 1) (0 in a threshold-0 column), z = x - u, v = z - u; float32, in place; with check, the
+    squared column norms of the changes of z and u and of the new z (numpy's, in float64)."""
+    from lfproc.recon._solvers import _z_u_step
 
     rng = np.random.default_rng(5)
-    x = rng.standard_normal((300, 7)).astype(np.float32)
-    y0 = rng.standard_normal((300, 7)).astype(np.float32)
-    y_blas, y_np, scratch = y0.copy(), y0.copy(), np.empty_like(x)
-    _axpy(x, y_blas, 0.4)
-    _axpy(x, y_np, 0.4, scratch)
-    np.testing.assert_allclose(y_np, y0 + np.float32(0.4) * x, rtol=0, atol=0)
-    np.testing.assert_allclose(y_np, y_blas, rtol=0, atol=4 * np.finfo(np.float32).eps * np.abs(y_blas).max())
+    lim = np.array([1, 1, 0, 1, 1, 1, 0], np.float32)
+    a = np.float32(1 - 1.6)
+    for check in (False, True):
+        z, u, g = (rng.standard_normal((300, 7)).astype(np.float32) * 2 for _ in range(3))
+        z0, u0 = z.copy(), u.copy()
+        x = z + a * u + g
+        u_ref = np.clip(x, -1, 1) * lim
+        z_ref = x - u_ref
+        v, stats = np.empty_like(z), np.zeros((3, 7))
+        _z_u_step(z, u, g, lim, a, v, stats, check)
+        tol = dict(rtol=0, atol=4 * np.finfo(np.float32).eps * np.abs(x).max())
+        np.testing.assert_allclose(u, u_ref, **tol)
+        np.testing.assert_allclose(z, z_ref, **tol)
+        np.testing.assert_allclose(v, z_ref - u_ref, **tol)
+        assert (u[:, lim == 0] == 0).all() and np.abs(u).max() <= 1
+        on = lim == 1
+        assert ((np.abs(x[:, on]) <= 1) == (z[:, on] == 0)).mean() > 0.99  # inside the threshold the code is 0
+        want = [((z.astype(np.float64) - z0) ** 2).sum(0), ((u.astype(np.float64) - u0) ** 2).sum(0),
+                (z.astype(np.float64) ** 2).sum(0)] if check else np.zeros((3, 7))
+        np.testing.assert_allclose(stats, want, rtol=1e-6)
+
+
+def test_compiled_measurement_side_steps_equal_numpy():
+    """admm's compiled (m, B) steps against the numpy expressions they replaced: t *= unit, r = s - d - t; then
+    h = alpha (t + q) + (1 - alpha) s + d, s = (w2y + rb h) / denom, d = h - s (float32, in place)."""
+    from lfproc.recon._solvers import _s_d_step, _scale_residual
+
+    rng = np.random.default_rng(6)
+    t, s, d, q, w2y = (rng.standard_normal((40, 9)).astype(np.float32) for _ in range(5))
+    unit, rb = rng.uniform(0.5, 2, 9).astype(np.float32), rng.uniform(0.5, 2, 9).astype(np.float32)
+    denom = rng.uniform(1, 3, (40, 9)).astype(np.float32)
+    alpha = np.float32(1.6)
+    t_ref = t * unit
+    r_ref = s - d - t_ref
+    h = alpha * (t_ref + q) + (1 - alpha) * s + d
+    s_ref = (w2y + rb * h) / denom
+    d_ref = h - s_ref
+    r = np.empty_like(s)
+    _scale_residual(t, s, d, unit, r)
+    tol = dict(rtol=0, atol=1e-5)
+    np.testing.assert_allclose(t, t_ref, **tol)
+    np.testing.assert_allclose(r, r_ref, **tol)
+    _s_d_step(t, q, s, d, w2y, rb, denom, alpha)
+    np.testing.assert_allclose(s, s_ref, **tol)
+    np.testing.assert_allclose(d, d_ref, **tol)
 
 
 @pytest.mark.parametrize("stride", [4, 3, 8, 5])
