@@ -90,7 +90,7 @@ HALO = 3
 _BOUND_PASSES = 3
 
 
-def candidates(centre: np.ndarray, noise: float) -> list[tuple[slice, slice]]:
+def candidates(centre: np.ndarray, noise: float) -> tuple[list[tuple[slice, slice]], np.ndarray]:
     """Bounding boxes of the small lights of a centre view ``(H, W, 3)`` (module notes), in a fixed order, and the
     light pixels ``(H, W)``."""
     lum = centre.mean(axis=-1)
@@ -182,11 +182,6 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
     usable = W[W > 0]
     noise = float(np.median(1.0 / usable)) / max(rowsum, 1e-300) if usable.size else np.inf
     boxes, light = candidates(centre, noise)
-    priors = [(centre, ndimage.binary_dilation(light))]
-    if HALO:
-        halo = ndimage.binary_dilation(light, iterations=HALO)
-        median = np.stack([ndimage.median_filter(centre[..., c], size=BG, mode="nearest") for c in range(3)], -1)
-        priors.append((np.where(halo[..., None], np.minimum(centre, median), centre), halo))
     r = margin
     jobs = []
     for by, bx in boxes:
@@ -201,6 +196,14 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
             continue
         for y0, x0 in corners:
             jobs.append((min(max(y0, r), h - r - p), min(max(x0, r), w_ - r - p), p))
+
+    if not jobs:
+        return first.copy(), {"windows": 0, "refitted": 0}
+    priors = [(centre, ndimage.binary_dilation(light))]
+    if HALO:
+        halo = ndimage.binary_dilation(light, iterations=HALO)
+        median = np.stack([ndimage.median_filter(centre[..., c], size=BG, mode="nearest") for c in range(3)], -1)
+        priors.append((np.where(halo[..., None], np.minimum(centre, median), centre), halo))
 
     def solve(job):
         top, left, p = job
@@ -228,7 +231,8 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
             if pick is None:
                 continue
             out = _fit(pick[1], y, w, wb, x0, cols, _BOUND_PASSES)
-            if out is not None:  # one colour for the light layer: the free fit's, summed over the window
+            if out is not None:  # one colour for the light layer: the free fit's excess over the prior on the light's
+                # pixels, summed
                 tint = (out[0] - x0)[cols].reshape(-1, 3).clip(0).sum(axis=0)
                 if tint.sum() > 0:
                     out = _fit(pick[1], y, w, wb, x0, cols, _BOUND_PASSES, tint / tint.sum()) or out
@@ -240,17 +244,20 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
         return (shear @ x.reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
 
     results = list(pool.map(solve, jobs)) if pool is not None else [solve(j) for j in jobs]
-    num = np.zeros_like(first)  # overlapping windows (a long light) are averaged, feathered
-    den = np.zeros(first.shape[:4] + (1,))
-    done = 0
-    for (top, left, p), fit in zip(jobs, results):
-        if fit is None:
-            continue
-        done += 1
+    # feathered windows, averaged where they overlap (a long light): first + sum f_k (fit_k - first) / max(sum f_k, 1)
+    kept = [(job, fit) for job, fit in zip(jobs, results) if fit is not None]
+    den = np.zeros((h, w_))
+    for (top, left, p), _ in kept:
+        den[top:top + p, left:left + p] += _feather(p)
+    out = first.copy()
+    for (top, left, p), fit in kept:
         at = (slice(None), slice(None), slice(top, top + p), slice(left, left + p))
-        ramp = np.minimum(1.0, (np.minimum(np.arange(p), np.arange(p)[::-1]) + 1) / max(PAD, 1))
-        f = np.outer(ramp, ramp)[None, None, :, :, None]
-        num[at] += f * np.where(fit > 0, fit, first[at])  # radiance is positive: keep the first estimate there
-        den[at] += f
-    out = (num + np.maximum(1.0 - den, 0.0) * first) / np.maximum(den, 1.0)
-    return out, {"windows": len(jobs), "refitted": done}
+        gain = _feather(p) / np.maximum(den[top:top + p, left:left + p], 1.0)
+        out[at] += gain[:, :, None] * np.where(fit > 0, fit - first[at], 0.0)  # radiance is positive: keep the first
+    return out, {"windows": len(jobs), "refitted": len(kept)}
+
+
+def _feather(p: int) -> np.ndarray:
+    """A window's weights ``(p, p)``: 1 inside, falling linearly to ``1 / PAD`` over its last ``PAD`` pixels."""
+    ramp = np.minimum(1.0, (np.minimum(np.arange(p), np.arange(p)[::-1]) + 1) / max(PAD, 1))
+    return np.outer(ramp, ramp)
