@@ -314,9 +314,8 @@ def admm(op, w: np.ndarray, y: np.ndarray, mu, *, max_iter: int, tol: float, rho
 def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, compact_fraction):
     """:func:`admm` on one chunk; the ``(K, B)`` state is kept in units of each patch's threshold ``kappa``.
 
-    In those units the soft threshold is ``clip`` with scalar bounds (one fast pass; numpy's
-    ``clip`` with per-column bounds is 10x slower, measured), ``kappa`` folds into the
-    ``(m, B)`` side of the GEMMs, and a change of ``rho`` rescales ``z`` only.
+    In those units the soft threshold is a clip at +-1 (0 in a threshold-0 column: ``lim``), ``kappa`` folds
+    into the ``(m, B)`` side of the GEMMs, and a change of ``rho`` rescales ``z`` only.
     """
     b_n, m = w.shape
     k_n = op.shape[1]
@@ -337,18 +336,18 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
     # their threshold is 0, so no state overflows (mu = 0 gave inf norms and a wrong answer "converged")
     lsq = ~(kappa > _LSQ_THRESHOLD * ref)
     unit = np.where(lsq, ref, kappa).astype(np.float32)
+    lim = np.where(lsq[0], np.float32(0), np.float32(1)).astype(np.float32)  # the clip's bound: 0 for threshold 0
     denom = w2 + rb
     z = np.zeros((k_n, b_n), dtype=np.float32)  # z / kappa
     u = np.zeros_like(z)  # u / kappa (scaled dual of a = z)
     v = np.zeros_like(z)  # z - u
-    stats = no_stats = np.zeros((3, 1))  # the stopping rule's norms (_z_u_step), in check iterations only
+    no_stats = np.zeros((3, 1))  # the stopping rule's norms (_z_u_step) are summed in check iterations only
     g = np.empty_like(z)  # alpha A^T e (adj_t)
     s = np.zeros((m, b_n), dtype=np.float32)  # the noiseless measurements A a
     d = np.zeros_like(s)  # scaled dual of s = A a
     r = np.empty_like(s)
     alpha = np.float32(alpha)
     one_minus_alpha = np.float32(1 - alpha)
-    lim = np.where(lsq[0], np.float32(0), np.float32(1)).astype(np.float32)
     act = _Active(b_n, k_n)
     out_t = np.zeros((k_n, b_n), dtype=np.float32)
     pending = 0
@@ -359,10 +358,9 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
         _scale_residual(t, s, d, unit[0], r)  # t = A v, r = s - d - A v
         e = fac.times(fac.N, r)  # the a step: a = v + A^T e
         q = fac.times(fac.G, e)  # A a = A v + G e
-        stats = no_stats
+        stats = np.zeros((3, z.shape[1])) if check else no_stats
         if check:
             d_old, s_old = d.copy(), s.copy()
-            stats = np.zeros((3, z.shape[1]))
         # x = alpha a + (1 - alpha) z + u = z + (1 - alpha) u + alpha A^T e; u_new = x - soft(x, kappa) =
         # clip(x, -kappa, kappa) (0 with threshold 0), z_new = soft(x, kappa): one compiled pass
         e *= alpha / unit
@@ -391,7 +389,7 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
             if up.any() or down.any():
                 f = np.where(up, 2.0, np.where(down, 0.5, 1.0)).astype(np.float32)[None, :]
                 rb = rb * f
-                f_unit = np.where(lsq, np.float32(1.0), f)  # a threshold-0 column keeps its units
+                f_unit = np.where(lim == 0, np.float32(1.0), f)  # a threshold-0 column keeps its units
                 unit = unit / f_unit
                 denom = w2 + rb
                 z *= f_unit  # z / kappa with the new kappa; u / kappa is unchanged (0 with threshold 0)
@@ -407,8 +405,7 @@ def _admm_chunk(op, fac, w, y, mu, rho_rel, *, max_iter, tol, alpha, balance, co
                 return out_t.T, act.iters
             z, u, s, d, w2, w2y, denom = (np.ascontiguousarray(x[:, keep]) for x in (z, u, s, d, w2, w2y, denom))
             r = np.empty_like(s)
-            beta, rb, unit, lsq, atol = beta[:, keep], rb[:, keep], unit[:, keep], lsq[:, keep], atol[keep]
-            lim = np.ascontiguousarray(lim[keep])
+            beta, rb, unit, atol, lim = beta[:, keep], rb[:, keep], unit[:, keep], atol[keep], lim[keep]
             v, g = z - u, np.empty_like(z)
             op = op.subset(keep)
             fac = fac.subset(keep)
