@@ -51,6 +51,8 @@ def main() -> None:
                         help="show N x N pixels around the truth's brightest centre-view pixel (white: its maximum)")
     parser.add_argument("-o", "--output", type=Path, required=True)
     args = parser.parse_args()
+    if args.zoom < 0:
+        parser.error(f"--zoom: expected a window size in pixels >= 0 (0: whole frames), got {args.zoom}")
     scenes = args.scenes.split(",")
     labels = args.labels.split(",")
     tag = args.capture.replace(" ", "_")
@@ -59,6 +61,8 @@ def main() -> None:
         truth = np.load(args.before / f"{scene}__truth.npy")
         results = [np.load(args.before / f"{scene}__{tag}.npy"), np.load(args.after / f"{scene}__{tag}.npy")]
         white = float(np.percentile(luminance(truth[2, 2]), 99))
+        if args.zoom > min(truth.shape[2:4]):
+            parser.error(f"--zoom: expected at most {min(truth.shape[2:4])} pixels ({scene}'s size), got {args.zoom}")
         if args.zoom:  # a window around the brightest light, at its own white point
             lum = luminance(truth[2, 2])
             iy, ix = np.unravel_index(np.argmax(lum), lum.shape)
