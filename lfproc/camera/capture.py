@@ -692,13 +692,16 @@ def local_signal(capture: Capture, obs: Observation, *, radius: int = 1) -> np.n
 
 
 def noise_floor(capture: Capture) -> float:
-    """The light-field radiance at which one measurement has as much signal as read noise.
+    """The light-field radiance at which one measurement has as much signal as read noise, and at least one electron.
 
-    ``read_noise_e / (t r radiance_scale)`` at the capture's highest ISO and shortest exposure
-    ``t``, with ``r`` the mean total transmittance of a pixel (the mask codes summed over the
-    views): below it no single measurement sees the scene above its noise (units of the light
-    field the capture was simulated from; e-/s for a real capture, whose scale is 1). Used as
-    the noise floor of :func:`lfproc.metrics.hdr_figures`.
+    ``max(read_noise_e, 1) / (t r radiance_scale)`` at the capture's highest ISO and shortest
+    exposure ``t``, with ``r`` the mean total transmittance of a pixel (the mask codes summed over
+    the views): below it no single measurement sees the scene above its noise (units of the light
+    field the capture was simulated from; e-/s for a real capture, whose scale is 1). The electron:
+    a sensor without read noise (``paper-none``) still has photon noise, and one electron is the
+    signal whose photon noise equals it (without it that floor would be 0 and the figures would
+    count samples of a thousandth of an electron). Used as the noise floor of
+    :func:`lfproc.metrics.hdr_figures`.
 
     Parameters
     ----------
@@ -725,7 +728,7 @@ def noise_floor(capture: Capture) -> float:
     """
     if not isinstance(capture, Capture):
         raise InputError(f"noise_floor: expected a Capture, got {type(capture).__name__}")
-    read = float(iso_maps(capture.profile, max(capture.isos), (1,))["read_noise_e"][0])
+    read = max(float(iso_maps(capture.profile, max(capture.isos), (1,))["read_noise_e"][0]), 1.0)
     r = float(np.mean(capture.mask.codes)) * capture.views[0] * capture.views[1]
     scale = 1.0 if capture.radiance_scale is None else float(capture.radiance_scale)
     return read / (float(np.min(capture.exposures_s)) * max(r, 1e-30) * scale)

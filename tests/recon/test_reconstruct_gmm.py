@@ -240,7 +240,8 @@ def test_output_does_not_depend_on_threads_or_chunks_and_staged_search_runs():
 
 
 def test_noise_floor_of_a_capture_is_one_read_noise_per_measurement(tmp_path, capsys):
-    """Known answer: at the floor, one measurement of the highest ISO holds read_noise_e electrons."""
+    """Known answer: at the floor, one measurement of the highest ISO holds read_noise_e electrons (paper-medium:
+    2), and one electron without read noise (paper-none: photon noise only)."""
     from lfproc.camera.capture import noise_floor
     from lfproc.sensor import iso_maps
     from lfproc.io import write_lightfield
@@ -251,6 +252,10 @@ def test_noise_floor_of_a_capture_is_one_read_noise_per_measurement(tmp_path, ca
     read = iso_maps(capture.profile, 1600, (1,))["read_noise_e"][0]
     electrons = floor * capture.radiance_scale * 0.004 * capture.mask.codes.mean() * 25
     assert electrons == pytest.approx(read, rel=1e-9)
+    assert read == pytest.approx(2.0)
+    silent = simulate_capture(lf, profile="paper-none", mask_period=4, shots=2, random_state=11)
+    one = noise_floor(silent) * silent.radiance_scale * 0.004 * silent.mask.codes.mean() * 25
+    assert one == pytest.approx(1.0, rel=1e-9)
     cap_path = capture.save(tmp_path / "c.capture.npz")
     write_lightfield(lf, tmp_path / "t.exr")
     args = ["evaluate", str(tmp_path / "t.exr"), str(tmp_path / "t.exr"), "--json"]
