@@ -40,19 +40,19 @@ and the neighbourhood's level (the second prior's mean, sheared to the views), n
 Why the last two: near an occlusion edge, or where the first estimate put a light a pixel off, no fit of one
 disparity explains the window, yet its best fit can still halve a bad first estimate's chi-square. Measured per
 window on the tune scenes (96 x 128, 3 seeds, and Lytro size; each window applied alone): every window whose
-accepted fit left a chi-square of 3.1 or less raised PU21-PSNR (up to +3.5 dB, sunset-carrots' sun at 0.21),
-those at 3.1-4.2 moved it by less than 0.08 dB either way, and the one at 9.05 lost 0.55 dB (forest-stilllife,
-96 x 128): the bound belongs between 4.2 and 9. 8, not 4, because of a test scene: night-studio's block
-captures (96 x 128, seed 2) have two windows accepted at 5.0 and 6.5 that gain 4.7 dB together (a bound of 4
-lost them), while its bad windows sit at 19 and 28 (tune scenes: 4 and 8 within 0.02 dB). And where the fit of a window falls to 0 or below, the data say the
-sample is dark, while the first estimate there is the blurred light, often ten or a hundred times too bright
-(the old rule kept it). Tune scenes, windows applied together (96 x 128 seeds 0/1/2 of forest-stilllife;
-Lytro size; ``CHI2_MAX`` 4): before 30.12 / 30.51 / 30.43 and 33.26 dB; ``CHI2_MAX`` alone 30.12 / 30.51 / 31.22 and 33.26;
-``FLOOR`` alone 30.45 / 31.02 / 30.82 and 33.36; both 30.45 / 31.02 / 31.69 and 33.36 dB (desk-cannon and
+accepted fit left a chi-square of 3.1 or less raised PU21-PSNR (up to +3.5 dB, sunset-carrots' sun at 0.21), those
+at 3.1-4.2 moved it by less than 0.08 dB either way, and the one at 9.05 lost 0.55 dB (forest-stilllife, 96 x 128):
+the bound belongs between 4.2 and 9. 8, not 4, because of a test scene: night-studio's block captures (96 x 128,
+seed 2) have two windows accepted at 5.0 and 6.5 that gain 4.7 dB together (a bound of 4 lost them), while its bad
+windows sit at 19 and 28 (tune scenes: 4 and 8 within 0.02 dB). And where the fit of a window falls to 0 or below,
+the data say the sample is dark, while the first estimate there is the blurred light, often ten or a hundred times
+too bright (the old rule kept it). Tune scenes, windows applied together (96 x 128 seeds 0/1/2 of forest-stilllife;
+Lytro size; ``CHI2_MAX`` 4): before 30.12 / 30.51 / 30.43 and 33.26 dB; ``CHI2_MAX`` alone 30.12 / 30.51 / 31.22 and
+33.26; ``FLOOR`` alone 30.45 / 31.02 / 30.82 and 33.36; both 30.45 / 31.02 / 31.69 and 33.36 dB (desk-cannon and
 sunset-carrots: within 0.08 dB). Test scenes at 96 x 128, seed 0, the refit stage alone: night-studio, whose light
 sits on an occlusion edge, 28.69 -> 32.63 dB (the first estimate: 32.50; its two bad windows, at chi-square 19 and
-28, are no longer accepted); city-interior's lamp 33.29 -> 36.00 dB (its neighbours 100-360 where the truth is
-1-2 kept the first estimate; now 3-20).
+28, are no longer accepted); city-interior's lamp 33.29 -> 36.00 dB (its neighbours 100-360 where the truth is 1-2
+kept the first estimate; now 3-20).
 
 This is the paper's measurement model, solved exactly in a small window; it does not need the
 patch prior's approximations, and a light is a few unknowns against ``2 P^2`` measurements.
@@ -102,7 +102,8 @@ MAX_WINDOW = 20
 KAPPA = 0.3
 TAU = 1e-3
 #: The refit replaces the first estimate when its chi-square is below ACCEPT times the first estimate's, and below
-#: CHI2_MAX per measurement (a fit whose residuals are nearly three times the noise does not explain the window: module notes).
+#: CHI2_MAX per measurement (a fit whose residuals are nearly three times the noise does not explain the window:
+#: module notes).
 #: With FLOOR, a fit's non-positive samples take the smaller of the first estimate and the neighbourhood's level.
 ACCEPT = 0.5
 CHI2_MAX = 8.0
@@ -266,10 +267,10 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
             return None
         (x, _, _), shear = best
         fit = (shear @ x.reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
+        keep = first[:, :, top:top + p, left:left + p]  # radiance is positive: a non-positive fit keeps this
         if FLOOR:
-            low = (shear @ floor[ext].reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
-            return np.where(fit > 0, fit, np.minimum(first[:, :, top:top + p, left:left + p], low))
-        return fit
+            keep = np.minimum(keep, (shear @ floor[ext].reshape(e * e, 3)).reshape(nv, nu, p, p, 3))
+        return np.where(fit > 0, fit, keep)
 
     results = list(pool.map(solve, jobs)) if pool is not None else [solve(j) for j in jobs]
     # feathered windows, averaged where they overlap (a long light): first + sum f_k (fit_k - first) / max(sum f_k, 1)
@@ -281,7 +282,7 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
     for (top, left, p), fit in kept:
         at = (slice(None), slice(None), slice(top, top + p), slice(left, left + p))
         gain = _feather(p) / np.maximum(den[top:top + p, left:left + p], 1.0)
-        out[at] += gain[:, :, None] * np.where(fit > 0, fit - first[at], 0.0)  # radiance is positive: keep the first
+        out[at] += gain[:, :, None] * (fit - first[at])
     return out, {"windows": len(jobs), "refitted": len(kept)}
 
 

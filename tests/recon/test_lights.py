@@ -12,6 +12,7 @@ import pytest
 from scipy.ndimage import gaussian_filter
 
 import lfproc.recon._gmm as gmm
+import lfproc.recon._lights as lights
 from lfproc import LightField
 from lfproc.camera.simulate import simulate_capture
 from lfproc.recon import reconstruct_gmm
@@ -39,11 +40,19 @@ def _capture(lf, profile="paper-none", stops_below=3):
                             radiance_scale=cap.radiance_scale / 2 ** stops_below)
 
 
-def _refit(first_lf, cap):
+def _blurred(lf, sigma=1.0, gain=1.0):
+    """The first estimate of the planted scene ``lf``: its light (``lf`` less the plane alone) times ``gain``, spread
+    by a Gaussian of ``sigma`` pixels, over the plane."""
+    plane = _scene(light_value=0.0).data.astype(np.float64)
+    return plane + gain * gaussian_filter(lf.data.astype(np.float64) - plane, (0, 0, sigma, sigma, 0))
+
+
+def _refit(first_lf, cap, raw=None):
+    """``refit_lights`` on a first estimate in light-field units (the capture's measurements, or ``raw``)."""
     rs = float(cap.radiance_scale)
     first = first_lf.astype(np.float64) * rs
     shears = [lambda q, d=d: shear_matrix(cap.views, q, 2, d) for d in DEFAULT_DISPARITIES]
-    raw = _measurements(cap, "bound").raw
+    raw = _measurements(cap, "bound").raw if raw is None else raw
     before = first.copy()
     out, info = refit_lights(first, *raw, cap, shears, 2)
     np.testing.assert_array_equal(first, before)  # the input is not modified
@@ -57,8 +66,7 @@ def test_a_blurred_light_comes_back_sharp_with_its_energy():
     lf = _scene()
     cap = _capture(lf)
     truth = lf.data.astype(np.float64)
-    plane = _scene(light_value=0.0).data.astype(np.float64)
-    first = plane + gaussian_filter(truth - plane, (0, 0, 1.0, 1.0, 0))
+    first = _blurred(lf)
     out, info = _refit(first, cap)
     assert info == {"windows": 1, "refitted": 1}
     lum_t, lum_f, lum_o = truth.mean(-1), first.mean(-1), out.mean(-1)
@@ -77,13 +85,10 @@ def _neighbour_errors(monkeypatch, setting, values, profile="paper-none", sigma=
     """The planted light with its first estimate blurred (``gain`` times the light's energy spread by a Gaussian of
     ``sigma`` pixels), refitted once per value of the module setting: the RMS luminance error of the window's pixels
     next to the light, per value. Each refit is accepted, keeps the light's energy within 5 % and no sample at 0."""
-    import lfproc.recon._lights as lights
-
     lf = _scene()
     cap = _capture(lf, profile=profile)
     truth = lf.data.astype(np.float64)
-    plane = _scene(light_value=0.0).data.astype(np.float64)
-    first = plane + gain * gaussian_filter(truth - plane, (0, 0, sigma, sigma, 0))
+    first = _blurred(lf, sigma, gain)
     lum_t = truth.mean(-1)
     at = lum_t >= 0.1 * lum_t.max()
     near = np.zeros(lum_t.shape[2:], bool)
@@ -106,8 +111,6 @@ def test_the_median_prior_pulls_down_the_neighbours_a_blurred_light_made_too_bri
     neighbourhood's median around the light) chosen by evidence, the window's pixels next to the light come back
     within half the error that the first prior alone leaves them (measured: 2.0 against 6.8, the blur 26), and the
     light keeps its energy within 5 %. FLOOR off, to see the prior alone (with it: 1.1 against 2.3)."""
-    import lfproc.recon._lights as lights
-
     monkeypatch.setattr(lights, "FLOOR", False)
     err = _neighbour_errors(monkeypatch, "HALO", (0, 3))
     assert err[3] < 0.5 * err[0]
@@ -125,24 +128,18 @@ def test_where_a_fit_is_not_positive_the_neighbourhood_level_replaces_the_blur(m
 def test_a_window_its_fit_cannot_explain_keeps_the_first_estimate(monkeypatch):
     """The planted light blurred (refitted, as above), but the measurements around it multiplied by random factors
     of 0.2 to 5 (seeded): no fit explains them (chi-square above CHI2_MAX per measurement), so the window keeps the
-    first estimate exactly. The control: without the bound the same window is accepted."""
-    import lfproc.recon._lights as lights
-
+    first estimate. The control: without the bound the same window is accepted."""
     lf = _scene()
     cap = _capture(lf)
-    truth = lf.data.astype(np.float64)
-    plane = _scene(light_value=0.0).data.astype(np.float64)
-    first = plane + gaussian_filter(truth - plane, (0, 0, 1.0, 1.0, 0))
-    rs = float(cap.radiance_scale)
+    first = _blurred(lf)
     T, W, W_bound = _measurements(cap, "bound").raw
     bad = T.copy()
     bad[:, 12:32, 12:32] *= np.exp(np.random.default_rng(0).uniform(np.log(0.2), np.log(5.0), bad[:, 12:32, 12:32].shape))
-    shears = [lambda q, d=d: shear_matrix(cap.views, q, 2, d) for d in DEFAULT_DISPARITIES]
-    out, info = refit_lights(first * rs, bad, W, W_bound, cap, shears, 2)
+    out, info = _refit(first, cap, raw=(bad, W, W_bound))
     assert info == {"windows": 1, "refitted": 0}
-    np.testing.assert_array_equal(out, first * rs)
+    np.testing.assert_allclose(out, first, rtol=1e-12)  # unchanged, to the rounding of the units' scale
     monkeypatch.setattr(lights, "CHI2_MAX", np.inf)
-    assert refit_lights(first * rs, bad, W, W_bound, cap, shears, 2)[1] == {"windows": 1, "refitted": 1}
+    assert _refit(first, cap, raw=(bad, W, W_bound))[1] == {"windows": 1, "refitted": 1}
 
 
 def test_a_long_light_gets_windows_along_it():
@@ -258,8 +255,6 @@ def test_fit_evidence_is_the_gaussian_likelihood_of_the_residual():
     best non-negative light layer on the light's columns."""
     from scipy.optimize import minimize
     from scipy.stats import multivariate_normal
-
-    import lfproc.recon._lights as lights
 
     rng = np.random.default_rng(3)
     m = rng.random((30, 12))

@@ -239,7 +239,7 @@ def test_output_does_not_depend_on_threads_or_chunks_and_staged_search_runs():
     assert evaluate(staged, lf)["pu21_psnr_db"] > 27.5  # measured: 28.06 dB without the refinement pass, 27.88 with
 
 
-def test_noise_floor_of_a_capture_is_one_read_noise_per_measurement(tmp_path, capsys):
+def test_noise_floor_of_a_capture_is_one_read_noise_or_one_electron_per_measurement(tmp_path, capsys):
     """Known answer: at the floor, one measurement of the highest ISO holds read_noise_e electrons (paper-medium:
     2), and one electron without read noise (paper-none: photon noise only)."""
     from lfproc.camera.capture import noise_floor
