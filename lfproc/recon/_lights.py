@@ -57,10 +57,21 @@ kept the first estimate; now 3-20).
 Why ``CANDIDATES`` 2, not 1: without the bounds two disparities can score within a hair, the wrong one first, and
 the bounds then decide. A test scene showed it: city-interior's lamp at 96 x 128, ``paper-none``, seed 0, ranked 0.75
 (chi-square 519.6) before 1.0 (526.7); with the bounds 0.75 left 14.5 per measurement (not accepted) and 1.0 left
-0.10 (the refit stage 29.93 -> 36.13 dB; with medium noise the same lamp ranked 1.0 first: 36.00). night-studio's
-2 random seed 0 gained too (32.63 -> 33.84 dB). Tune scenes (96 x 128, 3 seeds; Lytro size): the same to 0.01 dB
-but forest-stilllife seed 2, 31.69 -> 31.72 dB; 3 candidates add nothing there (desk-cannon seed 2 +0.04 dB) for
-another fifth of the time. The refit stage takes about a fifth longer (the bounded fits are the costly ones).
+0.10 (the refit stage 29.93 -> 36.13 dB; with medium noise the same lamp ranked 1.0 first: 36.00). The second
+candidate is a fallback, taken only when the first's fit would not be accepted, not a contest of chi-squares: with
+one shot a wrong disparity's fit can leave less (the default path, city-interior's lamp: 0.25 at 0.13 against 1.0 at
+0.42), and picking the smaller lost 8 dB there (50.15 -> 42.22). Tune scenes (96 x 128, 3 seeds; Lytro size): the
+same to 0.01 dB but forest-stilllife seed 2, 31.69 -> 31.72 dB.
+
+Why ``PASSES`` 3: the background's prior is centred on the first estimate, around a light the light blurred. A
+pass's result is sharper, so the next pass, which finds the lights again on it, starts nearer the truth (and a window
+it cannot improve by half is left as it is). Tune scenes, 1 / 2 / 3 passes: forest-stilllife at 96 x 128 (seeds
+0/1/2) 30.45 / 31.02 / 31.72 -> 30.66 / 32.36 / 32.44 -> 30.67 / 32.45 / 32.56 dB, desk-cannon within 0.02 dB,
+sunset-carrots' lights not found at that size; at Lytro size forest-stilllife 33.36 -> 33.51 -> 33.55 dB and
+sunset-carrots 51.50 (its second pass refits nothing, so it stops). A pass after the first costs about as much as
+the first where its windows were refitted. The window's matrix is sparse (a measurement touches one colour of at
+most four pixels per view) and ``M Sb^2 M^T`` is made once per prior and disparity, not per fit: the same results in
+half the time, which pays for the passes on the default path.
 
 This is the paper's measurement model, solved exactly in a small window; it does not need the
 patch prior's approximations, and a light is a few unknowns against ``2 P^2`` measurements.
@@ -91,7 +102,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg as sl
-from scipy import ndimage
+from scipy import ndimage, sparse
 from scipy.optimize import nnls
 
 from ..camera.projection import patch_operators, transmittance_map
@@ -120,6 +131,8 @@ CHI2_MAX = 8.0
 HALO = 3
 FLOOR = True
 _BOUND_PASSES = 3
+#: Passes of the whole refit, each on the last one's result (module notes).
+PASSES = 3
 #: The disparities of least chi-square without the bounds that are solved again with them (module notes).
 CANDIDATES = 2
 
@@ -145,38 +158,54 @@ def _starts(span: slice, p: int) -> list[int]:
 
 
 def _window_matrix(cols, vals, shear):
-    """The window's measurements as a matrix on the centre view's extended window ``(E E 3)``.
+    """The window's measurements as a sparse matrix on the centre view's extended window ``(m, E E 3)``.
 
     ``cols, vals``: the window's patch matrix in gather form (:class:`lfproc.camera.projection.PatchOperators`,
-    ``(m, V U)``, columns ``(v, u, i, j, c)``); ``shear``: ``S_d`` ``(V U P P, E E)``. Row ``r`` is
-    ``sum_k vals[r, k] S_d[cols[r, k] // 3]`` in the colour ``cols[r, k] % 3``.
+    ``(m, V U)``, columns ``(v, u, i, j, c)``); ``shear``: ``S_d`` ``(V U P P, E E)``, dense or sparse. Row ``r`` is
+    ``sum_k vals[r, k] S_d[cols[r, k] // 3]`` in the colour ``cols[r, k] % 3``. Sparse: a row touches one colour of
+    at most four pixels per view (bilinear), 100 of the ``3 E^2`` columns, so ``M diag(s) M^T`` costs a fiftieth of
+    the dense product (the refit's main cost before).
     """
-    m_n = len(cols)
-    out = np.zeros((m_n, shear.shape[1], 3))
-    rows, e = np.arange(m_n)[:, None], np.arange(shear.shape[1])[None, :]
+    m_n, ee = len(cols), shear.shape[1]
+    shear = sparse.csr_array(shear)
+    rows, cc, data = [], [], []
     for k in range(cols.shape[1]):  # one view at a time: each row gets one colour
-        out[rows, e, cols[:, k, None] % 3] += vals[:, k, None] * shear[cols[:, k] // 3]
-    return out.reshape(m_n, -1)
+        part = shear[cols[:, k] // 3].tocoo()
+        rows.append(part.row)
+        cc.append(part.col * 3 + cols[part.row, k] % 3)
+        data.append(part.data * vals[part.row, k])
+    return sparse.csr_array((np.concatenate(data), (np.concatenate(rows), np.concatenate(cc))), shape=(m_n, ee * 3))
 
 
-def _fit(m, y, w, w_bound, x0, cols, passes, colour=None):
+def _prior_cov(m, x0):
+    """The background's prior variances ``Sb^2`` (module notes) and ``M Sb^2 M^T`` over every measurement (dense)."""
+    sb2 = (KAPPA * x0 + TAU * max(float(x0.max()), 1e-300)) ** 2
+    cov = m @ sparse.diags_array(sb2) @ m.T if sparse.issparse(m) else (m * sb2) @ m.T
+    return sb2, (cov.toarray() if sparse.issparse(cov) else cov)
+
+
+def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
     """``x = b + l`` (module notes) on one window: ``(x, chi-square, -2 log evidence)``, or None when there is
     nothing to fit or the solver fails (the window then keeps the first estimate). The evidence is the Gaussian
     density of the residual after ``l`` with the background integrated out, without its ``2 pi`` term. With
     ``colour`` (3,), the light layer on the pixels of ``cols`` (their three colours in turn) is that colour times a
-    non-negative intensity per pixel."""
-    sb2 = (KAPPA * x0 + TAU * max(float(x0.max()), 1e-300)) ** 2
+    non-negative intensity per pixel. ``m`` dense or sparse; ``prior``: :func:`_prior_cov` of ``m, x0`` when the
+    caller has it (it depends on neither the bounds nor the light layer)."""
+    sb2, cov = _prior_cov(m, x0) if prior is None else prior
     ww = w
     for _ in range(passes):
         k = ww > 0  # the usable measurements (a saturated one only as a bound the fit missed)
         if not k.any():  # every measurement of the window saturated and no bound missed: nothing to fit
             return None
         mk, rk = m[k], (y - m @ x0)[k]
-        c = (mk * sb2) @ mk.T
+        c = cov[np.ix_(k, k)]
         c.flat[::len(c) + 1] += 1.0 / ww[k] ** 2
         try:
             chol = np.linalg.cholesky(c)
-            design = mk[:, cols] if colour is None else mk[:, cols].reshape(len(mk), -1, 3) @ colour
+            design = mk[:, cols]
+            design = design.toarray() if sparse.issparse(design) else design
+            if colour is not None:
+                design = design.reshape(len(design), -1, 3) @ colour
             lc, _ = nnls(sl.solve_triangular(chol, design, lower=True), sl.solve_triangular(chol, rk, lower=True),
                          maxiter=50 * design.shape[1])
         except (np.linalg.LinAlgError, RuntimeError):  # not positive definite in floating point; no convergence
@@ -207,14 +236,29 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
     ones' weights as bounds; ``capture``: their :class:`~lfproc.camera.capture.Capture` (mask, CFA);
     ``shears``: per disparity, ``callable(p) -> S_d`` ``(V U P P, E E)``; ``margin``: ``R``. Windows are solved
     on ``pool`` (a ``concurrent.futures`` executor) and added in a fixed order (feathered; averaged where windows
-    overlap): the output does not depend on it. Returns the new light field (``first`` is not modified) and ``{"windows": n, "refitted": k}``.
+    overlap): the output does not depend on it. ``PASSES`` times, each on the last one's result (its lights found
+    again), until a pass refits nothing. Returns the new light field (``first`` is not modified) and
+    ``{"windows": n, "refitted": k, "passes": [[n, k], ...]}`` (``n, k``: the first pass's; then each pass's).
     """
-    nv, nu, h, w_ = first.shape[:4]
-    centre = first[nv // 2, nu // 2]
     rowsum = float(transmittance_map(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern,
                                      size=capture.size).mean())
     usable = W[W > 0]
     noise = float(np.median(1.0 / usable)) / max(rowsum, 1e-300) if usable.size else np.inf
+    out, passes, cache = first, [], {}
+    for _ in range(max(PASSES, 1)):
+        out, n, k = _refit_once(out, T, W, W_bound, capture, shears, margin, pool, noise, cache)
+        passes.append([n, k])
+        if not k:  # nothing changed: another pass would find the same
+            break
+    out = first.copy() if out is first else out
+    return out, {"windows": passes[0][0], "refitted": passes[0][1], "passes": passes}
+
+
+def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cache):
+    """One pass of :func:`refit_lights`: the new light field, the number of windows and of windows refitted.
+    ``cache``: the sparse shears by ``(disparity index, p)``, kept between passes."""
+    nv, nu, h, w_ = first.shape[:4]
+    centre = first[nv // 2, nu // 2]
     boxes, light = candidates(centre, noise)
     r = margin
     jobs = []
@@ -232,13 +276,15 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
             jobs.append((min(max(y0, r), h - r - p), min(max(x0, r), w_ - r - p), p))
 
     if not jobs:
-        return first.copy(), {"windows": 0, "refitted": 0}
-    priors = [(centre, ndimage.binary_dilation(light))]
-    median = np.stack([ndimage.median_filter(centre[..., c], size=BG, mode="nearest") for c in range(3)], -1)
-    floor = np.minimum(centre, median)  # where a fit is not positive: the neighbourhood's level, not the blur
+        return first, 0, 0
+    priors = [(False, ndimage.binary_dilation(light))]  # (mean from the floor on the support?, support)
     if HALO:
-        halo = ndimage.binary_dilation(light, iterations=HALO)
-        priors.append((np.where(halo[..., None], floor, centre), halo))
+        priors.append((True, ndimage.binary_dilation(light, iterations=HALO)))
+
+    def _shear(i, p):  # S_d of disparity i for windows of p pixels, sparse, made once per call
+        if (i, p) not in cache:
+            cache[i, p] = sparse.csr_array(shears[i](p))
+        return cache[i, p]
 
     def solve(job):
         top, left, p = job
@@ -251,29 +297,34 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
         pcols, pvals = ops.cols[0].astype(np.intp), ops.vals[0].astype(np.float64)  # (m, V U)
         pred = (pvals * first[:, :, top:top + p, left:left + p].reshape(-1)[pcols]).sum(axis=1)  # Phi x
         before = _chi2(pred, y, w, wb)
-        fits = [(shear, _window_matrix(pcols, pvals, shear)) for shear in (make(p) for make in shears)]
+        fits = [(shear, _window_matrix(pcols, pvals, shear)) for shear in (_shear(i, p) for i in range(len(shears)))]
         best = None
-        for mean, support in priors:
-            x0 = mean[ext].reshape(-1)
+        floor = _floor(centre, ext)  # where a fit is not positive: the neighbourhood's level, not the blur
+        for low, support in priors:
+            x0 = (np.where(support[ext][..., None], floor, centre[ext]) if low else centre[ext]).reshape(-1)
             cols = np.flatnonzero(np.repeat(support[ext].reshape(-1), 3))
             if not len(cols):
                 continue
             picks = []
             for shear, m in fits:  # the disparity: least chi-square, first without the bounds ...
-                out = _fit(m, y, w, wb, x0, cols, 1)
+                prior = _prior_cov(m, x0)
+                out = _fit(m, y, w, wb, x0, cols, 1, prior=prior)
                 if out is not None:
-                    picks.append((out[1], len(picks), m, shear))
+                    picks.append((out[1], len(picks), m, shear, prior))
             chosen = None
-            for _, _, m, shear in sorted(picks, key=lambda t: t[:2])[:CANDIDATES]:  # ... then with them, of the
-                # CANDIDATES best
-                out = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES)
+            for _, _, m, shear, prior in sorted(picks, key=lambda t: t[:2])[:CANDIDATES]:  # ... then with them: the
+                # first of the CANDIDATES best whose fit would be accepted
+                out = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
                 if out is not None:  # one colour for the light layer: the free fit's excess over the prior on the
                     # light's pixels, summed
                     tint = (out[0] - x0)[cols].reshape(-1, 3).clip(0).sum(axis=0)
                     if tint.sum() > 0:
-                        out = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, tint / tint.sum()) or out
-                if out is not None and (chosen is None or out[1] < chosen[0][1]):
+                        out = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, tint / tint.sum(), prior) or out
+                if out is not None and chosen is None:
                     chosen = (out, shear)
+                if out is not None and out[1] < min(ACCEPT * before, CHI2_MAX):
+                    chosen = (out, shear)
+                    break
             if chosen is not None and (best is None or chosen[0][2] < best[0][2]):  # the higher evidence
                 best = chosen
         if best is None or not best[0][1] < min(ACCEPT * before, CHI2_MAX):
@@ -282,7 +333,7 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
         fit = (shear @ x.reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
         keep = first[:, :, top:top + p, left:left + p]  # radiance is positive: a non-positive fit keeps this
         if FLOOR:
-            keep = np.minimum(keep, (shear @ floor[ext].reshape(e * e, 3)).reshape(nv, nu, p, p, 3))
+            keep = np.minimum(keep, (shear @ floor.reshape(e * e, 3)).reshape(nv, nu, p, p, 3))
         return np.where(fit > 0, fit, keep)
 
     results = list(pool.map(solve, jobs)) if pool is not None else [solve(j) for j in jobs]
@@ -296,7 +347,19 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
         at = (slice(None), slice(None), slice(top, top + p), slice(left, left + p))
         gain = _feather(p) / np.maximum(den[top:top + p, left:left + p], 1.0)
         out[at] += gain[:, :, None] * (fit - first[at])
-    return out, {"windows": len(jobs), "refitted": len(kept)}
+    return out, len(jobs), len(kept)
+
+
+def _floor(centre, ext):
+    """The smaller of the centre view ``(H, W, 3)`` and its ``BG x BG`` median (per colour) on the window ``ext``
+    (two slices). The median of a crop ``BG // 2`` larger (clipped to the view): on ``ext`` the same as the whole
+    view's, at a small share of its time."""
+    q = BG // 2
+    (y0, y1), (x0, x1) = ((max(sl.start - q, 0), min(sl.stop + q, n)) for sl, n in zip(ext, centre.shape[:2]))
+    crop = centre[y0:y1, x0:x1]
+    median = np.stack([ndimage.median_filter(crop[..., c], size=BG, mode="nearest") for c in range(3)], -1)
+    at = (slice(ext[0].start - y0, ext[0].stop - y0), slice(ext[1].start - x0, ext[1].stop - x0))
+    return np.minimum(centre[ext], median[at])
 
 
 def _feather(p: int) -> np.ndarray:

@@ -59,6 +59,11 @@ def _refit(first_lf, cap, raw=None):
     return out / rs, info
 
 
+def _counts(info):
+    """The first pass's windows and windows refitted."""
+    return {k: info[k] for k in ("windows", "refitted")}
+
+
 def test_a_blurred_light_comes_back_sharp_with_its_energy():
     """Noise-free capture of the planted light; the first estimate has the light spread by a Gaussian of 1 pixel
     (its energy kept, its peak at a third): the refit puts the energy back on the light's 4 pixels (within 5 %)
@@ -68,7 +73,7 @@ def test_a_blurred_light_comes_back_sharp_with_its_energy():
     truth = lf.data.astype(np.float64)
     first = _blurred(lf)
     out, info = _refit(first, cap)
-    assert info == {"windows": 1, "refitted": 1}
+    assert _counts(info) == {"windows": 1, "refitted": 1}
     lum_t, lum_f, lum_o = truth.mean(-1), first.mean(-1), out.mean(-1)
     at = lum_t >= 0.1 * lum_t.max()
     assert lum_f[at].sum() / lum_t[at].sum() < 0.6  # the control: the blur moved most of it off the light
@@ -98,7 +103,7 @@ def _neighbour_errors(monkeypatch, setting, values, profile="paper-none", sigma=
     for value in values:
         monkeypatch.setattr(lights, setting, value)
         out, info = _refit(first, cap)
-        assert info == {"windows": 1, "refitted": 1}
+        assert _counts(info) == {"windows": 1, "refitted": 1}
         lum_o = out.mean(-1)
         np.testing.assert_allclose(lum_o[at].sum() / lum_t[at].sum(), 1.0, atol=0.05)
         assert out.min() > 0
@@ -110,8 +115,9 @@ def test_the_median_prior_pulls_down_the_neighbours_a_blurred_light_made_too_bri
     """The planted light blurred as above. With the second prior (HALO 3: the background's mean from the
     neighbourhood's median around the light) chosen by evidence, the window's pixels next to the light come back
     within half the error that the first prior alone leaves them (measured: 2.0 against 6.8, the blur 26), and the
-    light keeps its energy within 5 %. FLOOR off, to see the prior alone (with it: 1.1 against 2.3)."""
+    light keeps its energy within 5 %. FLOOR off and one pass, to see the prior alone (with FLOOR: 1.1 against 2.3)."""
     monkeypatch.setattr(lights, "FLOOR", False)
+    monkeypatch.setattr(lights, "PASSES", 1)
     err = _neighbour_errors(monkeypatch, "HALO", (0, 3))
     assert err[3] < 0.5 * err[0]
 
@@ -120,9 +126,20 @@ def test_where_a_fit_is_not_positive_the_neighbourhood_level_replaces_the_blur(m
     """A first estimate whose halo holds twice the light's energy, spread by a Gaussian of 1.5 pixels (paper-medium
     noise). Where the window's fit is not positive the result takes the smaller of the first estimate and the
     neighbourhood's median (FLOOR), not the first estimate: the pixels next to the light come back with 0.6 of the
-    error they keep without it (measured: 2.80 against 5.21), no sample is 0 and the light keeps its energy."""
+    error they keep without it (measured: 2.80 against 5.21), no sample is 0 and the light keeps its energy. One pass
+    (later passes repair much of what the first leaves without FLOOR: 1.16 after three)."""
+    monkeypatch.setattr(lights, "PASSES", 1)
     err = _neighbour_errors(monkeypatch, "FLOOR", (False, True), profile="paper-medium", sigma=1.5, gain=2.0)
     assert err[True] < 0.6 * err[False], err
+
+
+def test_later_passes_refit_the_lights_of_the_sharper_estimate(monkeypatch):
+    """The first estimate as above (twice the light's energy in a halo of 1.5 pixels, paper-medium). A pass's result
+    is sharper than its input, so the next pass finds the light again with a lower background prior around it: the
+    pixels next to the light come back with under half the error one pass leaves (measured: 2.80, 1.51, 1.24 after
+    one, two, three passes), each keeping the light's energy within 5 % and no sample at 0."""
+    err = _neighbour_errors(monkeypatch, "PASSES", (1, 2, 3), profile="paper-medium", sigma=1.5, gain=2.0)
+    assert err[2] < 0.7 * err[1] and err[3] < 0.5 * err[1], err
 
 
 def test_a_window_its_fit_cannot_explain_keeps_the_first_estimate(monkeypatch):
@@ -136,10 +153,10 @@ def test_a_window_its_fit_cannot_explain_keeps_the_first_estimate(monkeypatch):
     bad = T.copy()
     bad[:, 12:32, 12:32] *= np.exp(np.random.default_rng(0).uniform(np.log(0.2), np.log(5.0), bad[:, 12:32, 12:32].shape))
     out, info = _refit(first, cap, raw=(bad, W, W_bound))
-    assert info == {"windows": 1, "refitted": 0}
+    assert _counts(info) == {"windows": 1, "refitted": 0}
     np.testing.assert_allclose(out, first, rtol=1e-12)  # unchanged, to the rounding of the units' scale
     monkeypatch.setattr(lights, "CHI2_MAX", np.inf)
-    assert _refit(first, cap, raw=(bad, W, W_bound))[1] == {"windows": 1, "refitted": 1}
+    assert _counts(_refit(first, cap, raw=(bad, W, W_bound))[1]) == {"windows": 1, "refitted": 1}
 
 
 def test_the_disparity_is_chosen_with_the_bounds_among_the_best_candidates(monkeypatch):
@@ -147,7 +164,7 @@ def test_the_disparity_is_chosen_with_the_bounds_among_the_best_candidates(monke
     (the test scene city-interior's lamp at 96 x 128, paper-none, seed 0: 0.75 at chi-square 519.6 before 1.0 at
     526.7; with the bounds 14.5 against 0.10). Planted: a light 4000 times the plane at disparity 1, saturated, whose
     chi-square without the bounds is made to rank second (20 added). With CANDIDATES 2 the window is refitted at
-    disparity 1 (energy within 5 %); with 1 (the control) it is not refitted and keeps under half of it."""
+    disparity 1 (energy within 5 %); with 1 (the control) it is not refitted and keeps under half of it. One pass."""
     lf = _scene(light_value=4000.0)
     cap = _capture(lf)
     truth, first = lf.data.astype(np.float64), _blurred(lf)
@@ -161,14 +178,15 @@ def test_the_disparity_is_chosen_with_the_bounds_among_the_best_candidates(monke
         matrices[id(m)] = len(matrices) % len(DEFAULT_DISPARITIES)
         return m
 
-    def second(m, y, w, w_bound, x0, cols, passes, colour=None):
-        out = fit(m, y, w, w_bound, x0, cols, passes, colour)
+    def second(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
+        out = fit(m, y, w, w_bound, x0, cols, passes, colour, prior)
         if out is not None and passes == 1 and matrices.get(id(m)) == true_d:
             out = (out[0], out[1] + 20.0, out[2])
         return out
 
     monkeypatch.setattr(lights, "_window_matrix", tagged)
     monkeypatch.setattr(lights, "_fit", second)
+    monkeypatch.setattr(lights, "PASSES", 1)
     energy = {}
     for k in (1, 2):
         monkeypatch.setattr(lights, "CANDIDATES", k)
@@ -177,6 +195,35 @@ def test_the_disparity_is_chosen_with_the_bounds_among_the_best_candidates(monke
         energy[k] = (info["refitted"], out.mean(-1)[at].sum() / lum_t[at].sum())
     assert energy[1][0] == 0 and energy[1][1] < 0.5, energy
     assert energy[2][0] == 1 and abs(energy[2][1] - 1.0) < 0.05, energy
+
+
+def test_the_first_candidate_whose_fit_is_accepted_is_kept(monkeypatch):
+    """The second candidate is a fallback, not a contest: with few measurements a wrong disparity's fit can leave a
+    smaller chi-square than the right one's (the default path, city-interior's lamp with 1 shot: 0.13 at 0.25 against
+    0.42 at 1.0; picking it lost 8 dB). Planted: every bounded fit but the best-ranked disparity's is given a
+    chi-square of 0 (and the best evidence); the result of one pass is still exactly CANDIDATES 1's."""
+    lf = _scene(light_value=4000.0)
+    cap = _capture(lf)
+    first = _blurred(lf)
+    fit, ranked = lights._fit, {}
+
+    def flattering(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
+        out = fit(m, y, w, w_bound, x0, cols, passes, colour, prior)
+        if out is not None and passes == 1:
+            ranked.setdefault(x0.tobytes(), []).append((out[1], id(m)))
+        elif out is not None and id(m) != min(ranked[x0.tobytes()])[1]:
+            out = (out[0], 0.0, -1e300)
+        return out
+
+    monkeypatch.setattr(lights, "_fit", flattering)
+    monkeypatch.setattr(lights, "PASSES", 1)  # one pass: in a second the first candidate is not always accepted
+    results = {}
+    for k in (1, 2):
+        monkeypatch.setattr(lights, "CANDIDATES", k)
+        ranked.clear()
+        results[k] = _refit(first, cap)
+    assert _counts(results[1][1]) == {"windows": 1, "refitted": 1}
+    np.testing.assert_array_equal(results[2][0], results[1][0])
 
 
 def test_a_long_light_gets_windows_along_it():
@@ -200,7 +247,7 @@ def test_a_long_light_gets_windows_along_it():
     plane = scene(0.0).data.astype(np.float64)
     first = plane + gaussian_filter(truth - plane, (0, 0, 1.0, 1.0, 0))
     out, info = _refit(first, _capture(lf))
-    assert info == {"windows": 3, "refitted": 3}
+    assert _counts(info) == {"windows": 3, "refitted": 3}
     lum_t, lum_f, lum_o = truth.mean(-1), first.mean(-1), out.mean(-1)
     at = lum_t >= 0.1 * lum_t.max()
     assert lum_f[at].sum() / lum_t[at].sum() < 0.7  # the control
@@ -217,7 +264,7 @@ def test_a_light_field_without_small_lights_is_returned_unchanged():
     lf = _scene(light_value=0.0)
     cap = _capture(lf)
     out, info = _refit(lf.data.astype(np.float64), cap)
-    assert info == {"windows": 0, "refitted": 0}
+    assert _counts(info) == {"windows": 0, "refitted": 0}
     np.testing.assert_allclose(out, lf.data, rtol=1e-12)
 
 
@@ -308,3 +355,18 @@ def test_fit_evidence_is_the_gaussian_likelihood_of_the_residual():
     best = minimize(score, np.ones(2), method="L-BFGS-B", bounds=[(0, None)] * 2, options={"ftol": 1e-14})
     assert best.x[0] > 1  # the planted light is there, so the bound does not decide everything
     assert evidence == pytest.approx(best.fun, abs=1e-6)
+
+
+def test_the_floor_of_a_window_is_the_whole_views_median_floor():
+    """Reference: scipy.ndimage.median_filter over the whole centre view. _floor filters a crop BG // 2 larger than
+    the window (clipped to the view) and must give the same values, at the view's corners and edges too."""
+    from scipy import ndimage
+
+    from lfproc.recon._lights import BG, _floor
+
+    centre = np.random.default_rng(0).random((60, 70, 3)) ** 4
+    full = np.minimum(centre, np.stack([ndimage.median_filter(centre[..., c], size=BG, mode="nearest")
+                                        for c in range(3)], -1))
+    for ext in [(slice(0, 20), slice(0, 20)), (slice(10, 40), slice(25, 50)), (slice(45, 60), slice(50, 70)),
+                (slice(2, 9), slice(60, 70))]:
+        np.testing.assert_array_equal(_floor(centre, ext), full[ext])
