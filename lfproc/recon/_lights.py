@@ -31,7 +31,8 @@ non-negative least-squares problem in the whitened measurements (:func:`scipy.op
 Lawson and Hanson), and ``b`` its Gaussian posterior mean given ``l``. Saturated measurements are
 lower bounds: those the fit predicts below their bound join the data at the bound, and the window
 is solved again. The disparity is the one of least chi-square over the search's disparities (solved
-once each without the bounds; again with them at the ``CANDIDATES`` best, keeping the least chi-square), and the refit replaces the first
+once each without the bounds; again with them at the best, and at the next of the ``CANDIDATES`` best only when
+that fit would not be accepted), and the refit replaces the first
 estimate (feathered over ``PAD`` pixels at the window's edge, never below 0) only when its
 chi-square is below ``ACCEPT`` times the first estimate's on the same measurements and below ``CHI2_MAX`` per
 measurement. Where the fit is not positive (a colour of a sample), the result takes the smaller of the first estimate
@@ -281,7 +282,7 @@ def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cach
     if HALO:
         priors.append((True, ndimage.binary_dilation(light, iterations=HALO)))
 
-    def _shear(i, p):  # S_d of disparity i for windows of p pixels, sparse, made once per call
+    def _shear(i, p):  # S_d of disparity i for windows of p pixels, sparse, made once per refit (all passes)
         if (i, p) not in cache:
             cache[i, p] = sparse.csr_array(shears[i](p))
         return cache[i, p]
@@ -355,7 +356,7 @@ def _floor(centre, ext):
     (two slices). The median of a crop ``BG // 2`` larger (clipped to the view): on ``ext`` the same as the whole
     view's, at a small share of its time."""
     q = BG // 2
-    (y0, y1), (x0, x1) = ((max(sl.start - q, 0), min(sl.stop + q, n)) for sl, n in zip(ext, centre.shape[:2]))
+    (y0, y1), (x0, x1) = ((max(span.start - q, 0), min(span.stop + q, n)) for span, n in zip(ext, centre.shape[:2]))
     crop = centre[y0:y1, x0:x1]
     median = np.stack([ndimage.median_filter(crop[..., c], size=BG, mode="nearest") for c in range(3)], -1)
     at = (slice(ext[0].start - y0, ext[0].stop - y0), slice(ext[1].start - x0, ext[1].stop - x0))

@@ -115,7 +115,8 @@ def test_the_median_prior_pulls_down_the_neighbours_a_blurred_light_made_too_bri
     """The planted light blurred as above. With the second prior (HALO 3: the background's mean from the
     neighbourhood's median around the light) chosen by evidence, the window's pixels next to the light come back
     within half the error that the first prior alone leaves them (measured: 2.0 against 6.8, the blur 26), and the
-    light keeps its energy within 5 %. FLOOR off and one pass, to see the prior alone (with FLOOR: 1.1 against 2.3)."""
+    light keeps its energy within 5 %. FLOOR off and one pass, to see the prior alone (with FLOOR: 1.1 against
+    2.3)."""
     monkeypatch.setattr(lights, "FLOOR", False)
     monkeypatch.setattr(lights, "PASSES", 1)
     err = _neighbour_errors(monkeypatch, "HALO", (0, 3))
