@@ -193,12 +193,13 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
     non-negative intensity per pixel. ``m`` dense or sparse; ``prior``: :func:`_prior_cov` of ``m, x0`` when the
     caller has it (it depends on neither the bounds nor the light layer)."""
     sb2, cov = _prior_cov(m, x0) if prior is None else prior
+    r0 = y - m @ x0
     ww = w
     for _ in range(passes):
         k = ww > 0  # the usable measurements (a saturated one only as a bound the fit missed)
         if not k.any():  # every measurement of the window saturated and no bound missed: nothing to fit
             return None
-        mk, rk = m[k], (y - m @ x0)[k]
+        mk, rk = m[k], r0[k]
         c = cov[np.ix_(k, k)]
         c.flat[::len(c) + 1] += 1.0 / ww[k] ** 2
         try:
@@ -214,14 +215,27 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
         l = np.zeros_like(x0)
         l[cols] = lc if colour is None else (lc[:, None] * colour).ravel()
         x = x0 + sb2 * (mk.T @ sl.cho_solve((chol, True), rk - mk @ l)) + l
-        below = (w_bound > 0) & (m @ x < y)  # bounds the fit does not meet join the data at their level
+        pred = m @ x
+        below = (w_bound > 0) & (pred < y)  # bounds the fit does not meet join the data at their level
         new = np.where(below, w_bound, w)
         if (new == ww).all():
             break
         ww = new
-    e = ((m @ x - y) * ww) ** 2
+    e = ((pred - y) * ww) ** 2
     rw = sl.solve_triangular(chol, rk - mk @ l, lower=True)
     return x, float(e[ww > 0].mean()), float(rw @ rw + 2 * np.log(np.diag(chol)).sum())
+
+
+def _fit_tinted(m, y, w, w_bound, x0, cols, prior):
+    """:func:`_fit` with the bounds, then again with one colour for the light layer: the free fit's excess over the
+    prior on the light's pixels, summed (module notes). None as :func:`_fit`."""
+    out = _fit(m, y, w, w_bound, x0, cols, _BOUND_PASSES, prior=prior)
+    if out is None:
+        return None
+    tint = (out[0] - x0)[cols].reshape(-1, 3).clip(0).sum(axis=0)
+    if tint.sum() > 0:
+        return _fit(m, y, w, w_bound, x0, cols, _BOUND_PASSES, tint / tint.sum(), prior) or out
+    return out
 
 
 def _chi2(pred, y, w, w_bound):
@@ -297,7 +311,7 @@ def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cach
                               lefts=[left], size=p, sensor_size=capture.size)
         pcols, pvals = ops.cols[0].astype(np.intp), ops.vals[0].astype(np.float64)  # (m, V U)
         pred = (pvals * first[:, :, top:top + p, left:left + p].reshape(-1)[pcols]).sum(axis=1)  # Phi x
-        before = _chi2(pred, y, w, wb)
+        bound = min(ACCEPT * _chi2(pred, y, w, wb), CHI2_MAX)  # what a fit must leave to be accepted
         fits = [(shear, _window_matrix(pcols, pvals, shear)) for shear in (_shear(i, p) for i in range(len(shears)))]
         best = None
         floor = _floor(centre, ext)  # where a fit is not positive: the neighbourhood's level, not the blur
@@ -306,29 +320,23 @@ def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cach
             cols = np.flatnonzero(np.repeat(support[ext].reshape(-1), 3))
             if not len(cols):
                 continue
-            picks = []
-            for shear, m in fits:  # the disparity: least chi-square, first without the bounds ...
+            picks = []  # the disparity: least chi-square, first without the bounds ...
+            for shear, m in fits:
                 prior = _prior_cov(m, x0)
                 out = _fit(m, y, w, wb, x0, cols, 1, prior=prior)
                 if out is not None:
-                    picks.append((out[1], len(picks), m, shear, prior))
-            chosen = None
-            for _, _, m, shear, prior in sorted(picks, key=lambda t: t[:2])[:CANDIDATES]:  # ... then with them: the
-                # first of the CANDIDATES best whose fit would be accepted
-                out = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
-                if out is not None:  # one colour for the light layer: the free fit's excess over the prior on the
-                    # light's pixels, summed
-                    tint = (out[0] - x0)[cols].reshape(-1, 3).clip(0).sum(axis=0)
-                    if tint.sum() > 0:
-                        out = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, tint / tint.sum(), prior) or out
-                if out is not None and chosen is None:
+                    picks.append((out[1], m, shear, prior))
+            picks.sort(key=lambda pick: pick[0])  # stable: ties keep the search's order
+            chosen = None  # ... then with them: the first of the CANDIDATES best whose fit would be accepted
+            for _, m, shear, prior in picks[:CANDIDATES]:
+                out = _fit_tinted(m, y, w, wb, x0, cols, prior)
+                if out is not None and (chosen is None or out[1] < bound):
                     chosen = (out, shear)
-                if out is not None and out[1] < min(ACCEPT * before, CHI2_MAX):
-                    chosen = (out, shear)
-                    break
+                    if out[1] < bound:
+                        break
             if chosen is not None and (best is None or chosen[0][2] < best[0][2]):  # the higher evidence
                 best = chosen
-        if best is None or not best[0][1] < min(ACCEPT * before, CHI2_MAX):
+        if best is None or not best[0][1] < bound:
             return None
         (x, _, _), shear = best
         fit = (shear @ x.reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
