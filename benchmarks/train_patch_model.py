@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/train_patch_model.py [--out lfproc/recon/data/gaussian_patch_model.npz] [--components 1]
+    python benchmarks/train_patch_model.py [--out lfproc/recon/data/gaussian_patch_model.npz] [--components 4]
                                            [--patches 60000] [--force]
 
 The training images are the photographs of the ``TUNE`` scenes of :mod:`quality_scenes` (the shared
@@ -35,7 +35,7 @@ def main() -> None:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=OUT)
-    parser.add_argument("--components", type=int, default=1)
+    parser.add_argument("--components", type=int, default=4)
     parser.add_argument("--patches", type=int, default=60000)
     parser.add_argument("--margin", type=int, default=2)
     parser.add_argument("--data", type=Path, default=quality_scenes.DATA)
