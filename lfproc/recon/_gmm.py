@@ -36,8 +36,8 @@ disparity, and the estimate grid tries the scales alone. Measured on the tune sc
 2 random shots, mean PU21-PSNR): one component 26.95 dB; four, every (component, scale) on the estimate grid
 too 27.95 (2.0x the time); four, staged as above 27.77 (1.5x); three 27.73; six 27.61; four with the
 disparity searched under their moment-matched single Gaussian 26.90 (so the gain is in the disparity search,
-not in the estimate's component). Lytro size, tune: 36.74 -> 37.75 dB with every pair (staged: see
-docs/benchmarks.md); the default command-line path 39.3 -> 52.3 s.
+not in the estimate's component). Lytro size, tune: 36.74 -> 37.68 dB (every pair on both grids 37.75);
+the default command-line path 39.3 -> 52.3 s (every pair: 77.2 s).
 
 Two grids. The disparity is searched on patches every ``search_stride`` pixels (default 4),
 its evidence pooled over neighbouring patches; the estimates are made every ``stride`` pixels
@@ -509,9 +509,8 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
                 scores[sel] = out
                 bar.update(len(sel))
             chosen_d = _chosen_disparity(scores, g, len(disparities), opt["pool_radius"])
-            # staged, several components: the component too is read from the search grid (module notes)
             chosen_k = (_chosen_component(scores, g, len(disparities), model.components, opt["pool_radius"])
-                        if search == "staged" and model.components > 1 else None)
+                        if search == "staged" and model.components > 1 else None)  # module notes: components
 
             def solve(job):  # pass 2, estimate grid: the component and scale of largest evidence at that disparity
                 ph, sel = job
