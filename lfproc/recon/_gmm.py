@@ -626,10 +626,19 @@ class _Grids:
 def _chosen_disparity(scores: np.ndarray, g: _Grids, n_d: int, radius: int) -> np.ndarray:
     """The disparity (index) of every estimate patch: the search grid's evidence pooled over the neighbouring
     patches (one patch's evidence alone is noisy), read at the nearest search patch."""
-    per_d = scores.reshape(len(g.ct), n_d, -1).max(axis=2)
-    pooled = _pool(per_d.reshape(len(g.ctops), len(g.clefts), -1), radius)
+    return _at_estimates(_pooled(scores.reshape(len(g.ct), n_d, -1).max(axis=2), g, radius), g).argmax(axis=1)
+
+
+def _pooled(per: np.ndarray, g: _Grids, radius: int) -> np.ndarray:
+    """Evidence ``(search patches, hypotheses)`` pooled over the neighbouring search patches (:func:`_pool`)."""
+    return _pool(per.reshape(len(g.ctops), len(g.clefts), -1), radius)
+
+
+def _at_estimates(pooled: np.ndarray, g: _Grids) -> np.ndarray:
+    """The pooled search-grid evidence ``(rows, columns, hypotheses)`` read at each estimate patch's nearest search
+    patch, ``(estimate patches, hypotheses)``."""
     iy, ix = _nearest(g.ctops, g.tops), _nearest(g.clefts, g.lefts)
-    return pooled[iy[:, None], ix[None, :]].reshape(len(g.gt), -1).argmax(axis=1)
+    return pooled[iy[:, None], ix[None, :]].reshape(len(g.gt), -1)
 
 
 def _in_order(pool, fn, jobs, ahead: int = 8):
@@ -783,11 +792,8 @@ def _chosen_component(scores: np.ndarray, g: _Grids, n_d: int, n_k: int, radius:
     its pooled evidence chose; pooled over the neighbouring patches in turn and read at the nearest search patch
     (as :func:`_chosen_disparity`)."""
     per_dk = scores.reshape(len(g.ct), n_d, n_k, -1).max(axis=3)
-    per_d = _pool(per_dk.max(axis=2).reshape(len(g.ctops), len(g.clefts), -1), radius).reshape(len(g.ct), -1)
-    per_k = per_dk[np.arange(len(g.ct)), per_d.argmax(axis=1)]
-    pooled = _pool(per_k.reshape(len(g.ctops), len(g.clefts), -1), radius)
-    iy, ix = _nearest(g.ctops, g.tops), _nearest(g.clefts, g.lefts)
-    return pooled[iy[:, None], ix[None, :]].reshape(len(g.gt), -1).argmax(axis=1)
+    d_at = _pooled(per_dk.max(axis=2), g, radius).reshape(len(g.ct), -1).argmax(axis=1)
+    return _at_estimates(_pooled(per_dk[np.arange(len(g.ct)), d_at], g, radius), g).argmax(axis=1)
 
 
 def _pool(per_d: np.ndarray, radius: int) -> np.ndarray:
