@@ -267,6 +267,9 @@ def test_noise_floor_of_a_capture_is_one_read_noise_or_one_electron_per_measurem
     assert "give one of them" in capsys.readouterr().err
 
 
+_SHIPPED_K = load_patch_model().components  # the damaged-model cases below keep the shipped model's shapes
+
+
 def _model_file(path, *, header=None, **arrays):
     """A patch-model file with the shipped model's arrays, any of them or the header replaced."""
     import json
@@ -295,8 +298,8 @@ def small_capture_file(tmp_path_factory):
     (dict(header={"format": "something else", "patch": 8, "margin": 2}), "not an lfproc patch model"),
     (dict(header="{not json"), "not valid JSON"),
     (dict(header=[1, 2, 3]), "not an lfproc patch model"),
-    (dict(means=np.full((4, 432), np.nan)), "NaN"),  # the shipped model has 4 components
-    (dict(covariances=np.repeat(-np.eye(432)[None], 4, axis=0)), "not positive definite"),
+    (dict(means=np.full((_SHIPPED_K, 432), np.nan)), "NaN"),
+    (dict(covariances=np.repeat(-np.eye(432)[None], _SHIPPED_K, axis=0)), "not positive definite"),
     (dict(covariances=np.zeros((1, 432, 431))), "array 'covariances'"),
     (dict(means=np.zeros((1, 432), complex)), "expected floating point"),
     (dict(weights=np.ones(2)), "patch model"),
