@@ -1,0 +1,141 @@
+"""Benchmark: the lights refit (``lfproc.recon._lights``) alone, on a first estimate saved once.
+
+Usage::
+
+    python benchmarks/refit_stage.py dump SCENE OUT.pkl [--size H W] [--capture "2 random"] [--seed-index I]
+    python benchmarks/refit_stage.py run OUT.pkl [NAME=VALUE ...]
+
+``dump`` captures a scene of :mod:`quality_scenes` as :mod:`reconstruct_realistic` does (mask period 4, the
+scene's seed + 1000 ``I``) and runs ``reconstruct_gmm`` up to the refit, then saves what the refit receives (the
+first light field, the measurements, their weights and bounds, the capture) with the truth. ``run`` applies the
+refit to it with the module's settings, or with ``NAME=VALUE`` overrides of ``lfproc.recon._lights``'s upper-case
+settings (``RATIO=4 PASSES=1``), and prints the seconds, the windows per pass ``[found, refitted]``, PU21-PSNR
+and the median error in stops of each decade of the truth's luminance above the noise floor (as
+:mod:`reconstruct_realistic`).
+
+Why: the whole reconstruction of a Lytro-size capture takes 1-3 minutes, the refit a tenth of that; a setting of
+the refit is compared on the same first estimate in seconds, and a change elsewhere cannot move the figures. The
+dump is a scratch file (Python's pickle: it loads only with the same lfproc version, and only files you made).
+Figures measured this way are of the refit stage alone; confirm a change with :mod:`reconstruct_realistic`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import pickle
+import sys
+import time
+import warnings
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import quality_scenes  # noqa: E402
+from reconstruct_realistic import parse_capture  # noqa: E402
+
+
+class _Dumped(Exception):
+    pass
+
+
+def _fail(message: str) -> None:
+    """Bad input: one line on stderr, exit code 2 (as argparse and the lfproc command)."""
+    print(f"refit_stage.py: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def dump(scene: str, out: Path, size: tuple[int, int], capture: str, seed_index: int) -> None:
+    import lfproc.recon._gmm as gmm
+    from lfproc.camera.simulate import simulate_capture
+
+    if scene not in quality_scenes.SETS["all"]:
+        _fail(f"SCENE: expected one of {', '.join(sorted(quality_scenes.SETS['all']))}, got {scene!r}")
+    if out.exists():
+        _fail(f"{out}: exists; remove it first")
+    lf = quality_scenes.make_scene(scene, size)
+    seed = quality_scenes.SETS["all"][scene][-1] + 1000 * seed_index
+    cap = simulate_capture(lf, mask_period=4, random_state=seed, **parse_capture(capture))
+    record = {}
+
+    def keep(first, T, W, W_bound, capture, shears, margin, pool=None):
+        record.update(first=first, T=T, W=W, W_bound=W_bound, capture=capture, margin=margin, truth=lf.data,
+                      disparities=tuple(gmm.DEFAULT_DISPARITIES), scene=scene, capture_name=capture_name,
+                      seed=seed)
+        raise _Dumped
+
+    capture_name = capture
+    original = gmm.refit_lights
+    gmm.refit_lights = keep
+    try:
+        gmm.reconstruct_gmm(cap)
+    except _Dumped:
+        pass
+    finally:
+        gmm.refit_lights = original
+    if not record:
+        _fail(f"{scene}: the reconstruction did not reach the refit (LIGHTS_REFIT off?)")
+    tmp = out.with_name(out.name + ".part")
+    with open(tmp, "wb") as f:
+        pickle.dump(record, f)
+    os.replace(tmp, out)
+    print(f"{out}: {scene}, {capture}, seed {seed}, first estimate {record['first'].shape}")
+
+
+def run(path: Path, settings: list[str]) -> None:
+    import lfproc.recon._lights as lights
+    from lfproc.camera.capture import noise_floor
+    from lfproc.metrics import hdr_figures, pu21_psnr
+    from lfproc.recon._gmm import shear_matrix
+
+    for item in settings:
+        name, sep, value = item.partition("=")
+        if not sep or not name.isupper() or not hasattr(lights, name):
+            _fail(f"{item!r}: expected NAME=VALUE with NAME an upper-case setting of lfproc.recon._lights")
+        old = getattr(lights, name)
+        try:
+            setattr(lights, name, bool(int(value)) if isinstance(old, bool) else type(old)(float(value)))
+        except ValueError:
+            _fail(f"{item!r}: expected a number for {name}, got {value!r}")
+    if not path.is_file():
+        _fail(f"{path}: not found (make it with 'refit_stage.py dump')")
+    with open(path, "rb") as f:
+        d = pickle.load(f)
+    cap, first = d["capture"], d["first"]
+    nv, nu = first.shape[:2]
+    shears = [lambda q, dd=dd: shear_matrix((nv, nu), q, d["margin"], dd) for dd in d["disparities"]]
+    t = time.perf_counter()
+    out, info = lights.refit_lights(first, d["T"], d["W"], d["W_bound"], cap, shears, d["margin"])
+    seconds = time.perf_counter() - t
+    for name, x in (("first", first), ("refit", out)):
+        x = x / cap.radiance_scale
+        f = hdr_figures(x, d["truth"], noise_floor=noise_floor(cap))
+        decades = " ".join(f"{s['decade'][0]:g}:{s['median_stops']:.2f}" for s in f["stops_by_decade"])
+        print(f"{name}: PU21-PSNR {pu21_psnr(x, d['truth']):.3f} dB; stops by decade {decades}")
+    print(f"{path.name} {' '.join(settings)}: {seconds:.0f} s, windows per pass {info['passes']}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("dump", help="save the refit's input for a scene and capture")
+    p.add_argument("scene")
+    p.add_argument("out", type=Path)
+    p.add_argument("--size", type=int, nargs=2, default=[434, 625], metavar=("H", "W"))
+    p.add_argument("--capture", default="2 random")
+    p.add_argument("--seed-index", type=int, default=0)
+    p = sub.add_parser("run", help="refit a saved first estimate, with settings overridden")
+    p.add_argument("path", type=Path)
+    p.add_argument("settings", nargs="*")
+    args = parser.parse_args()
+    os.environ.setdefault("LFPROC_PROGRESS", "0")
+    warnings.simplefilter("ignore")  # saturation warnings of the brightest scenes: expected
+    if args.command == "dump":
+        if args.seed_index < 0:
+            parser.error(f"--seed-index: expected a number >= 0, got {args.seed_index}")
+        dump(args.scene, args.out, tuple(args.size), args.capture, args.seed_index)
+    else:
+        run(args.path, args.settings)
+
+
+if __name__ == "__main__":
+    main()
