@@ -67,6 +67,15 @@ def parse_capture(name: str) -> dict:
     return dict(shots=int(parts[0]), iso_pattern_kind=parts[1], profile=f"paper-{noise}")
 
 
+def capture_cell(lf, scene: str, name: str, index: int, period):
+    """The capture ``name`` (:func:`parse_capture`) of ``lf``, the scene ``scene``'s ``index``-th seed (the scene's
+    seed + 1000 ``index``), mask period ``period`` (None: not periodic)."""
+    from lfproc.camera.simulate import simulate_capture
+
+    seed = quality_scenes.SETS["all"][scene][-1] + 1000 * index
+    return simulate_capture(lf, mask_period=period, random_state=seed, **parse_capture(name))
+
+
 def reconstruct_capture(cap, method: str, options: dict):
     """One reconstruction with ``method`` ("gmm" or "dictionary"); a bracketing capture's shots are reconstructed
     alone and merged with Debevec weights (``lfproc.recon.reconstruct_per_shot``, the paper's baseline)."""
@@ -100,7 +109,6 @@ def combine(runs: list[dict]) -> dict:
 
 def main() -> None:
     from lfproc.camera.capture import noise_floor
-    from lfproc.camera.simulate import simulate_capture
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--set", choices=sorted(quality_scenes.SETS), default="test")
@@ -135,13 +143,12 @@ def main() -> None:
         lf = quality_scenes.make_scene(scene, tuple(args.size), data=args.data)
         d = lf.data[lf.data > 0]
         stops = float(np.log2(d.max() / np.percentile(d, 0.1)))
-        seed = quality_scenes.SETS["all"][scene][-1]
         row = {"scene": scene, "stops": stops, "size": args.size, "mask_period": period}
         cells = []
         for name in names:
             runs = []
             for i in range(args.seeds):
-                cap = simulate_capture(lf, mask_period=period, random_state=seed + 1000 * i, **parse_capture(name))
+                cap = capture_cell(lf, scene, name, i, period)
                 t = time.perf_counter()
                 out = reconstruct_capture(cap, args.method, options)
                 seconds = time.perf_counter() - t

@@ -31,7 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import quality_scenes  # noqa: E402
-from reconstruct_realistic import parse_capture  # noqa: E402
+from reconstruct_realistic import capture_cell  # noqa: E402
 
 
 class _Dumped(Exception):
@@ -46,24 +46,22 @@ def _fail(message: str) -> None:
 
 def dump(scene: str, out: Path, size: tuple[int, int], capture: str, seed_index: int) -> None:
     import lfproc.recon._gmm as gmm
-    from lfproc.camera.simulate import simulate_capture
 
     if scene not in quality_scenes.SETS["all"]:
         _fail(f"SCENE: expected one of {', '.join(sorted(quality_scenes.SETS['all']))}, got {scene!r}")
     if out.exists():
         _fail(f"{out}: exists; remove it first")
     lf = quality_scenes.make_scene(scene, size)
-    seed = quality_scenes.SETS["all"][scene][-1] + 1000 * seed_index
-    cap = simulate_capture(lf, mask_period=4, random_state=seed, **parse_capture(capture))
+    cap = capture_cell(lf, scene, capture, seed_index, 4)
     record = {}
 
-    def keep(first, T, W, W_bound, capture, shears, margin, pool=None):
-        record.update(first=first, T=T, W=W, W_bound=W_bound, capture=capture, margin=margin, truth=lf.data,
-                      disparities=tuple(gmm.DEFAULT_DISPARITIES), scene=scene, capture_name=capture_name,
-                      seed=seed)
+    def keep(first, T, W, W_bound, cap_, shears, margin, pool=None):  # refit_lights' arguments, then stop
+        # reconstruct_gmm is called with its defaults: its shears are those of DEFAULT_DISPARITIES
+        record.update(first=first, T=T, W=W, W_bound=W_bound, capture=cap_, margin=margin, truth=lf.data,
+                      disparities=tuple(gmm.DEFAULT_DISPARITIES), scene=scene, capture_name=capture,
+                      seed_index=seed_index)
         raise _Dumped
 
-    capture_name = capture
     original = gmm.refit_lights
     gmm.refit_lights = keep
     try:
@@ -78,7 +76,7 @@ def dump(scene: str, out: Path, size: tuple[int, int], capture: str, seed_index:
     with open(tmp, "wb") as f:
         pickle.dump(record, f)
     os.replace(tmp, out)
-    print(f"{out}: {scene}, {capture}, seed {seed}, first estimate {record['first'].shape}")
+    print(f"{out}: {scene}, {capture}, seed index {seed_index}, first estimate {record['first'].shape}")
 
 
 def run(path: Path, settings: list[str]) -> None:
@@ -98,9 +96,12 @@ def run(path: Path, settings: list[str]) -> None:
             _fail(f"{item!r}: expected a number for {name}, got {value!r}")
     if not path.is_file():
         _fail(f"{path}: not found (make it with 'refit_stage.py dump')")
-    with open(path, "rb") as f:
-        d = pickle.load(f)
-    cap, first = d["capture"], d["first"]
+    try:
+        with open(path, "rb") as f:
+            d = pickle.load(f)
+        cap, first = d["capture"], d["first"]
+    except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, KeyError, TypeError, ValueError) as e:
+        _fail(f"{path}: not a dump of 'refit_stage.py dump' of this lfproc version ({type(e).__name__})")
     nv, nu = first.shape[:2]
     shears = [lambda q, dd=dd: shear_matrix((nv, nu), q, d["margin"], dd) for dd in d["disparities"]]
     t = time.perf_counter()
