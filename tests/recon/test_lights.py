@@ -14,6 +14,7 @@ from scipy.ndimage import gaussian_filter
 import lfproc.recon._gmm as gmm
 import lfproc.recon._lights as lights
 from lfproc import LightField
+from lfproc.camera.projection import build_operator
 from lfproc.camera.simulate import simulate_capture
 from lfproc.recon import reconstruct_gmm
 from lfproc.recon._gmm import DEFAULT_DISPARITIES, _measurements, shear_matrix
@@ -34,9 +35,9 @@ def _scene(light_value=400.0, seed=11):
     return LightField(data, units="relative")
 
 
-def _capture(lf, profile="paper-none", stops_below=3):
-    cap = simulate_capture(lf, mask_period=4, shots=2, random_state=2, profile=profile)
-    return simulate_capture(lf, mask_period=4, shots=2, random_state=2, profile=profile,
+def _capture(lf, profile="paper-none", stops_below=3, shots=2):
+    cap = simulate_capture(lf, mask_period=4, shots=shots, random_state=2, profile=profile)
+    return simulate_capture(lf, mask_period=4, shots=shots, random_state=2, profile=profile,
                             radiance_scale=cap.radiance_scale / 2 ** stops_below)
 
 
@@ -114,7 +115,7 @@ def _neighbour_errors(monkeypatch, setting, values, profile="paper-none", sigma=
 def test_the_median_prior_pulls_down_the_neighbours_a_blurred_light_made_too_bright(monkeypatch):
     """The planted light blurred as above. With the second prior (HALO 3: the background's mean from the
     neighbourhood's median around the light) chosen by evidence, the window's pixels next to the light come back
-    within half the error that the first prior alone leaves them (measured: 2.0 against 6.8, the blur 26), and the
+    within half the error that the first prior alone leaves them (measured: 1.1 against 6.8, the blur 26), and the
     light keeps its energy within 5 %. FLOOR off and one pass, to see the prior alone (with FLOOR: 1.1 against
     2.3)."""
     monkeypatch.setattr(lights, "FLOOR", False)
@@ -127,8 +128,8 @@ def test_where_a_fit_is_not_positive_the_neighbourhood_level_replaces_the_blur(m
     """A first estimate whose halo holds twice the light's energy, spread by a Gaussian of 1.5 pixels (paper-medium
     noise). Where the window's fit is not positive the result takes the smaller of the first estimate and the
     neighbourhood's median (FLOOR), not the first estimate: the pixels next to the light come back with 0.6 of the
-    error they keep without it (measured: 2.80 against 5.21), no sample is 0 and the light keeps its energy. One pass
-    (later passes repair much of what the first leaves without FLOOR: 1.16 after three)."""
+    error they keep without it (measured: 2.18 against 4.72), no sample is 0 and the light keeps its energy. One pass
+    (later passes repair much of what the first leaves without FLOOR: 1.18 after three)."""
     monkeypatch.setattr(lights, "PASSES", 1)
     err = _neighbour_errors(monkeypatch, "FLOOR", (False, True), profile="paper-medium", sigma=1.5, gain=2.0)
     assert err[True] < 0.6 * err[False], err
@@ -137,10 +138,11 @@ def test_where_a_fit_is_not_positive_the_neighbourhood_level_replaces_the_blur(m
 def test_later_passes_refit_the_lights_of_the_sharper_estimate(monkeypatch):
     """The first estimate as above (twice the light's energy in a halo of 1.5 pixels, paper-medium). A pass's result
     is sharper than its input, so the next pass finds the light again with a lower background prior around it: the
-    pixels next to the light come back with under half the error one pass leaves (measured: 2.80, 1.51, 1.24 after
-    one, two, three passes), each keeping the light's energy within 5 % and no sample at 0."""
+    pixels next to the light come back with under 0.7 of the error one pass leaves, and a third pass does not undo
+    it (measured: 2.18, 1.20, 1.20 after one, two, three passes; before the misfit found lights, 2.80, 1.51, 1.24),
+    each keeping the light's energy within 5 % and no sample at 0."""
     err = _neighbour_errors(monkeypatch, "PASSES", (1, 2, 3), profile="paper-medium", sigma=1.5, gain=2.0)
-    assert err[2] < 0.7 * err[1] and err[3] < 0.5 * err[1], err
+    assert err[2] < 0.7 * err[1] and err[3] <= 1.01 * err[2], err
 
 
 def test_a_window_its_fit_cannot_explain_keeps_the_first_estimate(monkeypatch):
@@ -160,18 +162,19 @@ def test_a_window_its_fit_cannot_explain_keeps_the_first_estimate(monkeypatch):
     assert _counts(_refit(first, cap, raw=(bad, W, W_bound))[1]) == {"windows": 1, "refitted": 1}
 
 
-def test_the_disparity_is_chosen_with_the_bounds_among_the_best_candidates(monkeypatch):
-    """Without the saturated bounds two disparities can score within a hair of each other, and the wrong one first
-    (the test scene city-interior's lamp at 96 x 128, paper-none, seed 0: 0.75 at chi-square 519.6 before 1.0 at
-    526.7; with the bounds 14.5 against 0.10). Planted: a light 4000 times the plane at disparity 1, saturated, whose
-    chi-square without the bounds is made to rank second (20 added). With CANDIDATES 2 the window is refitted at
-    disparity 1 (energy within 5 %); with 1 (the control) it is not refitted and keeps under half of it. One pass."""
+def test_the_second_best_disparity_is_tried_when_the_best_one_is_not_accepted(monkeypatch):
+    """With one shot two disparities can score within a hair of each other in the first pass that ranks them, the
+    wrong one first. Planted: a light 4000 times the plane at disparity 1, saturated, 1 shot, whose first-pass fit is
+    made to rank second (its chi-square set just above the least of the others'), and the best-ranked one's tinted fit
+    made too poor to accept. With CANDIDATES 2 the window is refitted at disparity 1 (energy within 5 %); with 1 (the
+    control) it is not refitted and keeps under half of it. One pass."""
     lf = _scene(light_value=4000.0)
-    cap = _capture(lf)
+    cap = _capture(lf, shots=1)
     truth, first = lf.data.astype(np.float64), _blurred(lf)
     lum_t = truth.mean(-1)
     at = lum_t >= 0.1 * lum_t.max()
     true_d = list(DEFAULT_DISPARITIES).index(1.0)
+    assert true_d == len(DEFAULT_DISPARITIES) - 1  # fitted last: the others' chi-squares are known by then
     matrices, window_matrix, fit = {}, lights._window_matrix, lights._fit
 
     def tagged(cols, vals, shear):  # the window's matrices, one per disparity in DEFAULT_DISPARITIES' order
@@ -179,10 +182,18 @@ def test_the_disparity_is_chosen_with_the_bounds_among_the_best_candidates(monke
         matrices[id(m)] = len(matrices) % len(DEFAULT_DISPARITIES)
         return m
 
+    others = {}
+
     def second(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
         out = fit(m, y, w, w_bound, x0, cols, passes, colour, prior)
-        if out is not None and passes == 1 and matrices.get(id(m)) == true_d:
-            out = (out[0], out[1] + 20.0, out[2])
+        ranked = others.setdefault(x0.tobytes(), [])  # per prior
+        if out is not None and passes == 1:  # the first passes rank the disparities; the true one's comes last
+            if matrices.get(id(m)) == true_d:
+                out = (out[0], min(ranked)[0] + 1e-9, out[2])
+            else:
+                ranked.append((out[1], id(m)))
+        elif out is not None and colour is not None and id(m) == min(ranked)[1]:  # the best-ranked: not accepted
+            out = (out[0], 1e9, out[2])
         return out
 
     monkeypatch.setattr(lights, "_window_matrix", tagged)
@@ -192,27 +203,97 @@ def test_the_disparity_is_chosen_with_the_bounds_among_the_best_candidates(monke
     for k in (1, 2):
         monkeypatch.setattr(lights, "CANDIDATES", k)
         matrices.clear()
+        others.clear()
         out, info = _refit(first, cap)
         energy[k] = (info["refitted"], out.mean(-1)[at].sum() / lum_t[at].sum())
     assert energy[1][0] == 0 and energy[1][1] < 0.5, energy
     assert energy[2][0] == 1 and abs(energy[2][1] - 1.0) < 0.05, energy
 
 
-def test_the_first_candidate_whose_fit_is_accepted_is_kept(monkeypatch):
-    """The second candidate is a fallback, not a contest: with few measurements a wrong disparity's fit can leave a
-    smaller chi-square than the right one's (the default path, city-interior's lamp with 1 shot: 0.13 at 0.25 against
-    0.42 at 1.0; picking it lost 8 dB). Planted: every bounded fit but the best-ranked disparity's is given a
-    chi-square of 0 (and the best evidence); the result of one pass is still exactly CANDIDATES 1's."""
+def test_from_two_shots_the_disparities_are_ranked_by_the_tinted_fit(monkeypatch):
+    """From RANK_SHOTS shots the disparity is the one of least chi-square of the fit with one colour for the light,
+    not of the free fit (three colours a pixel overfit a one- or two-pixel light at the wrong disparity: the test scene
+    city-interior's lamp at 96 x 128 lost 2 dB so). Planted: a light 4000 times the plane at disparity 1, 2 shots, one
+    pass. The free fits of every other disparity given a chi-square of 0 leave the result exactly as it was; the
+    control, the tinted fit of disparity 0 given it, refits the light there and moves its energy."""
     lf = _scene(light_value=4000.0)
     cap = _capture(lf)
+    truth, first = lf.data.astype(np.float64), _blurred(lf)
+    lum_t = truth.mean(-1)
+    at = lum_t >= 0.1 * lum_t.max()
+    wrong, right = list(DEFAULT_DISPARITIES).index(0.0), list(DEFAULT_DISPARITIES).index(1.0)
+    matrices, window_matrix, fit = {}, lights._window_matrix, lights._fit
+
+    def tagged(cols, vals, shear):
+        m = window_matrix(cols, vals, shear)
+        matrices[id(m)] = len(matrices) % len(DEFAULT_DISPARITIES)
+        return m
+
+    def flattering(tinted):
+        def patched(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
+            out = fit(m, y, w, w_bound, x0, cols, passes, colour, prior)
+            d = matrices.get(id(m))
+            if out is not None and (colour is not None) == tinted and (d == wrong if tinted else d != right):
+                out = (out[0], 0.0, out[2])
+            return out
+        return patched
+
+    monkeypatch.setattr(lights, "_window_matrix", tagged)
+    monkeypatch.setattr(lights, "PASSES", 1)
+    results = {}
+    for name, patch in (("plain", fit), ("free", flattering(False)), ("tinted", flattering(True))):
+        monkeypatch.setattr(lights, "_fit", patch)
+        matrices.clear()
+        results[name] = _refit(first, cap)
+    assert _counts(results["plain"][1]) == {"windows": 1, "refitted": 1}
+    np.testing.assert_array_equal(results["free"][0], results["plain"][0])
+    kept = {k: results[k][0].mean(-1)[at].sum() / lum_t[at].sum() for k in results}
+    assert abs(kept["plain"] - 1.0) < 0.05 and abs(kept["tinted"] - 1.0) > 0.2, kept
+
+
+def test_the_disparities_are_ranked_with_the_bounds_from_two_shots(monkeypatch):
+    """The free fits that rank the disparities: with 2 shots every one is solved with the bounds (_BOUND_PASSES; the
+    test scene courtyard-candle's saturated rim ranked right only so), with 1 shot by one pass, and only the
+    CANDIDATES best again with the bounds (with one measurement a pixel every disparity's bounded fit explains the
+    window below the noise: the default path's lamp). The planted light, 4000 times the plane, one pass."""
+    lf = _scene(light_value=4000.0)
+    first = _blurred(lf)
+    fit, calls = lights._fit, []
+
+    def counted(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
+        if colour is None:
+            calls.append(passes)
+        return fit(m, y, w, w_bound, x0, cols, passes, colour, prior)
+
+    monkeypatch.setattr(lights, "_fit", counted)
+    monkeypatch.setattr(lights, "PASSES", 1)
+    n = len(DEFAULT_DISPARITIES) * 2  # two priors (HALO)
+    for shots in (2, 1):
+        cap = simulate_capture(lf, mask_period=4, shots=shots, random_state=2, profile="paper-none")
+        calls.clear()
+        _refit(first, cap)
+        if shots == 2:
+            assert calls == [lights._BOUND_PASSES] * n, calls
+        else:
+            assert calls[:len(DEFAULT_DISPARITIES)] == [1] * len(DEFAULT_DISPARITIES), calls
+            assert calls.count(1) == n and 2 <= calls.count(lights._BOUND_PASSES) <= 2 * lights.CANDIDATES, calls
+
+
+def test_the_first_candidate_whose_fit_is_accepted_is_kept(monkeypatch):
+    """The second candidate (one shot) is a fallback, not a contest: with few measurements a wrong disparity's fit can leave a
+    smaller chi-square than the right one's (the default path, city-interior's lamp with 1 shot: 0.13 at 0.25 against
+    0.42 at 1.0; picking it lost 8 dB). Planted, 1 shot: every tinted fit but the best-ranked disparity's is given a
+    chi-square of 0 (and the best evidence); the result of one pass is still exactly CANDIDATES 1's."""
+    lf = _scene(light_value=4000.0)
+    cap = _capture(lf, shots=1)
     first = _blurred(lf)
     fit, ranked = lights._fit, {}
 
     def flattering(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
         out = fit(m, y, w, w_bound, x0, cols, passes, colour, prior)
-        if out is not None and passes == 1:
+        if out is not None and passes == 1:  # the first passes rank the disparities
             ranked.setdefault(x0.tobytes(), []).append((out[1], id(m)))
-        elif out is not None and id(m) != min(ranked[x0.tobytes()])[1]:
+        elif out is not None and colour is not None and id(m) != min(ranked[x0.tobytes()])[1]:
             out = (out[0], 0.0, -1e300)
         return out
 
@@ -227,25 +308,28 @@ def test_the_first_candidate_whose_fit_is_accepted_is_kept(monkeypatch):
     np.testing.assert_array_equal(results[2][0], results[1][0])
 
 
+def _line(value, rows=slice(14, 44)):
+    """A planted orange line (``rows`` x 2 pixels, columns 21-22, ``value`` times 1 : 0.8 : 0.5) at disparity 1 in
+    front of a textured plane, 48 x 32 pixels."""
+    rng = np.random.default_rng(11)
+    size, m = (48, 32), 6
+    tex = gaussian_filter(rng.random((size[0] + 2 * m, size[1] + 2 * m, 3)), (1.0, 1.0, 0)).astype(np.float32)
+    light = np.zeros_like(tex)
+    alpha = np.zeros(tex.shape[:2], np.float32)
+    light[rows, 21:23] = value * np.array([1.0, 0.8, 0.5], np.float32)
+    alpha[rows, 21:23] = 1.0
+    data, _ = render_layers([Layer(tex + 0.5, np.ones_like(alpha), 0.0), Layer(light, alpha, 1.0)], size=size,
+                            views=5)
+    return LightField(data, units="relative")
+
+
 def test_a_long_light_gets_windows_along_it():
     """A planted orange line of 30 x 2 pixels (longer than one window), blurred by a Gaussian of 1 pixel as above:
     windows of MAX_WINDOW along it (3 here) bring its energy back within 7 % (the blur: 0.63 of it on the line),
     each third of the line within 15 %, and its colour (1.30 : 1.04 : 0.65) within 0.1."""
-    def scene(value):
-        rng = np.random.default_rng(11)
-        size, m = (48, 32), 6
-        tex = gaussian_filter(rng.random((size[0] + 2 * m, size[1] + 2 * m, 3)), (1.0, 1.0, 0)).astype(np.float32)
-        light = np.zeros_like(tex)
-        alpha = np.zeros(tex.shape[:2], np.float32)
-        light[14:44, 21:23] = value * np.array([1.0, 0.8, 0.5], np.float32)
-        alpha[14:44, 21:23] = 1.0
-        data, _ = render_layers([Layer(tex + 0.5, np.ones_like(alpha), 0.0), Layer(light, alpha, 1.0)], size=size,
-                                views=5)
-        return LightField(data, units="relative")
-
-    lf = scene(400.0)
+    lf = _line(400.0)
     truth = lf.data.astype(np.float64)
-    plane = scene(0.0).data.astype(np.float64)
+    plane = _line(0.0).data.astype(np.float64)
     first = plane + gaussian_filter(truth - plane, (0, 0, 1.0, 1.0, 0))
     out, info = _refit(first, _capture(lf))
     assert _counts(info) == {"windows": 3, "refitted": 3}
@@ -258,6 +342,48 @@ def test_a_long_light_gets_windows_along_it():
         sel = at & np.isin(np.arange(at.shape[2]), part)[None, None, :, None]
         np.testing.assert_allclose(lum_o[sel].sum() / lum_t[sel].sum(), 1.0, atol=0.15)
     np.testing.assert_allclose(out[at].mean(0) / out[at].mean(), truth[at].mean(0) / truth[at].mean(), atol=0.1)
+
+
+def test_a_thin_light_the_blur_hid_below_the_ratio_is_found_by_its_misfit(monkeypatch):
+    """A dim line (20 x 2 pixels, 25 times the plane; paper-medium) blurred by a Gaussian of 1 pixel: the first
+    estimate peaks at 7.4 times its 9 x 9 median, under RATIO (8), as the test scene courtyard-candle's lit glass rim
+    (4-6 times). Its measurements are far from the first estimate's prediction (the misfit), so it is a light: the
+    refit brings the line's median error from 0.64 to under 0.15 stops (measured: 0.09) and its energy from 0.62 to
+    within 10 %. The control, MISFIT 0 (the ratio alone): no window."""
+    lf, plane = _line(25.0, rows=slice(19, 39)), _line(0.0, rows=slice(19, 39))
+    truth = lf.data.astype(np.float64)
+    first = plane.data + gaussian_filter(truth - plane.data, (0, 0, 1.0, 1.0, 0))
+    cap = _capture(lf, profile="paper-medium")
+    on = (truth - plane.data).mean(-1) > 12.5
+
+    def stops(x):
+        return float(np.median(np.abs(np.log2(x.mean(-1)[on] / truth.mean(-1)[on]))))
+
+    out, info = _refit(first, cap)
+    assert info["refitted"] >= 1
+    assert stops(first) > 0.5 and stops(out) < 0.15, (stops(first), stops(out))
+    np.testing.assert_allclose(out.mean(-1)[on].sum() / truth.mean(-1)[on].sum(), 1.0, atol=0.1)
+    monkeypatch.setattr(lights, "MISFIT", 0.0)
+    assert _counts(_refit(first, cap)[1]) == {"windows": 0, "refitted": 0}
+
+
+def test_misfit_is_the_local_chi_square_of_the_measurements():
+    """The whitened residual's square, summed over the shots and averaged over MISFIT_SIZE squares: for the truth
+    (the planted light, paper-medium) it is a chi-square of 2 degrees of freedom, mean 2 (within 10 %); for the
+    light blurred it is above 100 around the light and still near 2 far from it."""
+    lf = _scene()
+    cap = _capture(lf, profile="paper-medium")
+    rs = float(cap.radiance_scale)
+    raw = _measurements(cap, "bound").raw
+    op = build_operator(cap.mask, views=cap.views, size=cap.size, cfa_pattern=cap.cfa_pattern, dtype=np.float64)
+    truth = lights.misfit_map(lf.data.astype(np.float64) * rs, *raw, op)
+    blurred = lights.misfit_map(_blurred(lf) * rs, *raw, op)
+    assert truth.shape == blurred.shape == cap.size
+    np.testing.assert_allclose(truth.mean(), 2.0, rtol=0.1)
+    assert blurred[14:18, 14:18].min() > 100  # the light: pixels 15-16 of the view
+    far = np.ones(cap.size, bool)
+    far[6:26, 6:26] = False
+    np.testing.assert_allclose(blurred[far].mean(), 2.0, rtol=0.1)
 
 
 def test_a_light_field_without_small_lights_is_returned_unchanged():
