@@ -99,9 +99,12 @@ def run(path: Path, settings: list[str]) -> None:
     try:
         with open(path, "rb") as f:
             d = pickle.load(f)
+        missing = {"T", "W", "W_bound", "capture", "disparities", "first", "margin", "truth"} - set(d)
+        if missing:
+            raise KeyError(", ".join(sorted(missing)))
         cap, first = d["capture"], d["first"]
     except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, KeyError, TypeError, ValueError) as e:
-        _fail(f"{path}: not a dump of 'refit_stage.py dump' of this lfproc version ({type(e).__name__})")
+        _fail(f"{path}: not a dump of 'refit_stage.py dump' of this lfproc version ({type(e).__name__}: {e})")
     nv, nu = first.shape[:2]
     shears = [lambda q, dd=dd: shear_matrix((nv, nu), q, d["margin"], dd) for dd in d["disparities"]]
     t = time.perf_counter()
