@@ -383,8 +383,10 @@ def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cach
                 if out is not None:
                     picks.append((out[1], m, shear, prior, out if tinted_rank else None))
             picks.sort(key=lambda pick: pick[0])  # stable: ties keep the search's order
-            chosen = None  # ... then the first of the CANDIDATES best whose tinted fit would be accepted
-            for _, m, shear, prior, out in picks[:CANDIDATES]:
+            # ... then the first of the CANDIDATES best whose tinted fit would be accepted; ranked by that fit already,
+            # the best alone (the next has no smaller chi-square against the same bound)
+            chosen = None
+            for _, m, shear, prior, out in picks[:1 if tinted_rank else CANDIDATES]:
                 if out is None:  # ranked by the first pass: now with the bounds, tinted
                     free = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
                     out = None if free is None else _tinted(free, m, y, w, wb, x0, cols, prior)
