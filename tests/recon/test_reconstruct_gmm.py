@@ -68,6 +68,72 @@ def test_planted_patch_is_recovered_from_two_noise_free_shots():
         assert psnr >= 50, (d, psnr)
 
 
+def test_wiener_is_the_gaussian_evidence_and_its_solution():
+    """_wiener's score is log N(y; A mu, K + W^-2) (reference: scipy.stats.multivariate_normal) plus the constants
+    it leaves out (m/2 log 2 pi and - sum log w, one per patch) and the prior; alpha solves (W K W + I) alpha =
+    W (y - A mu) (reference: numpy.linalg.solve). One covariance per patch and one shared, with unusable (w = 0)
+    measurements."""
+    from scipy.stats import multivariate_normal
+
+    rng = np.random.default_rng(3)
+    b_n, m = 5, 12
+    g = rng.standard_normal((b_n, m, 2 * m))
+    kmats = g @ g.transpose(0, 2, 1) / m
+    a_mu = rng.standard_normal(m)
+    y = rng.standard_normal((b_n, m)) * 3
+    w = rng.uniform(0.2, 4.0, (b_n, m))
+    for kmat in (kmats, kmats[0]):
+        score, alpha = _wiener(kmat, a_mu, y, w, 0.7)
+        only, none = _wiener(kmat, a_mu, y, w, 0.7, want_solution=False)
+        assert none is None
+        np.testing.assert_array_equal(only, score)
+        for i in range(b_n):
+            k = kmat[i] if kmat.ndim == 3 else kmat
+            ref = multivariate_normal(a_mu, k + np.diag(1 / w[i] ** 2)).logpdf(y[i])
+            np.testing.assert_allclose(score[i], ref + 0.5 * m * np.log(2 * np.pi) - np.log(w[i]).sum() + 0.7,
+                                       rtol=1e-10)
+            c = w[i][:, None] * k * w[i][None] + np.eye(m)
+            np.testing.assert_allclose(alpha[i], np.linalg.solve(c, w[i] * (y[i] - a_mu)), rtol=1e-9, atol=1e-12)
+    w[0, :4] = 0.0  # unusable measurements: left out of the evidence, alpha 0 there
+    score, alpha = _wiener(kmats, a_mu, y, w, 0.0)
+    keep = slice(4, m)
+    ref = multivariate_normal(a_mu[keep], kmats[0][keep, keep] + np.diag(1 / w[0, keep] ** 2)).logpdf(y[0, keep])
+    np.testing.assert_allclose(score[0], ref + 0.5 * (m - 4) * np.log(2 * np.pi) - np.log(w[0, keep]).sum(),
+                               rtol=1e-10)
+    np.testing.assert_array_equal(alpha[0, :4], 0.0)
+
+
+def test_patch_sums_equal_a_loop_over_the_patches():
+    """_prepared then _Sums (classes of non-overlapping patches added at once, pixel-major) against a plain loop
+    adding each weighted patch to its window of the light field, overlapping patches of several classes and
+    phases, in shuffled order."""
+    from lfproc.recon._gmm import _prepared, _Sums
+
+    rng = np.random.default_rng(4)
+    shape, p = (2, 3, 20, 26, 3), 8
+    tops, lefts = np.meshgrid(np.arange(0, 13, 2), np.arange(0, 19, 2), indexing="ij")
+    tops, lefts = tops.ravel(), lefts.ravel()
+    order = rng.permutation(len(tops))
+    tops, lefts = tops[order], lefts[order]
+    est = {"patches": rng.random((len(tops), 2, 3, p, p, 3)), "weight": rng.uniform(0.5, 2.0, len(tops)),
+           "noise": rng.random(len(tops))}
+    win = rng.uniform(0.1, 1.0, (p, p))
+    sums = _Sums(shape)
+    for half in (slice(0, 40), slice(40, None)):  # two chunks
+        part = {k: v[half] for k, v in est.items()}
+        prepared = _prepared(part, tops[half], lefts[half], win, shape[3])
+        np.testing.assert_array_equal(prepared["noise"], est["noise"][half])  # other keys pass through
+        sums.add(prepared)
+    acc, wacc = np.zeros(shape), np.zeros(shape[2:4])
+    for i, (t, l) in enumerate(zip(tops, lefts)):
+        q = win * est["weight"][i]
+        acc[:, :, t:t + p, l:l + p] += est["patches"][i] * q[None, None, :, :, None]
+        wacc[t:t + p, l:l + p] += q
+    ref = acc / np.maximum(wacc, 1e-300)[None, None, :, :, None]
+    np.testing.assert_allclose(sums.result(), ref, rtol=1e-12)
+    np.testing.assert_allclose(sums.weights.reshape(shape[2:4]), wacc, rtol=1e-12)
+
+
 def _plane(d: float, size=(48, 64), seed=0, level=1.0):
     from scipy.ndimage import gaussian_filter
 
