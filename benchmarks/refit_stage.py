@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/refit_stage.py dump SCENE OUT.pkl [--size H W] [--capture "2 random"] [--seed-index I]
-    python benchmarks/refit_stage.py run OUT.pkl [NAME=VALUE ...]
+    python benchmarks/refit_stage.py run OUT.pkl [NAME=VALUE ...] [--save DIR]
 
 ``dump`` captures a scene of :mod:`quality_scenes` as :mod:`reconstruct_realistic` does (mask period 4, the
 scene's seed + 1000 ``I``) and runs ``reconstruct_gmm`` up to the refit, then saves what the refit receives (the
@@ -28,6 +28,8 @@ import sys
 import time
 import warnings
 from pathlib import Path
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import quality_scenes  # noqa: E402
@@ -79,7 +81,7 @@ def dump(scene: str, out: Path, size: tuple[int, int], capture: str, seed_index:
     print(f"{out}: {scene}, {capture}, seed index {seed_index}, first estimate {record['first'].shape}")
 
 
-def run(path: Path, settings: list[str]) -> None:
+def run(path: Path, settings: list[str], save: Path | None = None) -> None:
     import lfproc.recon._lights as lights
     from lfproc.camera.capture import noise_floor
     from lfproc.metrics import hdr_figures, pu21_psnr
@@ -96,6 +98,8 @@ def run(path: Path, settings: list[str]) -> None:
             _fail(f"{item!r}: expected a number for {name}, got {value!r}")
     if not path.is_file():
         _fail(f"{path}: not found (make it with 'refit_stage.py dump')")
+    if save is not None and not save.is_dir():
+        _fail(f"--save {save}: expected an existing directory")
     try:
         with open(path, "rb") as f:
             d = pickle.load(f)
@@ -115,6 +119,10 @@ def run(path: Path, settings: list[str]) -> None:
         f = hdr_figures(x, d["truth"], noise_floor=noise_floor(cap))
         decades = " ".join(f"{s['decade'][0]:g}:{s['median_stops']:.2f}" for s in f["stops_by_decade"])
         print(f"{name}: PU21-PSNR {pu21_psnr(x, d['truth']):.3f} dB; stops by decade {decades}")
+        if save is not None:
+            np.save(save / f"{path.stem}__{name}.npy", x.astype(np.float32))
+    if save is not None:
+        np.save(save / f"{path.stem}__truth.npy", d["truth"])
     print(f"{path.name} {' '.join(settings)}: {seconds:.0f} s, windows per pass {info['passes']}")
 
 
@@ -130,6 +138,8 @@ def main() -> None:
     p = sub.add_parser("run", help="refit a saved first estimate, with settings overridden")
     p.add_argument("path", type=Path)
     p.add_argument("settings", nargs="*")
+    p.add_argument("--save", type=Path, default=None,
+                   help="a directory: write <dump>__truth.npy, __first.npy and __refit.npy there (light-field units)")
     args = parser.parse_args()
     os.environ.setdefault("LFPROC_PROGRESS", "0")
     warnings.simplefilter("ignore")  # saturation warnings of the brightest scenes: expected
@@ -138,7 +148,7 @@ def main() -> None:
             parser.error(f"--seed-index: expected a number >= 0, got {args.seed_index}")
         dump(args.scene, args.out, tuple(args.size), args.capture, args.seed_index)
     else:
-        run(args.path, args.settings)
+        run(args.path, args.settings, args.save)
 
 
 if __name__ == "__main__":

@@ -461,7 +461,8 @@ def test_window_matrix_is_the_projection_of_the_sheared_window():
 
 def test_fit_evidence_is_the_gaussian_likelihood_of_the_residual():
     """Reference: scipy.stats.multivariate_normal and scipy.optimize.minimize (L-BFGS-B). With the background
-    integrated out, the residual after the light layer, ``y - M x0 - M l``, is N(0, M Sb^2 M^T + diag(1 / w^2)); the
+    integrated out, the residual after the light layer, ``y - M x0 - M l``, is N(0, M Sb^2 M^T + diag(1 / w^2)) (Sb^2:
+    standard deviations KAPPA x0 + TAU max x0, a pixel's three colours correlated by RHO, pixels independent); the
     fit's third value (what chooses between the two priors) is -2 log of that density, without the 2 pi term, at the
     best non-negative light layer on the light's columns."""
     from scipy.optimize import minimize
@@ -473,8 +474,10 @@ def test_fit_evidence_is_the_gaussian_likelihood_of_the_residual():
     w = rng.uniform(5, 10, 30)
     y = m @ (x0 + np.eye(12)[4] * 3) + rng.normal(size=30) / w  # a light of 3 on column 4, none on 5
     _, _, evidence = lights._fit(m, y, w, np.zeros(30), x0, cols, 1)
-    sb2 = (lights.KAPPA * x0 + lights.TAU * x0.max()) ** 2
-    density = multivariate_normal(np.zeros(30), (m * sb2) @ m.T + np.diag(1 / w ** 2))
+    sb = lights.KAPPA * x0 + lights.TAU * x0.max()  # four pixels' colours, each pixel's correlated by RHO
+    sb2 = sb[:, None] * np.kron(np.eye(4), lights.RHO + (1 - lights.RHO) * np.eye(3)) * sb[None]
+    assert 0 < lights.RHO < 1
+    density = multivariate_normal(np.zeros(30), m @ sb2 @ m.T + np.diag(1 / w ** 2))
 
     def score(lc):
         return -2 * density.logpdf(y - m @ x0 - m[:, cols] @ lc) - 30 * np.log(2 * np.pi)
@@ -482,6 +485,28 @@ def test_fit_evidence_is_the_gaussian_likelihood_of_the_residual():
     best = minimize(score, np.ones(2), method="L-BFGS-B", bounds=[(0, None)] * 2, options={"ftol": 1e-14})
     assert best.x[0] > 1  # the planted light is there, so the bound does not decide everything
     assert evidence == pytest.approx(best.fun, abs=1e-6)
+
+
+def test_the_background_prior_has_correlated_colours_and_tau_only_near_the_light():
+    """Known answer for _prior_cov: Sb^2 is block diagonal, one 3 x 3 block a pixel, s_c s_c' (RHO or 1 on the
+    diagonal) with s = KAPPA x0 + TAU max(x0) on the light layer's pixels (``near``) and KAPPA x0 elsewhere;
+    M Sb^2 M^T of a sparse and a dense M alike."""
+    from scipy import sparse
+
+    rng = np.random.default_rng(5)
+    x0 = rng.random(12) + 0.5  # four pixels, three colours
+    near = np.repeat([True, False, False, True], 3)
+    m = rng.random((7, 12)) * (rng.random((7, 12)) < 0.4)
+    sb2, cov = lights._prior_cov(sparse.csr_array(m), x0, near)
+    s = lights.KAPPA * x0 + lights.TAU * x0.max() * near
+    ref = np.zeros((12, 12))
+    for px in range(4):
+        c = slice(3 * px, 3 * px + 3)
+        ref[c, c] = np.outer(s[c], s[c]) * np.where(np.eye(3, dtype=bool), 1.0, lights.RHO)
+    np.testing.assert_allclose(sb2.toarray(), ref, rtol=1e-12)
+    np.testing.assert_allclose(cov, m @ ref @ m.T, rtol=1e-12)
+    np.testing.assert_allclose(lights._prior_cov(m, x0, near)[1], cov, rtol=1e-12)
+    assert sb2[3, 3] == pytest.approx((lights.KAPPA * x0[3]) ** 2)  # away from the light: no TAU
 
 
 def test_the_floor_of_a_window_is_the_whole_views_median_floor():
