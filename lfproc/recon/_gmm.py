@@ -663,8 +663,9 @@ def _prepared(est: dict, tops, lefts, win, width: int, keys=("patches",)) -> dic
     one fancy-indexed sum (no repeated indices), ``"classes"`` its row slices, in a fixed order.
     """
     p, b_n = len(win), len(tops)
-    order = np.argsort((tops % p) * p + lefts % p, kind="stable")
-    cls = ((tops % p) * p + lefts % p)[order]
+    cls = (tops % p) * p + lefts % p
+    order = np.argsort(cls, kind="stable")
+    cls = cls[order]
     cuts = np.r_[0, np.flatnonzero(np.diff(cls)) + 1, b_n] * p * p
     q = (win[None] * est["weight"][order, None, None]).reshape(-1)  # (B P P,)
     ii = np.arange(p)
