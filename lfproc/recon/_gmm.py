@@ -488,8 +488,7 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
                      for d in disparities]
     data = _measurements(capture, saturation)
     g = _Grids(capture, p, opt["stride"], opt["search_stride"])
-    x1 = (np.arange(p) + 0.5) / p
-    win = np.outer(np.sin(np.pi * x1) ** 2 + 1e-3, np.sin(np.pi * x1) ** 2 + 1e-3)
+    win = np.outer(*2 * [np.sin(np.pi * ((np.arange(p) + 0.5) / p)) ** 2 + 1e-3])  # sin^2 window of the patch
     bar = progress(total=len(g.gt) + len(g.ct), desc="reconstruct (gmm)", unit="patch",
                    disable=None if progress_bar is None else not progress_bar)
     log_pi = np.log(model.weights)
@@ -519,8 +518,7 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
                                                    None if chosen_k is None else chosen_k[sel])
                 est = _estimate(data, g.gt[sel], g.gl[sel], p, phases[ph], chosen, shears_sparse, model, (nv, nu),
                                 scales, alpha=alpha, norm=norm)
-                keys = ("patches", "sources") if est["sources"].any() else ("patches",)
-                return _prepared(est, g.gt[sel], g.gl[sel], win, capture.size[1], keys)
+                return _prepared(est, g.gt[sel], g.gl[sel], win, capture.size[1], ("patches", "sources"))
 
             acc, lights, info = _combined(jobs, _in_order(pool, solve, jobs), g, win, (nv, nu, *capture.size, 3), bar)
             if REFINE_SIGMA:
@@ -657,10 +655,11 @@ def _in_order(pool, fn, jobs, ahead: int = 8):
 def _prepared(est: dict, tops, lefts, win, width: int, keys=("patches",)) -> dict:
     """Patch estimates made ready for :class:`_Sums` (in the worker thread, so that the main thread only adds).
 
-    Each estimate of ``keys`` times its weight ``window x patch weight`` (``"<key>_weighted"``), pixel-major
-    ``(B P P, V U 3)``, and the flat sensor pixel of each row (``"pixels"``), with the patches sorted into classes
-    whose corners agree modulo the patch size: the patches of one class do not overlap, so each class is added with
-    one fancy-indexed sum (no repeated indices), ``"classes"`` its row slices, in a fixed order.
+    Each estimate of ``keys`` (after the first, only those not all 0) times its weight ``window x patch weight``
+    (``"<key>_weighted"``), pixel-major ``(B P P, V U 3)``, and the flat sensor pixel of each row (``"pixels"``),
+    with the patches sorted into classes whose corners agree modulo the patch size: the patches of one class do not
+    overlap, so each class is added with one fancy-indexed sum (no repeated indices), ``"classes"`` its row slices,
+    in a fixed order.
     """
     p, b_n = len(win), len(tops)
     cls = (tops % p) * p + lefts % p
@@ -673,6 +672,8 @@ def _prepared(est: dict, tops, lefts, win, width: int, keys=("patches",)) -> dic
     out = {k: v for k, v in est.items() if k not in keys}
     out.update(pixels=pixels.reshape(-1), q=q, classes=list(zip(cuts[:-1], cuts[1:])))
     for key in keys:
+        if key != keys[0] and not est[key].any():  # the first always; the others (point sources) when not all 0
+            continue
         x = est[key][order].transpose(0, 3, 4, 1, 2, 5)  # (B, P, P, V, U, 3)
         out[key + "_weighted"] = (x.reshape(b_n * p * p, -1) * q[:, None])
     return out
