@@ -520,7 +520,7 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
                                 scales, alpha=alpha, norm=norm)
                 return _prepared(est, g.gt[sel], g.gl[sel], win, capture.size[1], ("patches", "sources"))
 
-            acc, lights, info = _combined(jobs, _in_order(pool, solve, jobs), g, win, (nv, nu, *capture.size, 3), bar)
+            acc, lights, info = _combined(jobs, _in_order(pool, solve, jobs), g, (nv, nu, *capture.size, 3), bar)
             if REFINE_SIGMA:
                 acc = _refine(acc - lights, g.gt, g.gl, info, model, shears_sparse, scales, win, pool, opt["chunk"],
                               data.saturated.any(axis=0)) + lights
@@ -538,7 +538,7 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
     return _result(acc, capture, record, started)
 
 
-def _combined(jobs, estimates, g, win, shape, bar):
+def _combined(jobs, estimates, g, shape, bar):
     """The first light field: the patch estimates added in the jobs' fixed order (the output does not depend on the
     threads), divided by their weights; the point sources' share of it (module notes: small lights); and each
     patch's hypothesis, weight and noise (for :func:`_refine`)."""
@@ -547,7 +547,7 @@ def _combined(jobs, estimates, g, win, shape, bar):
     for (_, sel), est in zip(jobs, estimates):
         acc.add(est)
         if "sources_weighted" in est:
-            lights.add(est, "sources")
+            lights.add(est, "sources", weigh=False)  # divided by the patches' weights
         hyp[sel], weight[sel], noise[sel] = est["hypothesis"], est["weight"], est["noise"]
         bar.update(len(sel))
     lights = lights.result(acc.weights)
@@ -689,12 +689,13 @@ class _Sums:
         self.sums = np.zeros((shape[2] * shape[3], shape[0] * shape[1] * shape[4]))
         self.weights = np.zeros(shape[2] * shape[3])
 
-    def add(self, est: dict, key: str = "patches") -> None:
-        """Add ``est[key]`` and its weights (:func:`_prepared`), class by class in a fixed order."""
+    def add(self, est: dict, key: str = "patches", weigh: bool = True) -> None:
+        """Add ``est[key]`` and (``weigh``) its weights (:func:`_prepared`), class by class in a fixed order."""
         for start, stop in est["classes"]:
             rows = est["pixels"][start:stop]
             self.sums[rows] += est[key + "_weighted"][start:stop]
-            self.weights[rows] += est["q"][start:stop]
+            if weigh:
+                self.weights[rows] += est["q"][start:stop]
 
     def result(self, weights: np.ndarray | None = None) -> np.ndarray:
         """The sums over ``weights`` (default: their own), ``(V, U, H, W, 3)``."""

@@ -253,12 +253,8 @@ def _prior_cov(m, x0, near=None):
     correlated by ``RHO``) and ``M Sb^2 M^T`` over every measurement (dense). ``near`` (``x0``'s shape, bool): where
     the ``TAU`` term applies (default: everywhere)."""
     sb = KAPPA * x0 + TAU * max(float(x0.max()), 1e-300) * (1.0 if near is None else near)
-    if RHO:
-        blocks = sb.reshape(-1, 3)[:, :, None] * sb.reshape(-1, 3)[:, None, :]
-        blocks = blocks * (RHO + (1 - RHO) * np.eye(3))[None]
-        sb2 = sparse.block_diag(list(blocks), format="csr")
-    else:
-        sb2 = sparse.diags_array(sb ** 2, format="csr")
+    blocks = sb.reshape(-1, 3)[:, :, None] * sb.reshape(-1, 3)[:, None, :] * (RHO + (1 - RHO) * np.eye(3))[None]
+    sb2 = sparse.block_diag(list(blocks), format="csr")
     m = sparse.csr_array(m)
     cov = m @ sb2 @ m.T
     return sb2, cov.toarray()
@@ -399,10 +395,10 @@ def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cach
         floor = _floor(centre, ext)  # where a fit is not positive: the neighbourhood's level, not the blur
         for low, support in priors:
             x0 = (np.where(support[ext][..., None], floor, centre[ext]) if low else centre[ext]).reshape(-1)
-            cols = np.flatnonzero(np.repeat(support[ext].reshape(-1), 3))
+            near = np.repeat(support[ext].reshape(-1), 3)  # the light layer's samples: TAU there only (module notes)
+            cols = np.flatnonzero(near)
             if not len(cols):
                 continue
-            near = np.repeat(support[ext].reshape(-1), 3)  # TAU on the light layer's pixels only (module notes)
             picks = []  # the disparity: least chi-square, from RANK_SHOTS shots of the tinted fit with the bounds ...
             for shear, m in fits:
                 prior = _prior_cov(m, x0, near)
