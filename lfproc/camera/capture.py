@@ -57,7 +57,7 @@ from ..sensor import calibrated_observation, CameraProfile, iso_maps, load_profi
 from .._shared.deps import require
 from ..errors import FileFormatError, InputError, LfprocError, LfprocWarning, MissingFileError, ShapeError
 from ..io._atomic import atomic_file
-from .iso import _num, DEFAULT_BLOCK_PX, describe_iso_pattern, iso_pattern, ISO_PATTERNS
+from .iso import _num, capture_streams, DEFAULT_BLOCK_PX, describe_iso_pattern, iso_pattern, ISO_PATTERNS
 from .projection import (
     build_operator, CFA_PATTERNS, decode_levels, encode_levels, MASK_KINDS, MaskCode, ProjectionOperator,
     sampling_rate, transmittance_map,
@@ -922,7 +922,8 @@ def capture_from_raw(
     gamma : float, optional (default: the profile's)
     bias_dn : float or ndarray, optional (default: black level plus mean dark signal)
     isos, block_px, random_state : for a named ``iso_layout`` (``block_px``: the block side of
-        ``block``; ``random_state`` seeds ``random``).
+        ``block``; ``random_state`` seeds ``random`` as :func:`~lfproc.camera.simulate.simulate_capture` does:
+        the same seed, the same layout, :func:`~lfproc.camera.iso.capture_streams`).
 
     Returns
     -------
@@ -972,7 +973,7 @@ def capture_from_raw(
         if name in ISO_PATTERNS and isos is None:
             raise InputError(f"iso_layout {name!r}: pass isos= (the ISO values of the pattern)")
         iso_map = iso_pattern(iso_layout, size=dn.shape[1:], isos=isos if isos is not None else (100,),
-                              block_px=block_px, random_state=random_state)
+                              block_px=block_px, random_state=capture_streams(random_state)[0])  # the simulator's
         seed = random_state if isinstance(random_state, (int, np.integer)) else None
         iso_info = describe_iso_pattern(name, isos if name in ISO_PATTERNS else np.unique(iso_map),
                                         block_px=block_px, random_state=None if seed is None else int(seed))

@@ -426,3 +426,17 @@ def test_random_masks_are_tiled_by_default_and_none_turns_it_off(tmp_path, capsy
     assert main(["simulate", str(path), "-o", str(tmp_path / "x.capture.npz"), "--mask-period", "four"]) == 2
     err = capsys.readouterr().err
     assert "--mask-period" in err and "'four'" in err
+
+
+def test_one_seed_gives_the_same_mask_and_noise_whatever_the_iso_layout():
+    """Paired designs (lfproc.camera.iso.capture_streams): at one seed the random and block layouts get the same
+    mask codes and the same noise draws, so a pixel both layouts give the same ISO has the same code in both."""
+    a = simulate_capture(_lf(), shots=2, iso_pattern_kind="random", isos=ISOS, random_state=7)
+    b = simulate_capture(_lf(), shots=2, iso_pattern_kind="block", isos=ISOS, block_px=2, random_state=7)
+    np.testing.assert_array_equal(a.mask.codes, b.mask.codes)
+    same = a.iso == b.iso
+    assert 0.1 < same.mean() < 0.5  # a quarter of the pixels, by chance
+    np.testing.assert_array_equal(a.dn[same], b.dn[same])
+    assert (a.dn[~same] != b.dn[~same]).mean() > 0.5  # another ISO: another code
+    c = simulate_capture(_lf(), shots=2, iso_pattern_kind="random", isos=ISOS, random_state=8)
+    assert not np.array_equal(a.mask.codes, c.mask.codes)
