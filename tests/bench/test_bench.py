@@ -182,12 +182,14 @@ def test_grid_sizes_seeds_and_methods():
     for level in ("none", "low", "medium", "high"):
         prof = load_profile(f"paper-{level}")
         assert {100, 400, 800, 1600, 3200, 6400} <= set(prof.iso_values)
-    # seeds: shared across noise level and ISO set (common random numbers), not across shots or patterns
+    # seeds: shared across noise level, ISO set and pattern (common random numbers), not across shots
     by = {(c.iso_pattern, c.shots, c.noise, c.isos, c.method): cell_seed(0, c) for c in paper}
     a = by[("random", 2, "low", (100, 400, 800, 1600), "joint")]
     assert a == by[("random", 2, "high", (100, 1600, 3200, 6400), "joint")]
     assert a != by[("random", 3, "low", (100, 400, 800, 1600), "joint")]
-    assert a != by[("row", 2, "low", (100, 400, 800, 1600), "joint")]
+    assert a == by[("row", 2, "low", (100, 400, 800, 1600), "joint")] == by[("block", 2, "high", (100, 400, 800, 1600), "joint")]
+    assert by[("global", 4, "low", (100, 400, 800, 1600), "individual-iso")] != \
+        by[("global", 4, "low", (100, 400, 800, 1600), "bracketing")]  # another acquisition
     assert by[("global", 3, "low", (100, 400, 800, 1600), "bracketing")] == \
         by[("global", 3, "low", (100, 400, 800, 1600), "bracketing-joint")]
     with pytest.raises(InputError, match="preset"):
