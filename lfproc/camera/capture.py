@@ -922,8 +922,7 @@ def capture_from_raw(
     gamma : float, optional (default: the profile's)
     bias_dn : float or ndarray, optional (default: black level plus mean dark signal)
     isos, block_px, random_state : for a named ``iso_layout`` (``block_px``: the block side of
-        ``block``; ``random_state`` seeds ``random`` as :func:`~lfproc.camera.simulate.simulate_capture` does:
-        the same seed, the same layout, :func:`~lfproc.camera.iso.capture_streams`).
+        ``block``; ``random_state`` seeds ``random`` as the simulator does, :func:`~lfproc.camera.iso.capture_streams`).
 
     Returns
     -------
