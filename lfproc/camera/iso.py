@@ -153,7 +153,17 @@ def capture_streams(random_state) -> tuple[np.random.Generator, np.random.Genera
     noise's (:meth:`numpy.random.Generator.spawn` of ``random_state``'s generator).
 
     One seed so gives the same mask and noise whatever the layout (:func:`lfproc.camera.simulate.simulate_capture`),
-    and :func:`lfproc.camera.capture.import_capture` redraws a simulated capture's ``random`` layout from its seed.
+    and :func:`lfproc.camera.capture.capture_from_raw` redraws a simulated capture's ``random`` layout from its seed.
+
+    Parameters
+    ----------
+    random_state : int, Generator or None
+        As everywhere in lfproc (:func:`lfproc._shared.random.check_random_state`).
+
+    Returns
+    -------
+    tuple of three Generator
+        The layout's, the mask's and the noise's.
 
     Examples
     --------
