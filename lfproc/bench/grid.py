@@ -34,7 +34,7 @@ Seeds. Every cell records its seed: a hash of the bench seed, the scene and the
 acquisition's *draw group* -- ``(method, shots)`` -- but not the ISO pattern, ISO set, noise
 level or exposure, so cells that differ only in those share the mask codes, the random ISO
 map and the noise stream (common random numbers: their differences are less noisy; the
-simulator draws layout, mask and noise from separate streams, :func:`lfproc.camera.iso.capture_streams`,
+simulator draws layout, mask and noise from separate streams, :func:`lfproc.camera.capture.capture_streams`,
 so a random layout does not move the mask). With the pattern in the group, as before, random, row
 and block captures had different masks: on the realistic test scenes at 96 x 128 that alone put block
 0.43 dB ahead of random (docs/benchmarks.md, stop 17).

@@ -55,9 +55,10 @@ from .._shared.jsonable import to_jsonable
 from .._version import __version__
 from ..sensor import calibrated_observation, CameraProfile, iso_maps, load_profile, Observation
 from .._shared.deps import require
+from .._shared.random import check_random_state
 from ..errors import FileFormatError, InputError, LfprocError, LfprocWarning, MissingFileError, ShapeError
 from ..io._atomic import atomic_file
-from .iso import _num, capture_streams, DEFAULT_BLOCK_PX, describe_iso_pattern, iso_pattern, ISO_PATTERNS
+from .iso import _num, DEFAULT_BLOCK_PX, describe_iso_pattern, iso_pattern, ISO_PATTERNS
 from .projection import (
     build_operator, CFA_PATTERNS, decode_levels, encode_levels, MASK_KINDS, MaskCode, ProjectionOperator,
     sampling_rate, transmittance_map,
@@ -77,6 +78,7 @@ __all__ = [
     "local_signal",
     "noise_floor",
     "capture_from_raw",
+    "capture_streams",
     "read_sensor_frame",
     "observations",
     "describe_capture",
@@ -845,6 +847,35 @@ def read_sensor_frame(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, An
     return dn, meta
 
 
+def capture_streams(random_state) -> tuple[np.random.Generator, np.random.Generator, np.random.Generator]:
+    """The three independent generators a simulated capture draws from: its ISO layout's, its mask's and its
+    noise's (:meth:`numpy.random.Generator.spawn` of ``random_state``'s generator).
+
+    One seed so gives the same mask and noise whatever the layout (:func:`lfproc.camera.simulate.simulate_capture`),
+    and :func:`capture_from_raw` redraws a simulated capture's ``random`` layout from its seed.
+
+    Parameters
+    ----------
+    random_state : int, Generator or None
+        As everywhere in lfproc (:func:`lfproc._shared.random.check_random_state`).
+
+    Returns
+    -------
+    tuple of three Generator
+        The layout's, the mask's and the noise's.
+
+    Examples
+    --------
+    >>> from lfproc.camera.iso import iso_pattern
+    >>> layout, mask, noise = capture_streams(0)
+    >>> a = iso_pattern("random", size=(4, 4), random_state=layout)
+    >>> bool((a == iso_pattern("random", size=(4, 4), random_state=capture_streams(0)[0])).all())
+    True
+    """
+    layout, mask, noise = check_random_state(random_state).spawn(3)
+    return layout, mask, noise
+
+
 def _mask_from(mask, *, views) -> tuple[MaskCode, tuple[int, int], str | None]:
     """The mask of :func:`capture_from_raw`, the views it implies and the file it came from."""
     if isinstance(mask, (str, os.PathLike)):
@@ -922,7 +953,7 @@ def capture_from_raw(
     gamma : float, optional (default: the profile's)
     bias_dn : float or ndarray, optional (default: black level plus mean dark signal)
     isos, block_px, random_state : for a named ``iso_layout`` (``block_px``: the block side of
-        ``block``; ``random_state`` seeds ``random`` as the simulator does, :func:`~lfproc.camera.iso.capture_streams`).
+        ``block``; ``random_state`` seeds ``random`` as the simulator does, :func:`capture_streams`).
 
     Returns
     -------

@@ -33,7 +33,7 @@ from ..errors import FileFormatError, InputError, MissingFileError, ShapeError
 from .. import _untrusted as ut
 from ..io.images import imread
 
-__all__ = ["ISO_PATTERNS", "DEFAULT_ISOS", "DEFAULT_BLOCK_PX", "iso_pattern", "describe_iso_pattern", "capture_streams"]
+__all__ = ["ISO_PATTERNS", "DEFAULT_ISOS", "DEFAULT_BLOCK_PX", "iso_pattern", "describe_iso_pattern"]
 
 ISO_PATTERNS = ("random", "row", "block", "dual")
 DEFAULT_ISOS = (100, 400, 800, 1600)
@@ -146,34 +146,6 @@ def iso_pattern(
         g = math.ceil(math.sqrt(isos.size))
         index = (((rows // b) % g) * g + (cols // b) % g) % isos.size
     return isos[index].astype(np.float32)
-
-
-def capture_streams(random_state) -> tuple[np.random.Generator, np.random.Generator, np.random.Generator]:
-    """The three independent generators a simulated capture draws from: its ISO layout's, its mask's and its
-    noise's (:meth:`numpy.random.Generator.spawn` of ``random_state``'s generator).
-
-    One seed so gives the same mask and noise whatever the layout (:func:`lfproc.camera.simulate.simulate_capture`),
-    and :func:`lfproc.camera.capture.capture_from_raw` redraws a simulated capture's ``random`` layout from its seed.
-
-    Parameters
-    ----------
-    random_state : int, Generator or None
-        As everywhere in lfproc (:func:`lfproc._shared.random.check_random_state`).
-
-    Returns
-    -------
-    tuple of three Generator
-        The layout's, the mask's and the noise's.
-
-    Examples
-    --------
-    >>> layout, mask, noise = capture_streams(0)
-    >>> a = iso_pattern("random", size=(4, 4), random_state=layout)
-    >>> bool((a == iso_pattern("random", size=(4, 4), random_state=capture_streams(0)[0])).all())
-    True
-    """
-    layout, mask, noise = check_random_state(random_state).spawn(3)
-    return layout, mask, noise
 
 
 @renamed_keywords(seed="random_state")

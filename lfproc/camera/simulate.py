@@ -38,7 +38,7 @@ or a single-channel integer image, values = ISO). The ISO map is the same in eve
 is a property of the sensor); each shot has its own mask code.
 
 Random streams. The ISO layout, the mask and the noise are drawn from three independent streams of
-``random_state`` (:func:`lfproc.camera.iso.capture_streams`), so one seed gives the same mask codes and
+``random_state`` (:func:`lfproc.camera.capture.capture_streams`), so one seed gives the same mask codes and
 noise draws whatever the ISO pattern or noise level: designs compared at one seed differ by their design
 alone. Before (stop 16 and earlier) the ``random`` layout drew from the one stream first and moved every
 later draw, so comparing patterns at one seed compared different masks too. Measured
@@ -76,8 +76,8 @@ from .._shared.validation import check_choice, check_count, check_positive
 from .._shared.random import check_random_state
 from .._shared.frozen import freeze
 from .._version import __version__
-from .iso import DEFAULT_BLOCK_PX, DEFAULT_ISOS, ISO_PATTERNS, _num, capture_streams, describe_iso_pattern, iso_pattern
-from .capture import MAX_SHOTS, Capture, _warn_saturation, file_sha256, observations
+from .iso import DEFAULT_BLOCK_PX, DEFAULT_ISOS, ISO_PATTERNS, _num, describe_iso_pattern, iso_pattern
+from .capture import MAX_SHOTS, Capture, _warn_saturation, capture_streams, file_sha256, observations
 from ..sensor import expose, load_profile
 from ..errors import InputError, ShapeError, ViewCountWarning, option_name
 from ..lightfield import LightField, clean_nonfinite

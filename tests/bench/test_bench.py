@@ -187,7 +187,8 @@ def test_grid_sizes_seeds_and_methods():
     a = by[("random", 2, "low", (100, 400, 800, 1600), "joint")]
     assert a == by[("random", 2, "high", (100, 1600, 3200, 6400), "joint")]
     assert a != by[("random", 3, "low", (100, 400, 800, 1600), "joint")]
-    assert a == by[("row", 2, "low", (100, 400, 800, 1600), "joint")] == by[("block", 2, "high", (100, 400, 800, 1600), "joint")]
+    assert a == by[("row", 2, "low", (100, 400, 800, 1600), "joint")] == \
+        by[("block", 2, "high", (100, 400, 800, 1600), "joint")]
     assert by[("global", 4, "low", (100, 400, 800, 1600), "individual-iso")] != \
         by[("global", 4, "low", (100, 400, 800, 1600), "bracketing")]  # another acquisition
     assert by[("global", 3, "low", (100, 400, 800, 1600), "bracketing")] == \

@@ -275,7 +275,7 @@ def test_local_signal_leaves_the_measurement_out_and_knows_a_flat_scene():
     bumped = obs.radiance.copy()
     bumped[0, 20, 20] *= 3
     est2 = local_signal(cap, replace(obs, radiance=bumped))
-    # equal up to rounding (the filter's sums include the pixel, then subtract it); tripling it would move a
+    # equal up to rounding (the filter's sums include the pixel, then subtract it); tripling it would move an
     # estimate that included it by about a quarter
     assert est2[0, 20, 20] == pytest.approx(est[0, 20, 20], rel=1e-12)
     assert est2[0, 22, 20] > est[0, 22, 20] * 1.1  # a same-colour neighbour's

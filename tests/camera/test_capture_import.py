@@ -137,7 +137,8 @@ def test_dng_capture_imports_then_reconstructs(simulated, files, tmp_path, capsy
 
 def test_cli_reuses_a_capture_files_mask_and_a_random_layout_by_seed(files, tmp_path, capsys, dng_writer):
     """The mask of an existing capture file (here a shifted one), the random ISO layout redrawn from its
-    seed (the simulator draws it from the first of its streams, lfproc.camera.iso.capture_streams), one exposure for both shots."""
+    seed (the simulator draws it from the first of its streams, lfproc.camera.capture.capture_streams), one
+    exposure for both shots."""
     sim = simulate_capture(_lf(), profile=_profile(), iso_pattern_kind="random", isos=ISOS, shots=2,
                            mask="shifted", mask_period=4, random_state=5)
     donor = sim.save(tmp_path / "donor.capture.npz")

@@ -429,7 +429,7 @@ def test_random_masks_are_tiled_by_default_and_none_turns_it_off(tmp_path, capsy
 
 
 def test_one_seed_gives_the_same_mask_and_noise_whatever_the_iso_layout():
-    """Paired designs (lfproc.camera.iso.capture_streams): at one seed the random and block layouts get the same
+    """Paired designs (lfproc.camera.capture.capture_streams): at one seed the random and block layouts get the same
     mask codes and the same noise draws, so a pixel both layouts give the same ISO has the same code in both."""
     a = simulate_capture(_lf(), shots=2, iso_pattern_kind="random", isos=ISOS, random_state=7)
     b = simulate_capture(_lf(), shots=2, iso_pattern_kind="block", isos=ISOS, block_px=2, random_state=7)
