@@ -45,14 +45,19 @@ def scenes(tmp_path):
     return root
 
 
+def _done_records(out):
+    """The published done-records of ``out`` (a writer's hidden ``.lfproc-tmp-*.json`` is not one)."""
+    return [p for p in (out / "done").glob("*.json") if not p.name.startswith(".")] if (out / "done").is_dir() else []
+
+
 def _record_mtimes(out):
-    return {p.name: p.stat().st_mtime_ns for p in (out / "done").glob("*.json")}
+    return {p.name: p.stat().st_mtime_ns for p in _done_records(out)}
 
 
 
 def _first_scene_done(out):
     """Ready test for ``kill_when``: ``out/done`` holds a done-record."""
-    return lambda: (out / "done").is_dir() and any((out / "done").glob("*.json"))
+    return lambda: bool(_done_records(out))
 
 
 def test_build_failure_reported_then_resumed(scenes, tmp_path):
@@ -210,7 +215,7 @@ def test_cli_dataset_build_virtual_illum_killed_then_resumed(tmp_path, capsys, k
     # first run: a local Dask cluster of one worker (scenes one after the other), killed as soon as the
     # first done-record appears
     kill_when(cmd, _first_scene_done(out), timeout_s=60)
-    done_at_kill = sorted(p.stem for p in (out / "done").glob("*.json"))
+    done_at_kill = sorted(p.stem for p in _done_records(out))
     assert 1 <= len(done_at_kill) < len(names), f"the run should have been killed after its first scene: {done_at_kill}"
     assert not (out / "manifest.json").exists()  # the killed run never reached its manifest
     before = _scene_mtimes(out, done_at_kill)
