@@ -405,6 +405,24 @@ def test_candidates_are_the_pixels_far_above_their_neighbourhood_and_the_noise()
     assert candidates(centre, noise=5.0)[1].sum() == 0  # 20 is not 10 x a noise of 5
 
 
+def test_a_lit_line_half_the_median_square_thick_is_found_along_its_whole_length(monkeypatch):
+    """A line of 40 x 5 pixels (rows 50, 250, 250, 220, 50 over a floor of 1): along its middle the 9 x 9 median is 50
+    (36 floor samples, then the rows of 50), so its core is 4-5 times the median, under RATIO (8); only its ends (the
+    square half on the floor) are lights by the ratio. Grown by hysteresis from those (GROW_RATIO 4): every core pixel
+    is a light, the rows of 50 and the floor are not. The control, GROW_RATIO 0: the middle third is missed."""
+    centre = np.ones((40, 60, 3))
+    for row, value in zip(range(18, 23), (50.0, 250.0, 250.0, 220.0, 50.0)):
+        centre[row, 10:50] = value
+    core = np.zeros((40, 60), bool)
+    core[19:22, 10:50] = True
+    _, light = candidates(centre, noise=0.1)
+    assert light[core].all()
+    assert not light[~core & (np.arange(60)[None, :] >= 14) & (np.arange(60)[None, :] < 46)].any()
+    monkeypatch.setattr(lights, "GROW_RATIO", 0.0)
+    _, ratio_only = candidates(centre, noise=0.1)
+    assert ratio_only[core].sum() < 0.5 * core.sum() and not ratio_only[19:22, 24:36].any()
+
+
 @pytest.mark.parametrize("profile", ["paper-none", "paper-medium"])
 def test_reconstruction_of_a_small_light_keeps_its_energy_with_the_refit(profile, monkeypatch):
     """reconstruct_gmm on the planted light, with and without the refit (LIGHTS_REFIT; the same capture):
