@@ -163,7 +163,7 @@ import scipy.linalg as sl
 from scipy import ndimage, sparse
 from scipy.optimize import nnls
 
-from ..camera.projection import build_operator, patch_operators, transmittance_map
+from ..camera.projection import ProjectionOperator, build_operator, patch_operators, transmittance_map
 
 #: A light: the centre view above RATIO times the median of a BG x BG square around it ...
 RATIO = 8.0
@@ -210,7 +210,8 @@ MISFIT_SIZE = 5
 RHO = 0.9
 
 
-def misfit_map(lf, T, W, W_bound, op):
+def misfit_map(lf: np.ndarray, T: np.ndarray, W: np.ndarray, W_bound: np.ndarray,
+               op: ProjectionOperator) -> np.ndarray:
     """The mean squared whitened residual of the measurements ``(S, H, W)`` over ``MISFIT_SIZE`` squares, summed
     over the shots ``(H, W)`` (a saturated one counts where ``lf`` predicts it below its bound)."""
     pred = op.forward(lf)
