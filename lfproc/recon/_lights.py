@@ -225,12 +225,13 @@ def candidates(centre: np.ndarray, noise: float, misfit: np.ndarray | None = Non
     light pixels ``(H, W)``."""
     lum = centre.mean(axis=-1)
     background = ndimage.median_filter(lum, size=BG, mode="nearest")
-    light = (lum > RATIO * background) & (lum > SIGNIFICANCE * noise)
+    significant = lum > SIGNIFICANCE * noise
+    light = significant & (lum > RATIO * background)
     if misfit is not None and MISFIT:
-        light |= (misfit > MISFIT) & (lum > MISFIT_RATIO * background) & (lum > SIGNIFICANCE * noise)
+        light |= significant & (misfit > MISFIT) & (lum > MISFIT_RATIO * background)
     if GROW_RATIO and light.any():  # hysteresis (module notes): label and keep the components holding a light, as
         # skimage.filters.apply_hysteresis_threshold does for one image and two scalar thresholds
-        weak, _ = ndimage.label(light | (lum > GROW_RATIO * background) & (lum > SIGNIFICANCE * noise))
+        weak, _ = ndimage.label(light | significant & (lum > GROW_RATIO * background))
         light = np.isin(weak, np.unique(weak[light]))
     labels, _ = ndimage.label(ndimage.binary_dilation(light, iterations=2))
     return [b for b in ndimage.find_objects(labels) if b is not None], light

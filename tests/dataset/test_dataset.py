@@ -54,7 +54,6 @@ def _record_mtimes(out):
     return {p.name: p.stat().st_mtime_ns for p in _done_records(out)}
 
 
-
 def _first_scene_done(out):
     """Ready test for ``kill_when``: ``out/done`` holds a done-record."""
     return lambda: bool(_done_records(out))
