@@ -70,6 +70,17 @@ hysteresis: 44.98 / 45.09 / 45.02 / 45.41 dB (3: within 0.05 dB of these at twic
 (refit stage, ``benchmarks/refit_stage.py``): forest-stilllife 34.16 -> 34.35, sunset-carrots 51.23 -> 51.33 (its
 10-100 decade 0.60 -> 0.23 stops), desk-cannon 25.93 both.
 
+Why ``EDGE_RATIO`` is off: a light as large as night-studio's lamp (a disc of 500-1000 over a floor of 5, about 32
+pixels across; Lytro size, a test scene) is bright in its own ``BG x BG`` median, so no test finds it, and its rim
+comes back blurred: the three pixels outside it 2-16 times too bright, a ring of +2 stops. That ring is the scene's
+largest error, and it decides the order of its noise levels (between none and high, 59 % of the difference in
+squared PU21 error sits in one 24 x 24 block of it). The edge test (above ``EDGE_RATIO`` times the 10th percentile
+of the square) makes the rim a light; the refit stage (``benchmarks/refit_stage.py``, night-studio, medium noise):
+45.02 -> 47.69 dB with 50, the ring one pixel wide, at 8 times the refit's time. But on the tune scene desk-cannon
+it finds texture edges: 25.93 -> 25.72 dB with 50 (547 s against 25 s), 25.89 with 200 (402 s); sunset-carrots
+51.33 both; forest-stilllife with 50 was stopped after 25 minutes (the default: 152 s). Kept as a setting for that
+work, off until a test tells a large light's rim from texture.
+
 Why ``CANDIDATES`` 2, not 1 (measured when every window was ranked without the bounds): two disparities can score
 within a hair, the wrong one first, and the bounds then decide. A test scene showed it: city-interior's lamp at 96 x 128, ``paper-none``, seed 0, ranked 0.75
 (chi-square 519.6) before 1.0 (526.7); with the bounds 0.75 left 14.5 per measurement (not accepted) and 1.0 left
@@ -171,6 +182,10 @@ BG = 9
 #: A light grows into the pixels connected to it above GROW_RATIO times that median and SIGNIFICANCE times the noise
 #: (hysteresis: a lit line about BG / 2 pixels thick raises its own median; module notes; 0: off).
 GROW_RATIO = 4.0
+#: A light also: above EDGE_RATIO times the EDGE_PERCENTILE-th percentile of the BG x BG square (the bright side of
+#: a large light's edge, whose own median is bright; module notes; 0: off).
+EDGE_RATIO = 0.0
+EDGE_PERCENTILE = 10.0
 #: ... and above SIGNIFICANCE times the radiance one measurement resolves.
 SIGNIFICANCE = 10.0
 #: Window: the light's bounding box plus PAD pixels each side, square, at most MAX_WINDOW pixels (a longer light gets
@@ -229,6 +244,9 @@ def candidates(centre: np.ndarray, noise: float, misfit: np.ndarray | None = Non
     light = significant & (lum > RATIO * background)
     if misfit is not None and MISFIT:
         light |= significant & (misfit > MISFIT) & (lum > MISFIT_RATIO * background)
+    if EDGE_RATIO:
+        light |= significant & (lum > EDGE_RATIO * ndimage.percentile_filter(lum, EDGE_PERCENTILE, size=BG,
+                                                                              mode="nearest"))
     if GROW_RATIO and light.any():  # hysteresis (module notes): label and keep the components holding a light, as
         # skimage.filters.apply_hysteresis_threshold does for one image and two scalar thresholds
         weak, _ = ndimage.label(light | significant & (lum > GROW_RATIO * background))

@@ -540,3 +540,20 @@ def test_the_floor_of_a_window_is_the_whole_views_median_floor():
     for ext in [(slice(0, 20), slice(0, 20)), (slice(10, 40), slice(25, 50)), (slice(45, 60), slice(50, 70)),
                 (slice(2, 9), slice(60, 70))]:
         np.testing.assert_array_equal(_floor(centre, ext), full[ext])
+
+
+def test_a_large_lights_edge_is_a_light_only_with_the_edge_test(monkeypatch):
+    """A disc of radius 12 at 500 over a floor of 1, blurred (Gaussian, sigma 1 pixel) as a first estimate blurs a
+    large lamp: its own 9 x 9 median is bright wherever it is bright, so the ratio test (RATIO 8) finds nothing and
+    by default nothing is refitted. With EDGE_RATIO 50 (10th percentile of the square; off by default, module
+    notes) its rim is a light (the disc's outer 1.5 pixels and the blur's spill beyond), its middle and the floor
+    are not."""
+    yy, xx = np.mgrid[:40, :40]
+    r = np.hypot(yy - 20, xx - 20)
+    centre = gaussian_filter(np.where(r <= 12, 500.0, 1.0), 1.0)[..., None].repeat(3, axis=-1)
+    _, light = candidates(centre, noise=0.1)
+    assert not light.any()
+    monkeypatch.setattr(lights, "EDGE_RATIO", 50.0)
+    _, edge = candidates(centre, noise=0.1)
+    assert edge[(r <= 12) & (r > 10.5)].all()
+    assert not edge[r < 7].any() and not edge[r > 14.5].any()
