@@ -72,14 +72,14 @@ hysteresis: 44.98 / 45.09 / 45.02 / 45.41 dB (3: within 0.05 dB of these at twic
 
 Why ``EDGE_RATIO`` is off: a light as large as night-studio's lamp (a disc of 500-1000 over a floor of 5, about 32
 pixels across; Lytro size, a test scene) is bright in its own ``BG x BG`` median, so no test finds it, and its rim
-comes back blurred: the three pixels outside it 2-16 times too bright, a ring of +2 stops. That ring is the scene's
-largest error, and it decides the order of its noise levels (between none and high, 59 % of the difference in
-squared PU21 error sits in one 24 x 24 block of it). The edge test (above ``EDGE_RATIO`` times the 10th percentile
-of the square) makes the rim a light; the refit stage (``benchmarks/refit_stage.py``, night-studio, medium noise):
-45.02 -> 47.69 dB with 50, the ring one pixel wide, at 8 times the refit's time. But on the tune scene desk-cannon
-it finds texture edges: 25.93 -> 25.72 dB with 50 (547 s against 25 s), 25.89 with 200 (402 s); sunset-carrots
-51.33 both; forest-stilllife with 50 was stopped after 25 minutes (the default: 152 s). Kept as a setting for that
-work, off until a test tells a large light's rim from texture.
+comes back blurred: the three pixels outside it 1.4-16 times too bright, a ring of +2 stops. That ring is the scene's
+largest error and decides the order of its noise levels (between none and high, the largest difference in squared
+PU21 error, 59 % of it, is one 24 x 24 block of the rim). The edge test (above ``EDGE_RATIO`` times the 10th
+percentile of the square) makes the rim a light. Refit stage (``benchmarks/refit_stage.py``, night-studio, medium
+noise, a shared machine): 45.02 -> 47.69 dB with 50, the ring one pixel wide (1225 s against 154 s); with 200
+45.12, the rim mostly missed. On the tune scene desk-cannon it finds texture edges: 25.93 -> 25.72 dB with 50 (547 s
+against 25 s), 25.89 with 200 (402 s); sunset-carrots 51.33 both; forest-stilllife with 50 stopped after 25 minutes
+(the default: 152 s). Kept as a setting for that work, off until a test tells a large light's rim from texture.
 
 Why ``CANDIDATES`` 2, not 1 (measured when every window was ranked without the bounds): two disparities can score
 within a hair, the wrong one first, and the bounds then decide. A test scene showed it: city-interior's lamp at 96 x 128, ``paper-none``, seed 0, ranked 0.75
