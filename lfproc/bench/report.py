@@ -531,9 +531,12 @@ def _settings_section(rows, meta) -> list[str]:
     """The header and the settings: preset, crop, mask, dictionary, reconstruction, seeds, times, scenes."""
     n_scenes = len({r["scene"] for r in rows})
     first = rows[0]
-    recon_text = (f"solver {first.get('solver')}, mu {first.get('mu')}, at most {first.get('max_iter')} iterations, "
-                  f"scale `{first.get('scale')}`, overlaps `{first.get('overlap')}`"
-                  + (f" (options given: {meta['recon']})" if meta["recon"] else " (lfproc.recon defaults)"))
+    if first.get("recon_method") == "gmm":  # the patch model's reconstruction has none of the solver's settings
+        recon_text = "gmm (`lfproc.recon.reconstruct_gmm`, the shipped patch model)"
+    else:
+        recon_text = (f"solver {first.get('solver')}, mu {first.get('mu')}, at most {first.get('max_iter')} "
+                      f"iterations, scale `{first.get('scale')}`, overlaps `{first.get('overlap')}`")
+    recon_text += f" (options given: {meta['recon']})" if meta["recon"] else " (lfproc.recon defaults)"
     crop = f"central {'x'.join(map(str, meta['crop']))} pixels of each view" if meta["crop"] else "none"
     mask = (f"period {meta['mask_period']} px (patches share one operator per phase)" if meta["mask_period"]
             else "not tiled (the paper's mask)")
@@ -553,8 +556,9 @@ def _settings_section(rows, meta) -> list[str]:
         f"mask: random, {mask}; "
         f"exposure {meta['exposure_s']} s; radiance scale automatic (the brightest expected signal just saturates "
         "ISO 100 at exposure 1).",
-        f"- Dictionary `{meta['dictionary']}` (patch {' x '.join(map(str, meta['dictionary_patch']))}, "
-        f"{meta['dictionary_atoms']} atoms); reconstruction: {recon_text}.",
+        (f"- Reconstruction: {recon_text}; no dictionary." if first.get("recon_method") == "gmm" else
+         f"- Dictionary `{meta['dictionary']}` (patch {' x '.join(map(str, meta['dictionary_patch']))}, "
+         f"{meta['dictionary_atoms']} atoms); reconstruction: {recon_text}."),
         f"- Reference settings of Tables I, III, IV: ISO set ({REF_ISOS}), noise `{REFERENCE['noise']}`, exposure 1.",
         f"- Bench seed {meta['seed']}; each cell's seed is in results.csv.",
         f"- Reconstruction time per cell (`seconds`, wall): total {_total(rows, 'seconds'):.0f} s, median "

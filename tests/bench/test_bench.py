@@ -470,3 +470,21 @@ def test_bench_default_method_is_gmm_and_a_cell_matches_the_public_api(tiny_inpu
                                random_state=int(ref["seed"]))
     expected = evaluate(reconstruct_gmm(capture), lf, scale_tolerance_stops=None)
     assert ref["pu21_psnr_db"] == pytest.approx(expected["pu21_psnr_db"], abs=1e-6)
+
+
+def test_report_settings_name_the_patch_model_for_gmm_cells():
+    """A gmm cell has no solver, mu or dictionary (its results.csv columns are empty): the report's settings say gmm
+    and name no dictionary, where they used to print 'solver , mu , at most  iterations'; a dictionary cell keeps
+    its solver's settings."""
+    from lfproc.bench.report import _settings_section
+
+    meta = {"preset": "quick", "preset_description": "two small scenes", "crop": (48, 48), "mask_period": 4,
+            "exposure_s": 0.004, "dictionary": "default:0", "dictionary_patch": (5, 5, 8, 8, 3),
+            "dictionary_atoms": 2560, "seed": 0, "lfproc_version": "0", "recon": {}, "scenes": []}
+    blank = dict(solver="", mu="", max_iter="", scale="", overlap="", seconds=1.0, cpu_seconds=1.0, scene="a")
+    gmm_text = "\n".join(_settings_section([dict(blank, recon_method="gmm")], meta))
+    assert "reconstruct_gmm" in gmm_text and "solver ," not in gmm_text and "2560 atoms" not in gmm_text
+    dictionary_row = dict(blank, recon_method="dictionary", solver="admm", mu=0.5, max_iter=100, scale="universal",
+                          overlap="scale-window-fit")
+    dict_text = "\n".join(_settings_section([dictionary_row], meta))
+    assert "solver admm, mu 0.5, at most 100 iterations" in dict_text and "2560 atoms" in dict_text
