@@ -531,7 +531,8 @@ def _settings_section(rows, meta) -> list[str]:
     """The header and the settings: preset, crop, mask, dictionary, reconstruction, seeds, times, scenes."""
     n_scenes = len({r["scene"] for r in rows})
     first = rows[0]
-    if first.get("recon_method") == "gmm":  # the patch model's reconstruction has none of the solver's settings
+    gmm = first.get("recon_method") == "gmm"
+    if gmm:  # the patch model's reconstruction has none of the solver's settings
         recon_text = "gmm (`lfproc.recon.reconstruct_gmm`, the shipped patch model)"
     else:
         recon_text = (f"solver {first.get('solver')}, mu {first.get('mu')}, at most {first.get('max_iter')} "
@@ -556,7 +557,7 @@ def _settings_section(rows, meta) -> list[str]:
         f"mask: random, {mask}; "
         f"exposure {meta['exposure_s']} s; radiance scale automatic (the brightest expected signal just saturates "
         "ISO 100 at exposure 1).",
-        (f"- Reconstruction: {recon_text}; no dictionary." if first.get("recon_method") == "gmm" else
+        (f"- Reconstruction: {recon_text}; no dictionary." if gmm else
          f"- Dictionary `{meta['dictionary']}` (patch {' x '.join(map(str, meta['dictionary_patch']))}, "
          f"{meta['dictionary_atoms']} atoms); reconstruction: {recon_text}."),
         f"- Reference settings of Tables I, III, IV: ISO set ({REF_ISOS}), noise `{REFERENCE['noise']}`, exposure 1.",
