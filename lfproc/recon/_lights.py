@@ -77,9 +77,9 @@ largest error and decides the order of its noise levels (between none and high, 
 PU21 error, 59 % of it, is one 24 x 24 block of the rim). The edge test (above ``EDGE_RATIO`` times the 10th
 percentile of the square) makes the rim a light. Refit stage (``benchmarks/refit_stage.py``, night-studio, medium
 noise, a shared machine): 45.02 -> 47.69 dB with 50, the ring one pixel wide (1225 s against 154 s); with 200
-45.12, the rim mostly missed. On the tune scene desk-cannon it finds texture edges: 25.93 -> 25.72 dB with 50 (547 s
-against 25 s), 25.89 with 200 (402 s); sunset-carrots 51.33 both; forest-stilllife with 50 stopped after 25 minutes
-(the default: 152 s). Kept as a setting for that work, off until a test tells a large light's rim from texture.
+45.12, the rim mostly missed. On the tune scene desk-cannon it finds texture edges: 25.93 -> 25.72 dB with 50 (216 s
+against 32 s, back to back on a quiet machine), 25.89 with 200 (402 s, shared); sunset-carrots 51.33 both;
+forest-stilllife with 50 stopped after 25 minutes (the default: 152 s). Kept as a setting for that work, off until a test tells a large light's rim from texture.
 
 Why ``CANDIDATES`` 2, not 1 (measured when every window was ranked without the bounds): two disparities can score
 within a hair, the wrong one first, and the bounds then decide. A test scene showed it: city-interior's lamp at 96 x 128, ``paper-none``, seed 0, ranked 0.75
