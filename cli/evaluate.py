@@ -120,8 +120,8 @@ def format_hdr_table(figures: dict) -> str:
     for d in figures["stops_by_decade"]:
         lines.append(f"{_decade(d['decade'][0]):<18}{d['samples']:>10}{_cell('{:.3f}', d['median_stops']):>16}")
     zeros = figures["zeros_above_floor"]
-    lines.append(f"worst decade: {_cell('{:.3f}', figures['max_decade_stops'])} stops; returned as 0 above the "
-                 f"floor: {'n/a' if math.isnan(zeros) else f'{100 * zeros:.3g} %'}")
+    lines.append(f"worst decade: {_cell('{:.3f}', figures['max_decade_stops'])} stops; returned as 0 (or 20 "
+                 f"stops under) above the floor: {'n/a' if math.isnan(zeros) else f'{100 * zeros:.3g} %'}")
     lines.append(f"brightest 1 % keep {100 * figures['highlight_energy']:.1f} % of their energy; detail ratio "
                  f"{figures['detail_ratio']:.3f} (PU21 Laplacian energy of the error / of the reference: 0 all "
                  "detail, 1 none)")

@@ -41,7 +41,7 @@ API = {
     ],
     "lfproc.metrics": [
         "ALIGN_MODES", "EMITTER_SHARE_DOMINATES", "PU21_LUMA", "PU21_L_MAX", "PU21_L_MIN", "PU21_PARAMETERS",
-        "PU21_PSNR_PEAK", "PU21_VARIANTS", "align_result", "error_stops", "evaluate", "evaluation_mask",
+        "PU21_PSNR_PEAK", "PU21_VARIANTS", "ZERO_STOPS", "align_result", "error_stops", "evaluate", "evaluation_mask",
         "hdr_figures", "log_luminance_error", "log_psnr", "mean_relative_error", "metric_luminance", "psnr",
         "pu21_decode", "pu21_encode", "pu21_psnr", "pu21_ssim", "pu2_encode", "pu2_psnr",
     ],

@@ -127,6 +127,7 @@ __all__ = [
     "ALIGN_MODES",
     "hdr_figures",
     "EMITTER_SHARE_DOMINATES",
+    "ZERO_STOPS",
     "evaluation_mask",
     "error_stops",
     "evaluate",
@@ -711,6 +712,9 @@ del _f, _extra, _head, _sep, _tail
 EMITTER_SHARE_DOMINATES = 0.5
 _HIGHLIGHT_FRACTION = 0.01  # "the brightest 1 %" of highlight_energy
 _EMITTER_FRACTION = 0.001  # "the brightest 0.1 %" of emitter_share
+#: A result more than this many stops below its reference counts as a zero in ``zeros_above_floor``
+#: (a reconstruction can return 1e-14 of the truth, black on any display, but not exactly 0).
+ZERO_STOPS = 20.0
 
 
 def _figure_luminance(values: Any, name: str) -> np.ndarray:
@@ -751,20 +755,22 @@ def _figure_mask(mask, shape) -> tuple[np.ndarray | None, int]:
 
 def _stops_by_decade(res_k: np.ndarray, ref_k: np.ndarray, floor: float) -> tuple[list[dict], float, int]:
     """``stops_by_decade`` of :func:`hdr_figures` over the samples (1-d luminances) above ``floor``, the
-    share of those whose result is ``<= 0`` (``nan`` when none is above), and their number."""
+    share of those whose result is ``<= 0`` or more than :data:`ZERO_STOPS` below the reference (``nan`` when none
+    is above), and their number."""
     above = ref_k > floor
     n_above = int(np.count_nonzero(above))
     ref_a, res_a = ref_k[above], res_k[above]
     positive = res_a > 0
     stops = np.full(ref_a.shape, np.inf)
     stops[positive] = np.abs(np.log2(res_a[positive] / ref_a[positive]))
+    near_zero = ~positive | (res_a < ref_a * 2.0 ** -ZERO_STOPS)
     decades = np.floor(np.log10(ref_a)).astype(np.int64)
     by_decade = []
     for k in np.unique(decades):
         sel = decades == k
         by_decade.append({"decade": (10.0 ** int(k), 10.0 ** (int(k) + 1)),
                           "median_stops": float(np.median(stops[sel])), "samples": int(np.count_nonzero(sel))})
-    zeros = float(np.count_nonzero(~positive) / n_above) if n_above else math.nan
+    zeros = float(np.count_nonzero(near_zero) / n_above) if n_above else math.nan
     return by_decade, zeros, n_above
 
 
@@ -820,7 +826,8 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
         ``max_decade_stops``
             the largest ``median_stops`` (``nan`` when no sample is above the floor).
         ``zeros_above_floor``
-            share of the samples above the noise floor whose result luminance is ``<= 0``
+            share of the samples above the noise floor whose result luminance is ``<= 0`` or
+            more than :data:`ZERO_STOPS` (20) stops below the reference's: black on any display
             (``nan`` when there is none).
         ``highlight_energy``
             ``sum(Y_res) / sum(Y_ref)`` over the brightest 1 % of the reference samples

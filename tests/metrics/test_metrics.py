@@ -411,6 +411,22 @@ def test_hdr_figures_zeros_in_the_dark(hdr_lf):
     assert out["samples_above_floor"] == np.count_nonzero(y > floor)
 
 
+def test_hdr_figures_counts_near_zeros_as_zeros(hdr_lf):
+    # a result 1e-14 of the truth (46 stops under: black on any display) is a zero; 19 stops under is not
+    from lfproc.metrics import ZERO_STOPS, hdr_figures
+
+    y = metric_luminance(hdr_lf.data.astype(np.float64))
+    dark = y < np.percentile(y, 10)
+    data = hdr_lf.data.astype(np.float64)
+    data[dark] *= 1e-14
+    out = hdr_figures(data, hdr_lf.data)
+    assert ZERO_STOPS == 20.0
+    assert out["zeros_above_floor"] == np.count_nonzero(dark) / y.size
+    data = hdr_lf.data.astype(np.float64)
+    data[dark] *= 2.0 ** -19
+    assert hdr_figures(data, hdr_lf.data)["zeros_above_floor"] == 0.0
+
+
 def test_hdr_figures_mask_and_emitters(hdr_lf):
     from lfproc.metrics import hdr_figures
 
