@@ -191,6 +191,34 @@ def test_dark_floor_beside_a_light_12_stops_brighter():
     assert energy > 0.85, energy
 
 
+@pytest.mark.slow  # 32 x 32 reconstruction
+@pytest.mark.filterwarnings("ignore::lfproc.errors.SaturationWarning")
+def test_a_region_saturated_in_every_measurement_is_held_at_its_bounds():
+    """A square 10^4 times its floor, 16 times the exposure, saturates every measurement, at every ISO, in both shots: the
+    result there is at least about the largest bound (the ISO-100 pixels' saturation level over
+    their transmittance), never the near-zero of a patch without data (1e-12 of the truth before:
+    the window of docs/bench-quick's worst cell)."""
+    from lfproc.camera.capture import observations
+    from lfproc.camera.projection import transmittance_map
+
+    data = np.full((5, 5, 32, 32, 3), 1.0, np.float32)
+    data[:, :, 8:24, 8:24] = 1e4
+    capture = simulate_capture(LightField(data, units="relative"), profile="paper-low", mask_period=4, shots=2,
+                               relative_exposures=[16.0, 16.0], random_state=3)
+    obs = observations(capture, variance_from="local", warn_saturation=False)
+    inner = np.s_[:, 10:22, 10:22]
+    assert np.asarray(obs.saturated)[inner].all()  # every measurement of the square's interior
+    r = transmittance_map(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern, size=capture.size)
+    bound = np.asarray(obs.radiance) / r / capture.radiance_scale  # light-field units
+    top = float(np.median(bound[inner][np.asarray(capture.iso)[inner] == min(capture.isos)]))
+    out = reconstruct_gmm(capture, disparities=[0.0], progress_bar=False).data
+    light = out[:, :, 12:20, 12:20]
+    assert np.median(light) > 0.7 * top, (np.median(light), top)  # measured 1.22; 0.41 with the bounds not raised
+    assert light.min() > 0.1 * top, (light.min(), top)  # 1.6e-15 with neither (a patch without data at level 0)
+    floor = np.concatenate([out[:, :, :4].ravel(), out[:, :, 28:].ravel()])
+    assert abs(np.median(floor) - 1.0) < 0.1, np.median(floor)
+
+
 def test_input_is_not_mutated_and_the_result_records_its_settings():
     lf = _plane(0.0, size=(24, 24))
     capture = simulate_capture(lf, profile="paper-low", mask_period=4, shots=1, random_state=7)
@@ -429,6 +457,11 @@ def test_saturated_measurement_takes_the_level_of_its_neighbours_above_its_bound
     T[0, 8, 6] = 2.0
     value, weight, w_sat = _impute_saturated(T, W, sat, W_sat, r)
     assert value[0, 6, 6] == 20.0 and weight[0, 6, 6] == 0.0 and w_sat[0, 6, 6] == 0.5
+    # ... raised to the largest bound of a saturated neighbour of its colour (a less sensitive pixel, bound 25)
+    T[0, 6, 8], sat[0, 6, 8], W[0, 6, 8], W_sat[0, 6, 8] = 25.0 * 2.0, True, 0.0, 0.5
+    value, weight, w_sat = _impute_saturated(T, W, sat, W_sat, r)
+    assert value[0, 6, 6] == 25.0 * 2.0 and weight[0, 6, 6] == 0.0 and w_sat[0, 6, 6] == 0.5
+    assert value[0, 6, 8] == 25.0 * 2.0  # the largest keeps its own
 
 
 def test_median_noise_of_a_patch_is_one_measurements_radiance_std():
