@@ -79,12 +79,22 @@ percentile of the square) makes the rim a light. Refit stage (``benchmarks/refit
 noise, a shared machine): 45.02 -> 47.69 dB with 50, the ring one pixel wide (1225 s against 154 s); with 200
 45.12, the rim mostly missed. On the tune scene desk-cannon it finds texture edges: 25.93 -> 25.72 dB with 50 (216 s
 against 32 s, back to back on a quiet machine), 25.89 with 200 (402 s, shared); sunset-carrots 51.33 both;
-forest-stilllife with 50 stopped after 25 minutes (the default: 152 s). Kept as a setting for that work, off until a test tells a large light's rim from texture.
+forest-stilllife with 50 stopped after 25 minutes (the default: 152 s). What it found on desk-cannon were occlusion
+edges, not texture: the lit stained glass behind the dark cannon, where the first estimate misses the measurements
+(local chi-square, :func:`misfit_map`, 142-546 on those pixels against 4 on night-studio's lamp rim) because no one
+disparity explains them, and the refit printed a checkerboard speckle into the glass. ``EDGE_MISFIT`` 20 keeps the
+edge test where the first estimate explains the measurements. Refit stage, Lytro size, 2 random, medium noise, the
+same dumps for each pair (stop 20): tune scenes desk-cannon 25.945 -> 25.910 dB (50 alone: 25.601), forest-stilllife
+33.998 -> 34.213, sunset-carrots 51.497 both (tune mean 37.147 -> 37.207); test scene night-studio 45.047 -> 47.753
+(its brightest decade 1.89 stops off in the first estimate, 0.24 after either). Off all the same: it costs 4-10 times
+the refit (116 -> 503 s on night-studio, 44 -> 209 s on desk-cannon, 143 -> 1378 s on forest-stilllife, whose
+first pass has 70 windows against 28; a shared machine, the ratios rough), minutes a light field. What is left:
+a cheaper window for long rims.
 
 Why ``CANDIDATES`` 2, not 1 (measured when every window was ranked without the bounds): two disparities can score
-within a hair, the wrong one first, and the bounds then decide. A test scene showed it: city-interior's lamp at 96 x 128, ``paper-none``, seed 0, ranked 0.75
-(chi-square 519.6) before 1.0 (526.7); with the bounds 0.75 left 14.5 per measurement (not accepted) and 1.0 left
-0.10 (the refit stage 29.93 -> 36.13 dB; with medium noise the same lamp ranked 1.0 first: 36.00). The second
+within a hair, the wrong one first, and the bounds then decide. A test scene showed it: city-interior's lamp at
+96 x 128, ``paper-none``, seed 0, ranked 0.75 (chi-square 519.6) before 1.0 (526.7); with the bounds 0.75 left
+14.5 per measurement (not accepted) and 1.0 left 0.10 (the refit stage 29.93 -> 36.13 dB; with medium noise the same lamp ranked 1.0 first: 36.00). The second
 candidate is a fallback, taken only when the first's fit would not be accepted, not a contest of chi-squares: with
 one shot a wrong disparity's fit can leave less (the default path, city-interior's lamp: 0.25 at 0.13 against 1.0 at
 0.42), and picking the smaller lost 8 dB there (50.15 -> 42.22). Tune scenes (96 x 128, 3 seeds; Lytro size): the
@@ -186,6 +196,9 @@ GROW_RATIO = 4.0
 #: a large light's edge, whose own median is bright; module notes; 0: off).
 EDGE_RATIO = 0.0
 EDGE_PERCENTILE = 10.0
+#: ... where the local chi-square (misfit_map) is at most EDGE_MISFIT (0: anywhere): the first estimate explains the
+#: measurements there, which a one-disparity window cannot at an occlusion edge (module notes).
+EDGE_MISFIT = 0.0
 #: ... and above SIGNIFICANCE times the radiance one measurement resolves.
 SIGNIFICANCE = 10.0
 #: Window: the light's bounding box plus PAD pixels each side, square, at most MAX_WINDOW pixels (a longer light gets
@@ -245,8 +258,9 @@ def candidates(centre: np.ndarray, noise: float, misfit: np.ndarray | None = Non
     if misfit is not None and MISFIT:
         light |= significant & (misfit > MISFIT) & (lum > MISFIT_RATIO * background)
     if EDGE_RATIO:
-        light |= significant & (lum > EDGE_RATIO * ndimage.percentile_filter(lum, EDGE_PERCENTILE, size=BG,
-                                                                              mode="nearest"))
+        edge = significant & (lum > EDGE_RATIO * ndimage.percentile_filter(lum, EDGE_PERCENTILE, size=BG,
+                                                                            mode="nearest"))
+        light |= edge if misfit is None or not EDGE_MISFIT else edge & (misfit <= EDGE_MISFIT)
     if GROW_RATIO and light.any():  # hysteresis (module notes): label and keep the components holding a light, as
         # skimage.filters.apply_hysteresis_threshold does for one image and two scalar thresholds
         weak, _ = ndimage.label(light | significant & (lum > GROW_RATIO * background))

@@ -557,3 +557,10 @@ def test_a_large_lights_edge_is_a_light_only_with_the_edge_test(monkeypatch):
     _, edge = candidates(centre, noise=0.1)
     assert edge[(r <= 12) & (r > 10.5)].all()
     assert not edge[r < 7].any() and not edge[r > 14.5].any()
+    # with EDGE_MISFIT 20, only where the first estimate explains the measurements (a misfit map low on the left
+    # half, high on the right: an occlusion edge there); the ratio and misfit tests find nothing here
+    misfit = np.where(xx < 20, 1.0, 100.0)
+    monkeypatch.setattr(lights, "EDGE_MISFIT", 20.0)
+    _, near = candidates(centre, noise=0.1, misfit=misfit)
+    np.testing.assert_array_equal(near, edge & (xx < 20))
+    assert near.any()
