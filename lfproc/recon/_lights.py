@@ -92,13 +92,13 @@ first pass has 70 windows against 28; a shared machine, the ratios rough), minut
 a cheaper window for long rims.
 
 Why ``CANDIDATES`` 2, not 1 (measured when every window was ranked without the bounds): two disparities can score
-within a hair, the wrong one first, and the bounds then decide. A test scene showed it: city-interior's lamp at
-96 x 128, ``paper-none``, seed 0, ranked 0.75 (chi-square 519.6) before 1.0 (526.7); with the bounds 0.75 left
-14.5 per measurement (not accepted) and 1.0 left 0.10 (the refit stage 29.93 -> 36.13 dB; with medium noise the
-same lamp ranked 1.0 first: 36.00). The second candidate is a fallback, taken only when the first's fit would not be accepted, not a contest of chi-squares: with
-one shot a wrong disparity's fit can leave less (the default path, city-interior's lamp: 0.25 at 0.13 against 1.0 at
-0.42), and picking the smaller lost 8 dB there (50.15 -> 42.22). Tune scenes (96 x 128, 3 seeds; Lytro size): the
-same to 0.01 dB but forest-stilllife seed 2, 31.69 -> 31.72 dB.
+within a hair, the wrong one first, and the bounds then decide. A test scene showed it: city-interior's lamp at 96 x
+128, ``paper-none``, seed 0, ranked 0.75 (chi-square 519.6) before 1.0 (526.7); with the bounds 0.75 left 14.5 per
+measurement (not accepted) and 1.0 left 0.10 (the refit stage 29.93 -> 36.13 dB; with medium noise the same lamp
+ranked 1.0 first: 36.00). The second candidate is a fallback, taken only when the first's fit would not be accepted,
+not a contest of chi-squares: with one shot a wrong disparity's fit can leave less (the default path,
+city-interior's lamp: 0.25 at 0.13 against 1.0 at 0.42), and picking the smaller lost 8 dB there (50.15 -> 42.22).
+Tune scenes (96 x 128, 3 seeds; Lytro size): the same to 0.01 dB but forest-stilllife seed 2, 31.69 -> 31.72 dB.
 
 Why ``PASSES`` 3: the background's prior is centred on the first estimate, around a light the light blurred. A
 pass's result is sharper, so the next pass, which finds the lights again on it, starts nearer the truth (and a window
