@@ -2,7 +2,8 @@
 
 Prints view-averaged PU21-PSNR, PU21-SSIM, PU2-PSNR, log-PSNR and mean relative error,
 then one row per view, then the figures of :func:`lfproc.metrics.hdr_figures`: the median
-error in stops per decade of the reference luminance, the share of samples returned as 0,
+error in stops per decade of the reference luminance, the share of samples returned as 0 (or
+20 stops under),
 the energy kept in the brightest 1 %, the PU21 detail ratio, and one line when a few
 emitters dominate PU21. ``--json`` prints one object (see :func:`lfproc.metrics.evaluate`);
 an infinite PSNR (identical views) is written as the string ``"inf"``.
@@ -50,9 +51,9 @@ def register(sub, common) -> None:
                     "99.9th percentile) and the mean relative error of the linear values are computed per view "
                     "and averaged over views. --align says how RESULT is brought to the reference's scale. "
                     "Then the figures PU21 hides: the median error in stops per decade of the reference "
-                    "luminance, the share of samples returned as 0, the energy kept by the brightest 1 %, the "
-                    "detail ratio (Laplacian energy of the PU21 error over the reference's), and a line when a "
-                    "few emitters dominate PU21. --mask and --exclude-above restrict every figure.")
+                    "luminance, the share of samples returned as 0 (or 20 stops under), the energy kept by the "
+                    "brightest 1 %, the detail ratio (Laplacian energy of the PU21 error over the reference's), "
+                    "and a line when a few emitters dominate PU21. --mask and --exclude-above restrict every figure.")
     p.add_argument("result", type=Path, help="light field or image to judge")
     p.add_argument("reference", type=Path, help="ground-truth light field or image")
     p.add_argument("--peak-luminance", type=float, default=1000.0, metavar="CD_M2",

@@ -43,7 +43,8 @@ conventions of the reference implementation of PU21, ``pu21_metric.m`` of ``gfxd
 
 PU21 maps the reference peak to the display peak, so its dark decades barely count and a few
 emitters can decide the score. :func:`hdr_figures` gives what a user sees instead: the median
-error in stops per decade of the reference luminance, the share of samples returned as 0,
+error in stops per decade of the reference luminance, the share of samples returned as 0 (or
+:data:`ZERO_STOPS` under),
 the energy kept by the brightest 1 %, a detail ratio (Laplacian energy of the PU21 error over
 the reference's) and the share of the PU21 error held by the brightest 0.1 %;
 :func:`evaluate` reports them too, and takes a mask (or ``exclude_above``) that restricts
