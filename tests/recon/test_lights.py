@@ -515,7 +515,7 @@ def test_the_background_prior_has_correlated_colours_and_tau_only_near_the_light
     x0 = rng.random(12) + 0.5  # four pixels, three colours
     near = np.repeat([True, False, False, True], 3)
     m = rng.random((7, 12)) * (rng.random((7, 12)) < 0.4)
-    sb2, cov = lights._prior_cov(sparse.csr_array(m), x0, near)
+    sb2, cov, _ = lights._prior_cov(sparse.csr_array(m), x0, near)
     s = lights.KAPPA * x0 + lights.TAU * x0.max() * near
     ref = np.zeros((12, 12))
     for px in range(4):
