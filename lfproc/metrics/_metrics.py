@@ -827,9 +827,8 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
         ``max_decade_stops``
             the largest ``median_stops`` (``nan`` when no sample is above the floor).
         ``zeros_above_floor``
-            share of the samples above the noise floor whose result luminance is ``<= 0`` or
-            more than :data:`ZERO_STOPS` (20) stops below the reference's: black on any display
-            (``nan`` when there is none).
+            share of the samples above the noise floor whose result luminance is ``<= 0`` or more
+            than :data:`ZERO_STOPS` (20) stops below the reference's (``nan`` when there is none).
         ``highlight_energy``
             ``sum(Y_res) / sum(Y_ref)`` over the brightest 1 % of the reference samples
             (at least one sample): 1.0 keeps the highlights' energy, 0.8 loses a fifth.

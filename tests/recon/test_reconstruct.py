@@ -163,7 +163,8 @@ def _sklearn_lasso(A, w, y, mu):
         w[b, :, None] * A.astype(np.float64), w[b] * y[b].astype(np.float64)).coef_ for b in range(len(w))]
 
 
-@pytest.mark.slow  # 20,000 FISTA iterations (FISTA reaches 1e-3 of the optimum only near the end)
+@pytest.mark.slow  # 40,000 FISTA iterations (FISTA reaches 1e-3 of the optimum only near the end: with numpy
+# 2.4.6 / scipy 1.17.1 / scikit-learn 1.9.1, 1.01e-3 after 20,000 and 4.6e-4 after 40,000 on the first problem)
 def test_admm_and_fista_reach_the_lasso_optimum():
     from lfproc.recon._solvers import BatchOperator, SharedOperator, admm, fista
 
@@ -172,7 +173,7 @@ def test_admm_and_fista_reach_the_lasso_optimum():
     refs = _sklearn_lasso(A, w, y, mu)
     for op in (SharedOperator(A), BatchOperator(np.stack([A, A]))):
         z_admm, _ = admm(op, w, y, mu, max_iter=3000, tol=1e-7)
-        z_fista, _ = fista(op, w, y, mu, max_iter=20000, tol=1e-8)
+        z_fista, _ = fista(op, w, y, mu, max_iter=40000, tol=1e-8)
         for b, ref in enumerate(refs):
             scale = np.linalg.norm(ref)
             assert np.linalg.norm(z_admm[b] - ref) / scale < 1e-3
