@@ -77,7 +77,7 @@ largest error and decides the order of its noise levels (between none and high, 
 PU21 error, 59 % of it, is one 24 x 24 block of the rim). The edge test (above ``EDGE_RATIO`` times the 10th
 percentile of the square) makes the rim a light. Refit stage (``benchmarks/refit_stage.py``, night-studio, medium
 noise, a shared machine): 45.02 -> 47.69 dB with 50, the ring one pixel wide (1225 s against 154 s); with 200
-45.12, the rim mostly missed. On the tune scene desk-cannon it finds texture edges: 25.93 -> 25.72 dB with 50 (216 s
+45.12, the rim mostly missed. On the tune scene desk-cannon it finds other edges: 25.93 -> 25.72 dB with 50 (216 s
 against 32 s, back to back on a quiet machine), 25.89 with 200 (402 s, shared); sunset-carrots 51.33 both;
 forest-stilllife with 50 stopped after 25 minutes (the default: 152 s). What it found on desk-cannon were occlusion
 edges, not texture: the lit stained glass behind the dark cannon, where the first estimate misses the measurements
@@ -178,6 +178,8 @@ that change was informed by a test scene (on its 128 x 64 crop: 22.83 -> 26.46 d
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg as sl
@@ -300,16 +302,24 @@ def _window_matrix(cols, vals, shear):
     return sparse.csr_array((np.concatenate(data), (np.concatenate(rows), np.concatenate(cc))), shape=(m_n, ee * 3))
 
 
-def _prior_cov(m, x0, near=None):
+class _Prior(NamedTuple):
+    """The background's prior on one window at one disparity (:func:`_prior_cov`)."""
+
+    sb2: sparse.csr_matrix  #: ``Sb^2``
+    cov: np.ndarray  #: ``M Sb^2 M^T`` over every measurement
+    factors: dict  #: Cholesky factors of the measurements' covariance by their weights (:func:`_fit`)
+
+
+def _prior_cov(m, x0, near=None) -> _Prior:
     """The background's prior covariance ``Sb^2`` (module notes; sparse, ``3 x 3`` blocks: a pixel's colours
-    correlated by ``RHO``) and ``M Sb^2 M^T`` over every measurement (dense). ``near`` (``x0``'s shape, bool): where
-    the ``TAU`` term applies (default: everywhere)."""
+    correlated by ``RHO``) and ``M Sb^2 M^T`` over every measurement (dense), with an empty cache of factors.
+    ``near`` (``x0``'s shape, bool): where the ``TAU`` term applies (default: everywhere)."""
     sb = KAPPA * x0 + TAU * max(float(x0.max()), 1e-300) * (1.0 if near is None else near)
     blocks = sb.reshape(-1, 3)[:, :, None] * sb.reshape(-1, 3)[:, None, :] * (RHO + (1 - RHO) * np.eye(3))[None]
     sb2 = sparse.block_diag(list(blocks), format="csr")
     m = sparse.csr_array(m)
     cov = m @ sb2 @ m.T
-    return sb2, cov.toarray(), {}  # the last: Cholesky factors by the measurements' weights (:func:`_fit`)
+    return _Prior(sb2, cov.toarray(), {})
 
 
 def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
@@ -319,11 +329,11 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
     ``colour`` (3,), the light layer on the pixels of ``cols`` (their three colours in turn) is that colour times a
     non-negative intensity per pixel. ``m`` dense or sparse; ``prior``: :func:`_prior_cov` of ``m, x0`` when the
     caller has it (it depends on neither the bounds nor the light layer). The factor of the measurements'
-    covariance depends only on their weights (which bounds joined): kept in the prior's dict, the last
+    covariance depends only on their weights (which bounds joined): kept in ``prior.factors``, the last
     ``_CHOL_KEPT``, it serves the next fit of the same prior (the tinted fit repeats the free fit's passes; the
     Cholesky factorisations were three quarters of the refit's time, a profile of desk-cannon; with the kept ones
     the refit stage on desk-cannon took 15 s against 18, 241 s against 268 with the edge test, the same figures)."""
-    sb2, cov, kept = _prior_cov(m, x0) if prior is None else prior
+    sb2, cov, kept = _prior_cov(m, x0) if prior is None else prior  # kept: prior.factors
     r0 = y - m @ x0
     ww = w
     for _ in range(passes):
@@ -466,7 +476,7 @@ def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cach
                 if tinted_rank:
                     out = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
                     out = None if out is None else _tinted(out, m, y, w, wb, x0, cols, prior)
-                    prior[2].clear()  # kept in picks: its factors are not needed again (memory)
+                    prior.factors.clear()  # kept in picks: its factors are not needed again (memory)
                 else:  # ... with fewer of the free fit's first pass, before the bounds join
                     out = _fit(m, y, w, wb, x0, cols, 1, prior=prior)
                 if out is not None:
