@@ -9,12 +9,15 @@ Usage::
 scene's seed + 1000 ``I``) and runs ``reconstruct_gmm`` up to the refit, then saves what the refit receives (the
 first light field, the measurements, their weights and bounds, the capture) with the truth. ``run`` applies the
 refit to it with the module's settings, or with ``NAME=VALUE`` overrides of ``lfproc.recon._lights``'s upper-case
-settings (``RATIO=4 PASSES=1``), and prints the seconds, the windows per pass ``[found, refitted]``, PU21-PSNR
-and the median error in stops of each decade of the truth's luminance above the noise floor (as
-:mod:`reconstruct_realistic`).
+settings (``RATIO=4 PASSES=1``), on a pool of one thread per core with one-thread BLAS as ``reconstruct_gmm`` runs
+it, and prints the seconds, the windows per pass ``[found, refitted]``, PU21-PSNR, the detail ratio and the median
+error in stops of each decade of the truth's luminance above the noise floor (as :mod:`reconstruct_realistic`).
 
 Why: the whole reconstruction of a Lytro-size capture takes 1-3 minutes, the refit a tenth of that; a setting of
-the refit is compared on the same first estimate in seconds, and a change elsewhere cannot move the figures. The
+the refit is compared on the same first estimate in seconds, and a change elsewhere cannot move the figures. Until
+stop 21 ``run`` called the refit serially with threaded BLAS, which on these small matrices was slower and counted
+more of the refit's cost than the reconstruction pays (back to back, quiet machine: desk-cannon 16 -> 5 s,
+night-studio 46 -> 22 s, the same figures); times measured before then are upper bounds. The
 dump is a scratch file (Python's pickle: it loads only with the same lfproc version, and only files you made).
 Figures measured this way are of the refit stage alone; confirm a change with :mod:`reconstruct_realistic`.
 """
@@ -27,9 +30,11 @@ import pickle
 import sys
 import time
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import quality_scenes  # noqa: E402
@@ -86,6 +91,7 @@ def run(path: Path, settings: list[str], save: Path | None = None) -> None:
     from lfproc.camera.capture import noise_floor
     from lfproc.metrics import hdr_figures, pu21_psnr
     from lfproc.recon._gmm import shear_matrix
+    from lfproc._shared.parallel import available_cpus
 
     for item in settings:
         name, sep, value = item.partition("=")
@@ -112,13 +118,15 @@ def run(path: Path, settings: list[str], save: Path | None = None) -> None:
     nv, nu = first.shape[:2]
     shears = [lambda q, dd=dd: shear_matrix((nv, nu), q, d["margin"], dd) for dd in d["disparities"]]
     t = time.perf_counter()
-    out, info = lights.refit_lights(first, d["T"], d["W"], d["W_bound"], cap, shears, d["margin"])
+    with threadpool_limits(1), ThreadPoolExecutor(max_workers=available_cpus()) as pool:  # as reconstruct_gmm
+        out, info = lights.refit_lights(first, d["T"], d["W"], d["W_bound"], cap, shears, d["margin"], pool)
     seconds = time.perf_counter() - t
     for name, x in (("first", first), ("refit", out)):
         x = x / cap.radiance_scale
         f = hdr_figures(x, d["truth"], noise_floor=noise_floor(cap))
         decades = " ".join(f"{s['decade'][0]:g}:{s['median_stops']:.2f}" for s in f["stops_by_decade"])
-        print(f"{name}: PU21-PSNR {pu21_psnr(x, d['truth']):.3f} dB; stops by decade {decades}")
+        print(f"{name}: PU21-PSNR {pu21_psnr(x, d['truth']):.3f} dB; detail {f['detail_ratio']:.3f}; "
+              f"stops by decade {decades}")
         if save is not None:
             np.save(save / f"{path.stem}__{name}.npy", x.astype(np.float32))
     if save is not None:
