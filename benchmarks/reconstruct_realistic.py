@@ -3,7 +3,8 @@
 Usage::
 
     python benchmarks/reconstruct_realistic.py [--set test|tune|all] [--size H W] [--captures "2 random,1 random"]
-                                               [--mask-period P|none] [--seeds N] [--json OUT.json] [--save DIR]
+                                               [--mask-period P|none] [--seeds N] [--first-seed I] [--json OUT.json]
+                                               [--save DIR]
 
 Scenes: :mod:`quality_scenes` (two real HDR photographs of the shared data as layers with exact
 occlusion; ``TUNE`` and ``TEST`` are disjoint: choose settings on the first, report on the
@@ -28,7 +29,8 @@ luminance at which one measurement at the highest ISO has as much signal as read
 pixel (the views' codes summed).
 
 ``--seeds N`` captures every cell N times (seeds: the scene's, then +1000, +2000...: other masks, ISO
-maps and noise) and prints the means of PU21-PSNR (with its standard deviation over the seeds),
+maps and noise; ``--first-seed I`` starts at the scene's + 1000 I, to add seeds to an earlier run) and prints
+the means of PU21-PSNR (with its standard deviation over the seeds),
 SSIM, detail and seconds, and the worst of the other figures (largest decade error and zeros,
 smallest highlight energy). An ordering between two captures that is smaller than the spread
 over seeds is not one; a few emitters make PU21 swing by +-0.5 dB between noise draws.
@@ -123,9 +125,13 @@ def main() -> None:
                         help="lfproc.recon.reconstruct (dictionary) or lfproc.recon.reconstruct_gmm (gmm)")
     parser.add_argument("--options", default="{}", help="JSON keywords for the reconstruction function")
     parser.add_argument("--seeds", type=int, default=1, help="captures per cell (seeds: scene's + 1000 i); means")
+    parser.add_argument("--first-seed", type=int, default=0, metavar="I",
+                        help="the first i of the seeds (default 0): add seeds to a run made before")
     args = parser.parse_args()
     if args.seeds < 1:
         parser.error(f"--seeds: expected a number of captures >= 1, got {args.seeds}")
+    if args.first_seed < 0:
+        parser.error(f"--first-seed: expected a number >= 0, got {args.first_seed}")
     os.environ.setdefault("LFPROC_PROGRESS", "0")
     warnings.simplefilter("ignore")  # saturation warnings of the brightest scenes: expected
     period = None if args.mask_period.lower() == "none" else int(args.mask_period)
@@ -147,7 +153,7 @@ def main() -> None:
         cells = []
         for name in names:
             runs = []
-            for i in range(args.seeds):
+            for i in range(args.first_seed, args.first_seed + args.seeds):
                 cap = capture_cell(lf, scene, name, i, period)
                 t = time.perf_counter()
                 out = reconstruct_capture(cap, args.method, options)
@@ -155,7 +161,7 @@ def main() -> None:
                 f = figures(out, lf, noise_floor(cap))  # lfproc.camera.capture.noise_floor
                 f["seconds"] = seconds
                 runs.append(f)
-                if args.save and i == 0:
+                if args.save and i == args.first_seed:
                     args.save.mkdir(parents=True, exist_ok=True)
                     np.save(args.save / f"{scene}__{name.replace(' ', '_')}.npy", out.data)
             f = runs[0] if len(runs) == 1 else combine(runs)
