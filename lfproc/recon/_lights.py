@@ -70,38 +70,50 @@ hysteresis: 44.98 / 45.09 / 45.02 / 45.41 dB (3: within 0.05 dB of these at twic
 (refit stage, ``benchmarks/refit_stage.py``): forest-stilllife 34.16 -> 34.35, sunset-carrots 51.23 -> 51.33 (its
 10-100 decade 0.60 -> 0.23 stops), desk-cannon 25.93 both.
 
-Why ``EDGE_RATIO`` is off: a light as large as night-studio's lamp (a disc of 500-1000 over a floor of 5, about 32
-pixels across; Lytro size, a test scene) is bright in its own ``BG x BG`` median, so no test finds it, and its rim comes
-back blurred: the three pixels outside it 1.4-16 times too bright, a ring of +2 stops. That ring is the scene's largest
-error and decides the order of its noise levels (between none and high, the largest difference in squared PU21 error, 59
-% of it, is one 24 x 24 block of the rim). The edge test (above ``EDGE_RATIO`` times the 10th percentile of the square)
-makes the rim a light. Refit stage (``benchmarks/refit_stage.py``, night-studio, medium noise, a shared machine): 45.02
--> 47.69 dB with 50, the ring one pixel wide (1225 s against 154 s); with 200 45.12, the rim mostly missed. On the tune
-scene desk-cannon it finds other edges: 25.93 -> 25.72 dB with 50 (216 s against 32 s, back to back on a quiet machine),
-25.89 with 200 (402 s, shared); sunset-carrots 51.33 both; forest-stilllife with 50 stopped after 25 minutes (the
-default: 152 s). What it found on desk-cannon were occlusion edges, not texture: the lit stained glass behind the dark
-cannon, where the first estimate misses the measurements (local chi-square, :func:`misfit_map`, 142-546 on those pixels
-against 4 on night-studio's lamp rim) because no one disparity explains them, and the refit printed a checkerboard
-speckle into the glass. ``EDGE_MISFIT`` 20 keeps the edge test where the first estimate explains the measurements. Refit
-stage, Lytro size, 2 random, medium noise, the same dumps for each pair (stop 20): tune scenes desk-cannon 25.945 ->
-25.910 dB (50 alone: 25.601), forest-stilllife 33.998 -> 34.213, sunset-carrots 51.497 both (tune mean 37.147 ->
-37.207); test scene night-studio 45.047 -> 47.753 (its brightest decade 1.89 stops off in the first estimate, 0.24 after
-either). Off all the same, for what it does to texture (stop 21; the refit stage run as the reconstruction runs it,
-one-thread BLAS): the detail ratio rises on the tune scenes desk-cannon 0.748 -> 0.825 and forest-stilllife 0.606 ->
-0.614, and on the test scene sunrise-desk 0.602 -> 0.694 (PU21-PSNR 30.25 -> 30.49), whose stained-glass panes come back
-with a checkerboard speckle (looked at): every pane that borders a dark lead becomes a light whose layer is free per
-pixel. The whole benchmark with it on (test scenes, Lytro size, 2 random): 40.78 -> 41.68 dB (courtyard-candle 32.77 ->
-33.39, night-studio 45.70 -> 48.47, sunrise-desk 31.33 -> 31.55), detail 0.51 -> 0.54. Its cost, measured so: 3-8 times
-the refit (night-studio 28 -> 96 s, forest-stilllife 68 -> 230 s, sunrise-desk 18 -> 153 s with 59 first-pass windows
-against 19; the 4-10 times measured before came from a benchmark that ran the refit serially on threaded BLAS). Tried
-and not kept: fitting only the 3 disparities of least first-pass chi-square with the bounds (half the time) lost
+Why the edge test (``EDGE_RATIO`` 50, ``EDGE_MISFIT`` 20, ``EDGE_SIZE`` 28; on since stop 21): a light as large as
+night-studio's lamp (a disc of 500-1000 over a floor of 5, about 32 pixels across; Lytro size, a test scene) is bright
+in its own ``BG x BG`` median, so no test finds it, and its rim comes back blurred: the three pixels outside it 1.4-16
+times too bright, a ring of +2 stops. That ring is the scene's largest error and decides the order of its noise levels
+(between none and high, the largest difference in squared PU21 error, 59 % of it, is one 24 x 24 block of the rim). The
+edge test (above ``EDGE_RATIO`` times the 10th percentile of the square) makes the rim a light. Refit stage
+(``benchmarks/refit_stage.py``, night-studio, medium noise, a shared machine): 45.02 -> 47.69 dB with 50, the ring one
+pixel wide (1225 s against 154 s); with 200 45.12, the rim mostly missed. On the tune scene desk-cannon it finds other
+edges: 25.93 -> 25.72 dB with 50 (216 s against 32 s, back to back on a quiet machine), 25.89 with 200 (402 s, shared);
+sunset-carrots 51.33 both; forest-stilllife with 50 stopped after 25 minutes (the default: 152 s). What it found on
+desk-cannon were occlusion edges, not texture: the lit stained glass behind the dark cannon, where the first estimate
+misses the measurements (local chi-square, :func:`misfit_map`, 142-546 on those pixels against 4 on night-studio's lamp
+rim) because no one disparity explains them, and the refit printed a checkerboard speckle into the glass.
+``EDGE_MISFIT`` 20 keeps the edge test where the first estimate explains the measurements. Refit stage, Lytro size, 2
+random, medium noise, the same dumps for each pair (stop 20): tune scenes desk-cannon 25.945 -> 25.910 dB (50 alone:
+25.601), forest-stilllife 33.998 -> 34.213, sunset-carrots 51.497 both (tune mean 37.147 -> 37.207); test scene
+night-studio 45.047 -> 47.753 (its brightest decade 1.89 stops off in the first estimate, 0.24 after either). Still off
+at stop 20, for what it did to texture (stop 21; the refit stage run as the reconstruction runs it, one-thread BLAS):
+the detail ratio rose on the tune scenes desk-cannon 0.748 -> 0.825 and forest-stilllife 0.606 -> 0.614, and on the test
+scene sunrise-desk 0.602 -> 0.694 (PU21-PSNR 30.25 -> 30.49), whose stained-glass panes came back with a checkerboard
+speckle (looked at): every pane that borders a dark lead became a light whose layer is free per pixel. Such a pane's
+bright side is a short piece of edge; the rim of a light too large for the ratio test is not: the ratio test misses a
+light only when it fills at least half of its ``BG x BG`` square, so it is at least about ``BG`` pixels wide and its rim
+runs at least ``pi BG``, 28 pixels. ``EDGE_SIZE`` keeps the connected pieces of edge (8 neighbours) of at least 28
+pixels; the number comes from that argument, not from a fit. The pieces found by the edge alone: sunrise-desk's 9-27
+pixels, desk-cannon's 19 and fewer, night-studio's lamp rim 163, forest-stilllife's largest 210 and 147. Refit stage,
+the same dumps: tune scenes desk-cannon 25.945 dB / detail 0.748 and sunset-carrots 51.497 / 0.282, as without the edge
+test, forest-stilllife 33.998 / 0.606 -> 34.207 / 0.604; test scenes night-studio 45.047 / 0.422 -> 47.693 / 0.429,
+sunrise-desk 30.246 / 0.602 -> 30.253 / 0.606, city-interior unchanged. The whole benchmark (``reconstruct_realistic.py
+--method gmm --captures "2 random"``, Lytro size): tune scenes 37.70 -> 37.78 dB (forest-stilllife 34.24 -> 34.49, the
+others unchanged); test scenes 40.78 -> 41.49 dB (courtyard-candle 32.77 -> 32.94, night-studio 45.70 -> 48.37,
+sunrise-desk 31.33 -> 31.34, city-interior 53.31 both), detail 0.51 both. With every piece of edge instead (no
+``EDGE_SIZE``): 41.68 dB, detail 0.54, the speckle. The cost: 3-8 times the refit with every piece of edge (night-studio
+28 -> 96 s, forest-stilllife 68 -> 230 s, sunrise-desk 18 -> 153 s with 59 first-pass windows against 19; the 4-10 times
+of stop 20 came from a benchmark that ran the refit serially on threaded BLAS); with ``EDGE_SIZE`` sunrise-desk's and
+desk-cannon's windows are those without the edge test, forest-stilllife has 51 first-pass windows against 28 and 70.
+Tried and not kept: fitting only the 3 disparities of least first-pass chi-square with the bounds (half the time) lost
 sunset-carrots' sun (51.50 -> 48.31 dB, its window rejected; 5 of 9: 51.34); a sparsity penalty on the light layer (a
 non-negative lasso, a pixel kept only where the residual's correlation with it exceeds 2 noise deviations, solved as
 NNLS on a shifted target), against the speckle and the default path's ring around city-interior's lamp: that ring 51.07
 -> 51.90 dB, but sunset-carrots' sun 51.50 -> 51.14 (its decades 0.28 -> 0.97 stops: the penalty biases a large light
 low), and on the ring alone (the light's own pixels free) the default path's lamp window was no longer accepted (41.73).
-What is left: a light layer that cannot print texture as speckle (a smooth or low-rank layer over a large light) before
-the edge test can be on.
+What is left: a light layer that cannot print texture as speckle (a smooth or low-rank layer over a large light), which
+would let the edge test reach shorter rims.
 
 Why ``CANDIDATES`` 2, not 1 (measured when every window was ranked without the bounds): two disparities can score
 within a hair, the wrong one first, and the bounds then decide. A test scene showed it: city-interior's lamp at 96 x
@@ -207,12 +219,15 @@ BG = 9
 #: (hysteresis: a lit line about BG / 2 pixels thick raises its own median; module notes; 0: off).
 GROW_RATIO = 4.0
 #: A light also: above EDGE_RATIO times the EDGE_PERCENTILE-th percentile of the BG x BG square (the bright side of
-#: a large light's edge, whose own median is bright; module notes; 0: off).
-EDGE_RATIO = 0.0
+#: a large light's edge, whose own median is bright; module notes; 0: off) ...
+EDGE_RATIO = 50.0
 EDGE_PERCENTILE = 10.0
 #: ... where the local chi-square (misfit_map) is at most EDGE_MISFIT (0: anywhere): the first estimate explains the
 #: measurements there, which a one-disparity window cannot at an occlusion edge (module notes).
-EDGE_MISFIT = 0.0
+EDGE_MISFIT = 20.0
+#: ... in connected pieces of at least EDGE_SIZE pixels (about pi BG: the rim of a light the ratio test misses;
+#: a shorter piece is the bright side of a texture's edge; module notes; 0: any).
+EDGE_SIZE = 28
 #: ... and above SIGNIFICANCE times the radiance one measurement resolves.
 SIGNIFICANCE = 10.0
 #: Window: the light's bounding box plus PAD pixels each side, square, at most MAX_WINDOW pixels (a longer light gets
@@ -275,7 +290,12 @@ def candidates(centre: np.ndarray, noise: float, misfit: np.ndarray | None = Non
     if EDGE_RATIO:
         edge = significant & (lum > EDGE_RATIO * ndimage.percentile_filter(lum, EDGE_PERCENTILE, size=BG,
                                                                             mode="nearest"))
-        light |= edge if misfit is None or not EDGE_MISFIT else edge & (misfit <= EDGE_MISFIT)
+        edge = edge if misfit is None or not EDGE_MISFIT else edge & (misfit <= EDGE_MISFIT)
+        if EDGE_SIZE:  # the rim of a large light, not the bright side of a texture's edge (module notes)
+            parts, _ = ndimage.label(edge, structure=np.ones((3, 3)))
+            sizes = np.bincount(parts.ravel())
+            edge = (sizes >= EDGE_SIZE)[parts] & edge
+        light |= edge
     if GROW_RATIO and light.any():  # hysteresis (module notes): label and keep the components holding a light, as
         # skimage.filters.apply_hysteresis_threshold does for one image and two scalar thresholds
         weak, _ = ndimage.label(light | significant & (lum > GROW_RATIO * background))

@@ -409,7 +409,9 @@ def test_a_lit_line_half_the_median_square_thick_is_found_along_its_whole_length
     """A line of 40 x 5 pixels (rows 50, 250, 250, 220, 50 over a floor of 1): along its middle the 9 x 9 median is 50
     (36 floor samples, then the rows of 50), so its core is 4-5 times the median, under RATIO (8); only its ends (the
     square half on the floor) are lights by the ratio. Grown by hysteresis from those (GROW_RATIO 4): every core pixel
-    is a light, the rows of 50 and the floor are not. The control, GROW_RATIO 0: the middle third is missed."""
+    is a light, the rows of 50 and the floor are not. The control, GROW_RATIO 0: the middle third is missed. The edge
+    test is off here (EDGE_RATIO 0): it would find the core on its own (250 over a 10th percentile of 1)."""
+    monkeypatch.setattr(lights, "EDGE_RATIO", 0.0)
     centre = np.ones((40, 60, 3))
     for row, value in zip(range(18, 23), (50.0, 250.0, 250.0, 220.0, 50.0)):
         centre[row, 10:50] = value
@@ -542,15 +544,15 @@ def test_the_floor_of_a_window_is_the_whole_views_median_floor():
         np.testing.assert_array_equal(_floor(centre, ext), full[ext])
 
 
-def test_a_large_lights_edge_is_a_light_only_with_the_edge_test(monkeypatch):
+def test_a_large_lights_rim_is_a_light_by_the_edge_test(monkeypatch):
     """A disc of radius 12 at 500 over a floor of 1, blurred (Gaussian, sigma 1 pixel) as a first estimate blurs a
-    large lamp: its own 9 x 9 median is bright wherever it is bright, so the ratio test (RATIO 8) finds nothing and
-    by default nothing is refitted. With EDGE_RATIO 50 (10th percentile of the square; off by default, module
-    notes) its rim is a light (the disc's outer 1.5 pixels and the blur's spill beyond), its middle and the floor
-    are not."""
+    large lamp: its own 9 x 9 median is bright wherever it is bright, so the ratio test (RATIO 8) alone finds nothing
+    (EDGE_RATIO 0). With the edge test (the default: EDGE_RATIO 50 of the square's 10th percentile; module notes) its
+    rim is a light (the disc's outer 1.5 pixels and the blur's spill beyond), its middle and the floor are not."""
     yy, xx = np.mgrid[:40, :40]
     r = np.hypot(yy - 20, xx - 20)
     centre = gaussian_filter(np.where(r <= 12, 500.0, 1.0), 1.0)[..., None].repeat(3, axis=-1)
+    monkeypatch.setattr(lights, "EDGE_RATIO", 0.0)
     _, light = candidates(centre, noise=0.1)
     assert not light.any()
     monkeypatch.setattr(lights, "EDGE_RATIO", 50.0)
@@ -564,3 +566,23 @@ def test_a_large_lights_edge_is_a_light_only_with_the_edge_test(monkeypatch):
     _, near = candidates(centre, noise=0.1, misfit=misfit)
     np.testing.assert_array_equal(near, edge & (xx < 20))
     assert near.any()
+
+
+def test_a_short_piece_of_edge_is_not_a_light(monkeypatch):
+    """EDGE_SIZE (28 pixels, about the circumference of a BG-wide disc; module notes): a piece of edge smaller than
+    that is the bright side of a texture's edge, not the rim of a light too large for the median test. The disc of
+    the test above with the misfit low (the edge test allowed) on a short arc of its rim only (17 pixels of edge),
+    then on a longer one (29): the first is dropped, the second kept whole."""
+    yy, xx = np.mgrid[:40, :40]
+    r = np.hypot(yy - 20, xx - 20)
+    centre = gaussian_filter(np.where(r <= 12, 500.0, 1.0), 1.0)[..., None].repeat(3, axis=-1)
+    monkeypatch.setattr(lights, "EDGE_RATIO", 50.0)
+    monkeypatch.setattr(lights, "EDGE_MISFIT", 20.0)
+    for box, kept in [((yy < 12) & (xx > 16) & (xx < 24), False), ((yy < 14) & (xx > 14) & (xx < 26), True)]:
+        misfit = np.where(box, 1.0, 100.0)
+        monkeypatch.setattr(lights, "EDGE_SIZE", 0)
+        _, every = candidates(centre, noise=0.1, misfit=misfit)
+        monkeypatch.setattr(lights, "EDGE_SIZE", 28)
+        _, found = candidates(centre, noise=0.1, misfit=misfit)
+        assert (17 if not kept else 29) == every.sum()
+        np.testing.assert_array_equal(found, every if kept else np.zeros_like(every))
