@@ -88,10 +88,10 @@ def dump(scene: str, out: Path, size: tuple[int, int], capture: str, seed_index:
 
 def run(path: Path, settings: list[str], save: Path | None = None) -> None:
     import lfproc.recon._lights as lights
-    from lfproc.camera.capture import noise_floor
+    from lfproc._shared.parallel import available_cpus
+    from lfproc.camera.capture import Capture, noise_floor
     from lfproc.metrics import hdr_figures, pu21_psnr
     from lfproc.recon._gmm import shear_matrix
-    from lfproc._shared.parallel import available_cpus
 
     for item in settings:
         name, sep, value = item.partition("=")
@@ -113,6 +113,12 @@ def run(path: Path, settings: list[str], save: Path | None = None) -> None:
         if missing:
             raise KeyError(", ".join(sorted(missing)))
         cap, first = d["capture"], d["first"]
+        arrays = [d[k] for k in ("T", "W", "W_bound", "first", "truth")]
+        if not all(isinstance(a, np.ndarray) for a in arrays) or first.ndim != 5 or d["T"].ndim != 3 \
+                or not d["T"].shape == d["W"].shape == d["W_bound"].shape or first.shape != d["truth"].shape:
+            raise TypeError("its arrays are not those of a capture (S, H, W) and a light field (V, U, H, W, 3)")
+        if not isinstance(cap, Capture):
+            raise TypeError(f"'capture' is a {type(cap).__name__}, not a Capture")
     except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, KeyError, TypeError, ValueError) as e:
         _fail(f"{path}: not a dump of 'refit_stage.py dump' of this lfproc version ({type(e).__name__}: {e})")
     nv, nu = first.shape[:2]

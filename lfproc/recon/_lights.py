@@ -291,7 +291,9 @@ def candidates(centre: np.ndarray, noise: float, misfit: np.ndarray | None = Non
         edge = significant & (lum > EDGE_RATIO * ndimage.percentile_filter(lum, EDGE_PERCENTILE, size=BG,
                                                                             mode="nearest"))
         edge = edge if misfit is None or not EDGE_MISFIT else edge & (misfit <= EDGE_MISFIT)
-        if EDGE_SIZE:  # the rim of a large light, not the bright side of a texture's edge (module notes)
+        if EDGE_SIZE:  # the rim of a large light, not the bright side of a texture's edge (module notes); by hand,
+            # not skimage.morphology.remove_small_objects, whose size argument changed meaning in 0.26 (min_size ->
+            # max_size) within the versions pyproject allows
             parts, _ = ndimage.label(edge, structure=np.ones((3, 3)))
             sizes = np.bincount(parts.ravel())
             edge = (sizes >= EDGE_SIZE)[parts] & edge
@@ -364,7 +366,8 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
     covariance depends only on their weights (which bounds joined): kept in ``prior.factors``, the last
     ``_CHOL_KEPT``, it serves the next fit of the same prior (the tinted fit repeats the free fit's passes; the
     Cholesky factorisations were three quarters of the refit's time, a profile of desk-cannon; with the kept ones
-    the refit stage on desk-cannon took 15 s against 18, 241 s against 268 with the edge test, the same figures)."""
+    the refit stage on desk-cannon took 15 s against 18, 241 s against 268 with every piece of edge, the same
+    figures: stop 20, serial on threaded BLAS, as ``benchmarks/refit_stage.py`` then ran)."""
     sb2, cov, kept = _prior_cov(m, x0) if prior is None else prior  # kept: prior.factors
     r0 = y - m @ x0
     ww = w

@@ -1,0 +1,55 @@
+"""Bad input to the benchmark scripts the docs tell users to run: exit code 2 and one line naming the option or
+file, before any scene is made or any dump is read (reference: argparse's own convention, exit code 2)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def _run(*argv: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(BENCHMARKS / argv[0]), *argv[1:]], capture_output=True, text=True,
+                          timeout=120)
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (("reconstruct_realistic.py", "--first-seed", "-1"), "--first-seed: expected a number >= 0, got -1"),
+    (("reconstruct_realistic.py", "--seeds", "0"), "--seeds: expected a number of captures >= 1, got 0"),
+    (("refit_stage.py", "run", "/nonexistent/dump.pkl"), "/nonexistent/dump.pkl: not found"),
+    (("refit_stage.py", "run", "/nonexistent/dump.pkl", "NOPE=1"), "'NOPE=1': expected NAME=VALUE"),
+    (("refit_stage.py", "run", "/nonexistent/dump.pkl", "RATIO=abc"), "expected a number for RATIO, got 'abc'"),
+])
+def test_a_bad_option_or_file_is_one_line_and_exit_code_2(argv, expected):
+    done = _run(*argv)
+    assert done.returncode == 2
+    assert expected in done.stderr.strip().splitlines()[-1]
+    assert "Traceback" not in done.stderr and done.stdout == ""
+
+
+def test_a_damaged_dump_is_one_line_and_exit_code_2(tmp_path):
+    """A dump cut short, a pickle of the wrong thing, and one with every key but values of the wrong types and
+    shapes (refit_stage.py's reader, Python's pickle; a scratch file, loaded only from dumps you made)."""
+    import pickle
+
+    import numpy as np
+
+    cut = tmp_path / "cut.pkl"
+    cut.write_bytes(pickle.dumps({"T": list(range(1000))})[:50])
+    wrong = tmp_path / "wrong.pkl"
+    wrong.write_bytes(pickle.dumps({"T": 1}))
+    keys = ("T", "W", "W_bound", "capture", "disparities", "first", "margin", "truth")
+    types = tmp_path / "types.pkl"
+    types.write_bytes(pickle.dumps(dict.fromkeys(keys, 1)))
+    shapes = tmp_path / "shapes.pkl"
+    shapes.write_bytes(pickle.dumps({**dict.fromkeys(keys, np.zeros((2, 4, 4))), "first": np.zeros((5, 5, 4, 4, 3)),
+                                     "truth": np.zeros((5, 5, 4, 4, 3)), "capture": "a capture"}))
+    for path in (cut, wrong, types, shapes):
+        done = _run("refit_stage.py", "run", str(path))
+        assert done.returncode == 2, done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and str(path) in lines[0] and "not a dump" in lines[0]
