@@ -112,8 +112,18 @@ non-negative lasso, a pixel kept only where the residual's correlation with it e
 NNLS on a shifted target), against the speckle and the default path's ring around city-interior's lamp: that ring 51.07
 -> 51.90 dB, but sunset-carrots' sun 51.50 -> 51.14 (its decades 0.28 -> 0.97 stops: the penalty biases a large light
 low), and on the ring alone (the light's own pixels free) the default path's lamp window was no longer accepted (41.73).
-What is left: a light layer that cannot print texture as speckle (a smooth or low-rank layer over a large light), which
-would let the edge test reach shorter rims.
+Tried and not kept (stop 22, the refit stage alone on the same dumps, PU21-PSNR; tune scenes decide): a Huber penalty
+on the one-colour layer's neighbour differences (iteratively reweighted NNLS, 0.3 of the layer's median): night-studio
+47.69 -> 47.87 dB, its annulus a little less grainy, but sunset-carrots' sun 51.50 -> 51.30 (decades 0.13 / 0.26 ->
+0.70 / 0.82 stops); ``ACCEPT`` 0.7 / 0.9, or accepting a smaller chi-square drop worth twice the layer's unknowns (AIC):
+night-studio 48.24 / 48.53 / 48.02 (its lamp's bottom windows, whose first estimate already has a chi-square of
+1.0-1.3 with a +2-stop crescent), but sunset-carrots' 10-100 decade 0.28 -> 0.43 stops and forest-stilllife's detail
+0.604 -> 0.633-0.664; a vanishing ridge on the layer (rows ``I / (r max y)`` for ``r`` 0.1-30: among fits as good,
+the least norm, not an NNLS vertex): sunset-carrots' decades 0.28 / 0.13 / 0.26 -> 0.20 / 0.05 / 0.03 (``r`` 3),
+the 2-block capture of city-interior 51.10 -> 51.78 (one lamp pixel whose measurements are all saturated came back 7.8
+times too bright), but forest-stilllife 34.21 -> 34.15 and city-interior 52.26 -> 52.11 (the tune mean unchanged).
+What is left: a light layer that cannot print texture as speckle (a smooth or low-rank layer over a large light, one
+that keeps a compact sun), which would let the edge test reach shorter rims.
 
 Why ``CANDIDATES`` 2, not 1 (measured when every window was ranked without the bounds): two disparities can score
 within a hair, the wrong one first, and the bounds then decide. A test scene showed it: city-interior's lamp at 96 x
