@@ -395,7 +395,12 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
     sb2, cov, kept = _prior_cov(m, x0) if prior is None else prior  # kept: prior.factors
     r0 = y - m @ x0
     ww = w
-    only = _bound_only(m, w, w_bound, cols, colour) if BOUND_RIDGE else None
+    light_cols = m[:, cols]  # the light layer's columns, dense, sliced once for every pass
+    light_cols = light_cols.toarray() if sparse.issparse(light_cols) else np.asarray(light_cols)
+    ridge = None  # rows of the prior on the unknowns only saturated measurements see (module notes "Why a ridge")
+    only = _bound_only(light_cols, w, w_bound, colour) if BOUND_RIDGE else None
+    if only is not None and only.any():
+        ridge = np.eye(len(only))[only] / (BOUND_RIDGE * max(float(np.abs(y).max()), 1e-300))
     for _ in range(passes):
         k = ww > 0  # the usable measurements (a saturated one only as a bound the fit missed)
         if not k.any():  # every measurement of the window saturated and no bound missed: nothing to fit
@@ -410,15 +415,12 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
                 chol = kept[key] = np.linalg.cholesky(c)
                 while len(kept) > _CHOL_KEPT:  # the oldest first (dicts keep their order)
                     del kept[next(iter(kept))]
-            design = mk[:, cols]
-            design = design.toarray() if sparse.issparse(design) else design
+            design = light_cols[k]
             if colour is not None:
                 design = design.reshape(len(design), -1, 3) @ colour
             a_w, b_w = sl.solve_triangular(chol, design, lower=True), sl.solve_triangular(chol, rk, lower=True)
-            if only is not None and only.any():  # seen only by bounds: the least-norm fit, not a vertex (module notes)
-                sd = BOUND_RIDGE * max(float(np.abs(y).max()), 1e-300)
-                a_w = np.vstack([a_w, np.eye(a_w.shape[1])[only] / sd])
-                b_w = np.concatenate([b_w, np.zeros(int(only.sum()))])
+            if ridge is not None:  # the least-norm fit among equally good ones, not an NNLS vertex
+                a_w, b_w = np.vstack([a_w, ridge]), np.concatenate([b_w, np.zeros(len(ridge))])
             lc, _ = nnls(a_w, b_w, maxiter=50 * design.shape[1])
         except (np.linalg.LinAlgError, RuntimeError):  # not positive definite in floating point; no convergence
             return None
@@ -436,11 +438,11 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
     return x, float(e[ww > 0].mean()), float(rw @ rw + 2 * np.log(np.diag(chol)).sum())
 
 
-def _bound_only(m, w, w_bound, cols, colour):
-    """The light layer's unknowns (``(len(cols),)``, or per pixel with ``colour``) whose column of ``m`` has less than
-    ``BOUND_SHARE`` of its weight on usable measurements (``w > 0``) against usable and saturated ones together."""
-    d = abs(m[:, cols])
-    d = d.toarray() if sparse.issparse(d) else np.asarray(d)
+def _bound_only(light_cols, w, w_bound, colour):
+    """The light layer's unknowns (a column of ``light_cols``, dense ``(m, n)``, or a pixel's three with ``colour``)
+    with less than ``BOUND_SHARE`` of their weight on usable measurements (``w > 0``) against usable and saturated
+    ones together."""
+    d = np.abs(light_cols)
     if colour is not None:
         d = d.reshape(len(d), -1, 3).sum(axis=2)
     seen = d[w > 0].sum(axis=0)
