@@ -211,11 +211,12 @@ def test_the_second_best_disparity_is_tried_when_the_best_one_is_not_accepted(mo
 
 
 def test_from_two_shots_the_disparities_are_ranked_by_the_tinted_fit(monkeypatch):
-    """From RANK_SHOTS shots the disparity is the one of least chi-square of the fit with one colour for the light,
-    not of the free fit (three colours a pixel overfit a one- or two-pixel light at the wrong disparity: the test scene
-    city-interior's lamp at 96 x 128 lost 2 dB so). Planted: a light 4000 times the plane at disparity 1, 2 shots, one
-    pass. The free fits of every other disparity given a chi-square of 0 leave the result exactly as it was; the
-    control, the tinted fit of disparity 0 given it, refits the light there and moves its energy."""
+    """From RANK_SHOTS shots the disparity is the one of the fit with one colour for the light (its evidence,
+    RANK_EVIDENCE), not of the free fit (three colours a pixel overfit a one- or two-pixel light at the wrong
+    disparity: the test scene city-interior's lamp at 96 x 128 lost 2 dB so). Planted: a light 4000 times the plane
+    at disparity 1, 2 shots, one pass. The free fits of every other disparity given a chi-square of 0 and the best
+    evidence leave the result exactly as it was; the control, the tinted fit of disparity 0 given them, refits the
+    light there and moves its energy."""
     lf = _scene(light_value=4000.0)
     cap = _capture(lf)
     truth, first = lf.data.astype(np.float64), _blurred(lf)
@@ -234,7 +235,7 @@ def test_from_two_shots_the_disparities_are_ranked_by_the_tinted_fit(monkeypatch
             out = fit(m, y, w, w_bound, x0, cols, passes, colour, prior)
             d = matrices.get(id(m))
             if out is not None and (colour is not None) == tinted and (d == wrong if tinted else d != right):
-                out = (out[0], 0.0, out[2])
+                out = (out[0], 0.0, -1e300)
             return out
         return patched
 
@@ -615,3 +616,53 @@ def test_light_pixels_only_saturated_measurements_see_share_their_excess(ridge, 
         assert light[0] == pytest.approx(light[1], rel=0.01)
     else:
         assert min(light) < 0.05 * max(light)
+
+
+def _faint(light_value):
+    """The planted light ``light_value`` times the plane, 2 shots of paper-medium 10 stops below the usual exposure
+    (near the noise: a measurement sums the 25 views over a 5 x 5 neighbourhood, and the blur of the first estimate
+    explains them nearly as well as the light), and its first estimate blurred by a Gaussian of 1 pixel."""
+    lf = _scene(light_value=light_value)
+    truth = lf.data.astype(np.float64)
+    at = truth.mean(-1) >= 0.1 * truth.mean(-1).max()
+    return truth, at, _capture(lf, profile="paper-medium", stops_below=10), _blurred(lf, 1.0)
+
+
+def test_the_first_pass_accepts_a_smaller_drop_of_the_chi_square(monkeypatch):
+    """The first estimate of the first pass is the patch prior's, which blurs a light (module notes "Why the first
+    pass accepts more"): there a fit is accepted below ACCEPT_FIRST (0.85) times its chi-square, in later passes below
+    ACCEPT (0.5). Planted: a light 100 times the plane near the noise (:func:`_faint`), one pass. The blurred first
+    estimate keeps 0.41 of the light's energy; the refit brings back more than 0.85 of it and halves the RMS
+    luminance error (measured: 0.93, 1.8 against 4.1). The control, ACCEPT_FIRST at ACCEPT: not refitted (the fit's
+    chi-square is 0.72 of the first estimate's)."""
+    truth, at, cap, first = _faint(100.0)
+    monkeypatch.setattr(lights, "PASSES", 1)
+    lum_t = truth.mean(-1)
+    results, default = {}, lights.ACCEPT_FIRST
+    for accept in (default, lights.ACCEPT):
+        monkeypatch.setattr(lights, "ACCEPT_FIRST", accept)
+        out, info = _refit(first, cap)
+        lum = out.mean(-1)
+        results[accept] = (info["refitted"], lum[at].sum() / lum_t[at].sum(), np.sqrt(((lum - lum_t) ** 2).mean()))
+    rms_first = np.sqrt(((first.mean(-1) - lum_t) ** 2).mean())
+    easy, strict = results[default], results[lights.ACCEPT]
+    assert easy[0] == 1 and easy[1] > 0.85 and easy[2] < 0.5 * rms_first, results
+    assert strict[0] == 0 and strict[2] == pytest.approx(rms_first), results
+
+
+def test_near_the_noise_the_disparity_of_higher_evidence_is_the_true_one(monkeypatch):
+    """From two shots the disparities are ranked by the tinted fit's evidence (RANK_EVIDENCE), as the priors are,
+    not by its chi-square: near the noise a light layer of 120 unknowns fits noise at a wrong disparity. Planted: a
+    light 40 times the plane at disparity 1 near the noise (:func:`_faint`), one pass; measured, the chi-square ranks
+    disparity 0 first (0.85 against 0.93 at 1), the evidence disparity 1. Ranked by evidence the light keeps its
+    energy within 10 % (0.95); the control, ranked by the chi-square, keeps under half of it (0.15)."""
+    truth, at, cap, first = _faint(40.0)
+    monkeypatch.setattr(lights, "PASSES", 1)
+    lum_t = truth.mean(-1)
+    kept = {}
+    for by_evidence in (True, False):
+        monkeypatch.setattr(lights, "RANK_EVIDENCE", by_evidence)
+        out, info = _refit(first, cap)
+        assert _counts(info) == {"windows": 1, "refitted": 1}
+        kept[by_evidence] = out.mean(-1)[at].sum() / lum_t[at].sum()
+    assert abs(kept[True] - 1.0) < 0.1 and kept[False] < 0.5, kept
