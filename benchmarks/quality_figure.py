@@ -7,6 +7,9 @@ Usage::
     python benchmarks/quality_figure.py --before BEFORE --after AFTER --scenes city-interior,night-studio \\
         --capture "2 random" -o docs/figures/quality_before_after.png
 
+``--zoom N`` shows N x N pixels around the truth's brightest pixel, or around ``--at SCENE=Y,X``. The refit stage's
+outputs (``refit_stage.py run DUMP --save DIR``: ``<scene>__refit.npy``) serve with ``--capture refit``.
+
 One row per scene: the truth, the result before and after (centre view over a horizontal EPI of
 the middle row, the 5 views of the centre angular row stretched), all tone-mapped with the truth's
 white point (``x / (1 + x)`` of the luminance over its 99th percentile, gamma 2.2), and the error
@@ -49,10 +52,21 @@ def main() -> None:
     parser.add_argument("--labels", default="before: dictionary (lfproc reconstruct),after: --method gmm")
     parser.add_argument("--zoom", type=int, default=0,
                         help="show N x N pixels around the truth's brightest centre-view pixel (white: its maximum)")
+    parser.add_argument("--at", action="append", default=[], metavar="SCENE=Y,X",
+                        help="with --zoom: centre that scene's window on centre-view pixel (Y, X), not its brightest")
     parser.add_argument("-o", "--output", type=Path, required=True)
     args = parser.parse_args()
     if args.zoom < 0:
         parser.error(f"--zoom: expected a window size in pixels >= 0 (0: whole frames), got {args.zoom}")
+    at = {}
+    for item in args.at:
+        name, _, yx = item.partition("=")
+        try:
+            at[name] = tuple(int(v) for v in yx.split(","))
+            if len(at[name]) != 2:
+                raise ValueError
+        except ValueError:
+            parser.error(f"--at: expected SCENE=Y,X (two integers), got {item!r}")
     scenes = args.scenes.split(",")
     labels = args.labels.split(",")
     tag = args.capture.replace(" ", "_")
@@ -65,7 +79,7 @@ def main() -> None:
             parser.error(f"--zoom: expected at most {min(truth.shape[2:4])} pixels ({scene}'s size), got {args.zoom}")
         if args.zoom:  # a window around the brightest light, at its own white point
             lum = luminance(truth[2, 2])
-            iy, ix = np.unravel_index(np.argmax(lum), lum.shape)
+            iy, ix = at.get(scene) or np.unravel_index(np.argmax(lum), lum.shape)
             y0 = int(np.clip(iy - args.zoom // 2, 0, lum.shape[0] - args.zoom))
             x0 = int(np.clip(ix - args.zoom // 2, 0, lum.shape[1] - args.zoom))
             window = (slice(None), slice(None), slice(y0, y0 + args.zoom), slice(x0, x0 + args.zoom))
