@@ -23,6 +23,8 @@ def _run(*argv: str) -> subprocess.CompletedProcess:
     (("refit_stage.py", "run", "/nonexistent/dump.pkl"), "/nonexistent/dump.pkl: not found"),
     (("refit_stage.py", "run", "/nonexistent/dump.pkl", "NOPE=1"), "'NOPE=1': expected NAME=VALUE"),
     (("refit_stage.py", "run", "/nonexistent/dump.pkl", "RATIO=abc"), "expected a number for RATIO, got 'abc'"),
+    (("quality_figure.py", "--before", "/nonexistent", "--after", "/nonexistent", "--scenes", "a", "--zoom", "8",
+      "--at", "a=1", "-o", "/nonexistent/f.png"), "--at: expected SCENE=Y,X (two integers), got 'a=1'"),
 ])
 def test_a_bad_option_or_file_is_one_line_and_exit_code_2(argv, expected):
     done = _run(*argv)
