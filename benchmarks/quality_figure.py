@@ -68,6 +68,10 @@ def main() -> None:
         except ValueError:
             parser.error(f"--at: expected SCENE=Y,X (two integers), got {item!r}")
     scenes = args.scenes.split(",")
+    if at and not args.zoom:
+        parser.error("--at: expected with --zoom N (it centres the zoomed window), got no --zoom")
+    if set(at) - set(scenes):
+        parser.error(f"--at: expected a scene of --scenes ({args.scenes}), got {sorted(set(at) - set(scenes))[0]!r}")
     labels = args.labels.split(",")
     tag = args.capture.replace(" ", "_")
     fig, axes = plt.subplots(len(scenes), 5, figsize=(20, 3.6 * len(scenes)), constrained_layout=True, squeeze=False)

@@ -25,6 +25,10 @@ def _run(*argv: str) -> subprocess.CompletedProcess:
     (("refit_stage.py", "run", "/nonexistent/dump.pkl", "RATIO=abc"), "expected a number for RATIO, got 'abc'"),
     (("quality_figure.py", "--before", "/nonexistent", "--after", "/nonexistent", "--scenes", "a", "--zoom", "8",
       "--at", "a=1", "-o", "/nonexistent/f.png"), "--at: expected SCENE=Y,X (two integers), got 'a=1'"),
+    (("quality_figure.py", "--before", "/nonexistent", "--after", "/nonexistent", "--scenes", "a", "--zoom", "8",
+      "--at", "b=1,2", "-o", "/nonexistent/f.png"), "--at: expected a scene of --scenes (a), got 'b'"),
+    (("quality_figure.py", "--before", "/nonexistent", "--after", "/nonexistent", "--scenes", "a",
+      "--at", "a=1,2", "-o", "/nonexistent/f.png"), "--at: expected with --zoom N"),
 ])
 def test_a_bad_option_or_file_is_one_line_and_exit_code_2(argv, expected):
     done = _run(*argv)

@@ -524,7 +524,7 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
     for i in range(max(PASSES, 1)):
         misfit = misfit_map(out, T, W, W_bound, op) if op is not None else None
         accept = ACCEPT_FIRST if i == 0 else ACCEPT  # the first estimate of the first pass blurs its lights
-        out, n, k = _refit_once(out, T, W, W_bound, capture, shears, margin, pool, noise, cache, misfit, accept)
+        out, n, k = _refit_once(out, T, W, W_bound, capture, shears, margin, pool, noise, cache, accept, misfit)
         passes.append([n, k])
         if not k:  # nothing changed: another pass would find the same
             break
@@ -532,7 +532,7 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
     return out, {"windows": passes[0][0], "refitted": passes[0][1], "passes": passes}
 
 
-def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cache, misfit=None, accept=ACCEPT):
+def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cache, accept, misfit=None):
     """One pass of :func:`refit_lights`: the new light field, the number of windows and of windows refitted.
     ``cache``: the sparse shears by ``(disparity index, p)``, kept between passes; ``accept``: a fit is accepted
     below this times the first estimate's chi-square (and ``CHI2_MAX``)."""
@@ -601,7 +601,8 @@ def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cach
                     picks.append((score, m, shear, prior, out if tinted_rank else None))
             picks.sort(key=lambda pick: pick[0])  # stable: ties keep the search's order
             # ... then the first of the CANDIDATES best whose tinted fit would be accepted; ranked by that fit already,
-            # the best alone (the next has no smaller chi-square against the same bound)
+            # the best alone (by chi-square the next has no smaller one against the same bound; by evidence it may, and
+            # is not tried: a fit of lower evidence is not taken for its chi-square)
             chosen = None
             for _, m, shear, prior, out in picks[:1 if tinted_rank else CANDIDATES]:
                 if out is None:  # ranked by the first pass: now with the bounds, tinted
