@@ -327,6 +327,9 @@ RHO = 0.9
 #: standard deviation BOUND_RIDGE times the window's brightest measurement (module notes "Why a ridge"; 0: off).
 BOUND_RIDGE = 3.0
 BOUND_SHARE = 0.1
+#: Rounds of alternating least squares on the accepted fit's one-colour layer, its colour then its intensities (module
+#: notes "Why the colour is fitted"; 0: the colour of the free fit's excess, as ranked).
+RECOLOUR = 1
 
 
 def misfit_map(lf: np.ndarray, T: np.ndarray, W: np.ndarray, W_bound: np.ndarray,
@@ -417,12 +420,13 @@ def _prior_cov(m, x0, near=None) -> _Prior:
     return _Prior(sb2, cov.toarray(), {})
 
 
-def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
-    """``x = b + l`` (module notes) on one window: ``(x, chi-square, -2 log evidence)``, or None when there is
+def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None, pattern=None):
+    """``x = b + l`` (module notes) on one window: ``(x, chi-square, -2 log evidence, l)``, or None when there is
     nothing to fit or the solver fails (the window then keeps the first estimate). The evidence is the Gaussian
     density of the residual after ``l`` with the background integrated out, without its ``2 pi`` term. With
     ``colour`` (3,), the light layer on the pixels of ``cols`` (their three colours in turn) is that colour times a
-    non-negative intensity per pixel. ``m`` dense or sparse; ``prior``: :func:`_prior_cov` of ``m, x0`` when the
+    non-negative intensity per pixel; with ``pattern`` (one non-negative value per pixel of ``cols``), that pattern
+    times a non-negative value per colour (:func:`_recoloured`). ``m`` dense or sparse; ``prior``: :func:`_prior_cov` of ``m, x0`` when the
     caller has it (it depends on neither the bounds nor the light layer). The factor of the measurements'
     covariance depends only on their weights (which bounds joined): kept in ``prior.factors``, the last
     ``_CHOL_KEPT``, it serves the next fit of the same prior (the tinted fit repeats the free fit's passes; the
@@ -435,7 +439,7 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
     light_cols = m[:, cols]  # the light layer's columns, dense, sliced once for every pass
     light_cols = light_cols.toarray() if sparse.issparse(light_cols) else np.asarray(light_cols)
     ridge = None  # rows of the prior on the unknowns only saturated measurements see (module notes "Why a ridge")
-    only = _bound_only(light_cols, w, w_bound, colour) if BOUND_RIDGE else None
+    only = _bound_only(light_cols, w, w_bound, colour, pattern) if BOUND_RIDGE else None
     if only is not None and only.any():
         ridge = np.eye(len(only))[only] / (BOUND_RIDGE * max(float(np.abs(y).max()), 1e-300))
     for _ in range(passes):
@@ -455,6 +459,8 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
             design = light_cols[k]
             if colour is not None:
                 design = design.reshape(len(design), -1, 3) @ colour
+            elif pattern is not None:  # the three colours of a light of this pattern
+                design = np.einsum("mpc,p->mc", design.reshape(len(design), -1, 3), pattern)
             a_w, b_w = sl.solve_triangular(chol, design, lower=True), sl.solve_triangular(chol, rk, lower=True)
             if ridge is not None:  # the least-norm fit among equally good ones, not an NNLS vertex
                 a_w, b_w = np.vstack([a_w, ridge]), np.concatenate([b_w, np.zeros(len(ridge))])
@@ -462,7 +468,7 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
         except (np.linalg.LinAlgError, RuntimeError):  # not positive definite in floating point; no convergence
             return None
         l = np.zeros_like(x0)
-        l[cols] = lc if colour is None else (lc[:, None] * colour).ravel()
+        l[cols] = _layer(lc, colour, pattern)
         x = x0 + sb2 @ (mk.T @ sl.cho_solve((chol, True), rk - mk @ l)) + l
         pred = m @ x
         below = (w_bound > 0) & (pred < y)  # bounds the fit does not meet join the data at their level
@@ -472,16 +478,27 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None):
         ww = new
     e = ((pred - y) * ww) ** 2
     rw = sl.solve_triangular(chol, rk - mk @ l, lower=True)
-    return x, float(e[ww > 0].mean()), float(rw @ rw + 2 * np.log(np.diag(chol)).sum())
+    return x, float(e[ww > 0].mean()), float(rw @ rw + 2 * np.log(np.diag(chol)).sum()), l
 
 
-def _bound_only(light_cols, w, w_bound, colour):
+def _layer(lc, colour, pattern):
+    """The light layer's samples on its columns from :func:`_fit`'s unknowns ``lc``."""
+    if colour is not None:
+        return (lc[:, None] * colour).ravel()
+    if pattern is not None:
+        return (pattern[:, None] * lc[None, :]).ravel()
+    return lc
+
+
+def _bound_only(light_cols, w, w_bound, colour, pattern=None):
     """The light layer's unknowns (a column of ``light_cols``, dense ``(m, n)``, or a pixel's three with ``colour``)
     with less than ``BOUND_SHARE`` of their weight on usable measurements (``w > 0``) against usable and saturated
     ones together."""
     d = np.abs(light_cols)
     if colour is not None:
         d = d.reshape(len(d), -1, 3).sum(axis=2)
+    elif pattern is not None:
+        d = np.einsum("mpc,p->mc", d.reshape(len(d), -1, 3), np.abs(pattern))
     seen = d[w > 0].sum(axis=0)
     total = d[(w > 0) | (w_bound > 0)].sum(axis=0)
     return seen < BOUND_SHARE * total
@@ -495,6 +512,25 @@ def _tinted(free, m, y, w, w_bound, x0, cols, prior):
     if tint.sum() > 0:
         return _fit(m, y, w, w_bound, x0, cols, _BOUND_PASSES, tint / tint.sum(), prior) or free
     return free
+
+
+def _recoloured(out, m, y, w, w_bound, x0, cols, prior, rounds):
+    """The tinted fit ``out`` (:func:`_fit`) refined by alternating least squares on its one-colour layer
+    ``l = s c``: the colour ``c`` fitted to the intensities ``s``, then ``s`` to ``c``, ``rounds`` times, each kept
+    while the evidence rises (module notes "Why the colour is fitted")."""
+    for _ in range(rounds):
+        s = out[3][cols].reshape(-1, 3).sum(axis=1)
+        if not s.sum() > 0:
+            break
+        c = _fit(m, y, w, w_bound, x0, cols, _BOUND_PASSES, prior=prior, pattern=s / s.sum())
+        tint = None if c is None else c[3][cols].reshape(-1, 3).sum(axis=0)
+        if tint is None or not tint.sum() > 0:
+            break
+        new = _fit(m, y, w, w_bound, x0, cols, _BOUND_PASSES, tint / tint.sum(), prior)
+        if new is None or not new[2] < out[2]:
+            break
+        out = new
+    return out
 
 
 def _chi2(pred, y, w, w_bound):
@@ -524,7 +560,8 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
     for i in range(max(PASSES, 1)):
         misfit = misfit_map(out, T, W, W_bound, op) if op is not None else None
         accept = ACCEPT_FIRST if i == 0 else ACCEPT  # the first estimate of the first pass blurs its lights
-        out, n, k = _refit_once(out, T, W, W_bound, capture, shears, margin, pool, noise, cache, accept, misfit)
+        out, n, k = _refit_once(out, T, W, W_bound, capture, shears, margin, pool, noise, cache, accept, misfit,
+                                RECOLOUR if i == 0 else 0)  # later passes fit a correction: its colour is not a light's
         passes.append([n, k])
         if not k:  # nothing changed: another pass would find the same
             break
@@ -532,7 +569,7 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
     return out, {"windows": passes[0][0], "refitted": passes[0][1], "passes": passes}
 
 
-def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cache, accept, misfit=None):
+def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cache, accept, misfit=None, recolour=0):
     """One pass of :func:`refit_lights`: the new light field, the number of windows and of windows refitted.
     ``cache``: the sparse shears by ``(disparity index, p)``, kept between passes; ``accept``: a fit is accepted
     below this times the first estimate's chi-square (and ``CHI2_MAX``)."""
@@ -609,14 +646,17 @@ def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cach
                     free = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
                     out = None if free is None else _tinted(free, m, y, w, wb, x0, cols, prior)
                 if out is not None and (chosen is None or out[1] < bound):
-                    chosen = (out, shear)
+                    chosen = (out, shear, m, prior, x0, cols)
                     if out[1] < bound:
                         break
             if chosen is not None and (best is None or chosen[0][2] < best[0][2]):  # the higher evidence
                 best = chosen
+        if best is not None and recolour:  # the accepted fit's colour (module notes "Why the colour is fitted")
+            out, shear, m, prior, x0, cols = best
+            best = (_recoloured(out, m, y, w, wb, x0, cols, prior, recolour), shear)
         if best is None or not best[0][1] < bound:
             return None
-        (x, _, _), shear = best
+        x, shear = best[0][0], best[1]
         fit = (shear @ x.reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
         keep = first[:, :, top:top + p, left:left + p]  # radiance is positive: a non-positive fit keeps this
         if FLOOR:
