@@ -426,9 +426,10 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None, pattern=No
     density of the residual after ``l`` with the background integrated out, without its ``2 pi`` term. With
     ``colour`` (3,), the light layer on the pixels of ``cols`` (their three colours in turn) is that colour times a
     non-negative intensity per pixel; with ``pattern`` (one non-negative value per pixel of ``cols``), that pattern
-    times a non-negative value per colour (:func:`_recoloured`). ``m`` dense or sparse; ``prior``: :func:`_prior_cov` of ``m, x0`` when the
-    caller has it (it depends on neither the bounds nor the light layer). The factor of the measurements'
-    covariance depends only on their weights (which bounds joined): kept in ``prior.factors``, the last
+    times a non-negative value per colour (:func:`_recoloured`). ``m`` dense or sparse; ``prior``:
+    :func:`_prior_cov` of ``m, x0`` when the caller has it (it depends on neither the bounds nor the light layer).
+    The factor of the measurements' covariance depends only on their weights (which bounds joined): kept in
+    ``prior.factors``, the last
     ``_CHOL_KEPT``, it serves the next fit of the same prior (the tinted fit repeats the free fit's passes; the
     Cholesky factorisations were three quarters of the refit's time, a profile of desk-cannon; with the kept ones
     the refit stage on desk-cannon took 15 s against 18, 241 s against 268 with every piece of edge, the same
