@@ -350,6 +350,8 @@ BOUND_SHARE = 0.1
 #: Rounds of alternating least squares on the accepted fit's one-colour layer, its colour then its intensities (module
 #: notes "Why the colour is fitted"; 0: the colour of the free fit's excess, as ranked).
 RECOLOUR = 1
+#: ... only where every colour of the light is measured (no colour seen by less than BOUND_SHARE of usable measurements)
+MEASURED_ONLY = True
 
 
 def misfit_map(lf: np.ndarray, T: np.ndarray, W: np.ndarray, W_bound: np.ndarray,
@@ -543,6 +545,11 @@ def _recoloured(out, m, y, w, w_bound, x0, cols, prior, rounds):
         s = out[3][cols].reshape(-1, 3).sum(axis=1)
         if not s.sum() > 0:
             break
+        if MEASURED_ONLY:
+            lc = m[:, cols]
+            lc = lc.toarray() if sparse.issparse(lc) else np.asarray(lc)
+            if _bound_only(lc, w, w_bound, None, s / s.sum()).any():
+                break
         c = _fit(m, y, w, w_bound, x0, cols, _BOUND_PASSES, prior=prior, pattern=s / s.sum())
         tint = None if c is None else c[3][cols].reshape(-1, 3).sum(axis=0)
         if tint is None or not tint.sum() > 0:
