@@ -4,6 +4,7 @@ Usage::
 
     python benchmarks/refit_stage.py dump SCENE OUT.pkl [--size H W] [--capture "2 random"] [--seed-index I]
     python benchmarks/refit_stage.py run OUT.pkl [NAME=VALUE ...] [--save DIR]
+    python benchmarks/refit_stage.py bound OUT.pkl TOP LEFT SIZE
 
 ``dump`` captures a scene of :mod:`quality_scenes` as :mod:`reconstruct_realistic` does (mask period 4, the
 scene's seed + 1000 ``I``) and runs ``reconstruct_gmm`` up to the refit, then saves what the refit receives (the
@@ -89,27 +90,12 @@ def dump(scene: str, out: Path, size: tuple[int, int], capture: str, seed_index:
     print(f"{out}: {scene}, {capture}, seed index {seed_index}, first estimate {record['first'].shape}")
 
 
-def run(path: Path, settings: list[str], save: Path | None = None) -> None:
-    import lfproc.recon._lights as lights
-    from lfproc._shared.parallel import available_cpus
-    from lfproc.camera.capture import Capture, noise_floor
-    from lfproc import LightField
-    from lfproc.metrics import evaluate, pu21_psnr
-    from lfproc.recon._gmm import shear_matrix
+def _load(path: Path) -> dict:
+    """A dump of :func:`dump`, checked (bad input: one line, exit code 2)."""
+    from lfproc.camera.capture import Capture
 
-    for item in settings:
-        name, sep, value = item.partition("=")
-        if not sep or not name.isupper() or not hasattr(lights, name):
-            _fail(f"{item!r}: expected NAME=VALUE with NAME an upper-case setting of lfproc.recon._lights")
-        old = getattr(lights, name)
-        try:
-            setattr(lights, name, bool(int(value)) if isinstance(old, bool) else type(old)(float(value)))
-        except ValueError:
-            _fail(f"{item!r}: expected a number for {name}, got {value!r}")
     if not path.is_file():
         _fail(f"{path}: not found (make it with 'refit_stage.py dump')")
-    if save is not None and not save.is_dir():
-        _fail(f"--save {save}: expected an existing directory")
     try:
         with open(path, "rb") as f:
             d = pickle.load(f)
@@ -125,6 +111,30 @@ def run(path: Path, settings: list[str], save: Path | None = None) -> None:
             raise TypeError(f"'capture' is a {type(cap).__name__}, not a Capture")
     except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, KeyError, TypeError, ValueError) as e:
         _fail(f"{path}: not a dump of 'refit_stage.py dump' of this lfproc version ({type(e).__name__}: {e})")
+    return d
+
+
+def run(path: Path, settings: list[str], save: Path | None = None) -> None:
+    import lfproc.recon._lights as lights
+    from lfproc import LightField
+    from lfproc._shared.parallel import available_cpus
+    from lfproc.camera.capture import noise_floor
+    from lfproc.metrics import evaluate, pu21_psnr
+    from lfproc.recon._gmm import shear_matrix
+
+    for item in settings:
+        name, sep, value = item.partition("=")
+        if not sep or not name.isupper() or not hasattr(lights, name):
+            _fail(f"{item!r}: expected NAME=VALUE with NAME an upper-case setting of lfproc.recon._lights")
+        old = getattr(lights, name)
+        try:
+            setattr(lights, name, bool(int(value)) if isinstance(old, bool) else type(old)(float(value)))
+        except ValueError:
+            _fail(f"{item!r}: expected a number for {name}, got {value!r}")
+    if save is not None and not save.is_dir():
+        _fail(f"--save {save}: expected an existing directory")
+    d = _load(path)
+    cap, first = d["capture"], d["first"]
     nv, nu = first.shape[:2]
     shears = [lambda q, dd=dd: shear_matrix((nv, nu), q, d["margin"], dd) for dd in d["disparities"]]
     t = time.perf_counter()
@@ -146,6 +156,44 @@ def run(path: Path, settings: list[str], save: Path | None = None) -> None:
     print(f"{path.name} {' '.join(settings)}: {seconds:.0f} s, windows per pass {info['passes']}")
 
 
+def bound(path: Path, top: int, left: int, size: int) -> None:
+    """Per decade of the truth's luminance in the centre view of the window ``(top, left, size)``: how well the
+    capture can fix a pixel's light at all. A lower bound on the standard deviation of a grey light on one pixel (the
+    inverse square root of the diagonal of the Fisher information: the squared weights of the usable measurements that
+    see it, every other unknown known), in stops above the truth (``log2(1 + bound / truth)``), at each disparity."""
+    import lfproc.recon._lights as lights
+    from lfproc.lightfield import luminance
+    from lfproc.recon._gmm import shear_matrix
+
+    d = _load(path)
+    cap, first = d["capture"], d["first"]
+    nv, nu, h, w = first.shape[:4]
+    r = d["margin"]
+    if size < 1 or not (r <= top <= h - r - size and r <= left <= w - r - size):
+        _fail(f"window {top} {left} {size}: expected a window of size >= 1 inside the margin {r} of the "
+              f"{h} x {w} views")
+    e = size + 2 * r
+    weights = d["W"][:, top:top + size, left:left + size].reshape(-1)
+    ops = lights.patch_operators(cap.mask, views=cap.views, cfa_pattern=cap.cfa_pattern, tops=[top], lefts=[left],
+                                 size=size, sensor_size=cap.size)
+    cols, vals = ops.cols[0].astype(np.intp), ops.vals[0].astype(np.float64)
+    truth = luminance(d["truth"][nv // 2, nu // 2, top:top + size, left:left + size].astype(np.float64))
+    decades = np.floor(np.log10(np.maximum(truth, 1e-30))).astype(int)
+    print(f"{path.name}: window {top} {left} {size}; per decade of the truth (pixels): median one-sigma bound in "
+          f"stops at each disparity")
+    for disparity in d["disparities"]:
+        m = lights._window_matrix(cols, vals, lights.sparse.csr_array(shear_matrix((nv, nu), size, r, disparity)))
+        m = m.toarray() if lights.sparse.issparse(m) else np.asarray(m)
+        grey = m.reshape(len(m), e * e, 3).sum(axis=2) / 3  # a grey light: its three colours together
+        fisher = ((weights[:, None] * grey) ** 2).sum(axis=0).reshape(e, e)[r:r + size, r:r + size]
+        with np.errstate(divide="ignore"):  # no usable measurement sees the pixel: no bound (inf)
+            sd = 1.0 / np.sqrt(fisher) / float(cap.radiance_scale)  # light-field units
+        stops = np.log2(1.0 + sd / np.maximum(truth, 1e-30))
+        cells = [f"1e{k}: {np.median(stops[decades == k]):.2f} ({int((decades == k).sum())})"
+                 for k in sorted(set(decades.ravel())) if k >= -1]
+        print(f"  {disparity:+.2f}: " + ", ".join(cells))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -160,6 +208,11 @@ def main() -> None:
     p.add_argument("settings", nargs="*")
     p.add_argument("--save", type=Path, default=None,
                    help="a directory: write <dump>__truth.npy, __first.npy and __refit.npy there (light-field units)")
+    p = sub.add_parser("bound", help="how well the capture fixes each pixel's light in a window (a lower bound)")
+    p.add_argument("path", type=Path)
+    p.add_argument("top", type=int)
+    p.add_argument("left", type=int)
+    p.add_argument("size", type=int)
     args = parser.parse_args()
     os.environ.setdefault("LFPROC_PROGRESS", "0")
     warnings.simplefilter("ignore")  # saturation warnings of the brightest scenes: expected
@@ -167,6 +220,8 @@ def main() -> None:
         if args.seed_index < 0:
             parser.error(f"--seed-index: expected a number >= 0, got {args.seed_index}")
         dump(args.scene, args.out, tuple(args.size), args.capture, args.seed_index)
+    elif args.command == "bound":
+        bound(args.path, args.top, args.left, args.size)
     else:
         run(args.path, args.settings, args.save)
 

@@ -23,6 +23,7 @@ def _run(*argv: str) -> subprocess.CompletedProcess:
     (("refit_stage.py", "run", "/nonexistent/dump.pkl"), "/nonexistent/dump.pkl: not found"),
     (("refit_stage.py", "run", "/nonexistent/dump.pkl", "NOPE=1"), "'NOPE=1': expected NAME=VALUE"),
     (("refit_stage.py", "run", "/nonexistent/dump.pkl", "RATIO=abc"), "expected a number for RATIO, got 'abc'"),
+    (("refit_stage.py", "bound", "/nonexistent/dump.pkl", "2", "2", "8"), "/nonexistent/dump.pkl: not found"),
     (("quality_figure.py", "--before", "/nonexistent", "--after", "/nonexistent", "--scenes", "a", "--zoom", "8",
       "--at", "a=1", "-o", "/nonexistent/f.png"), "--at: expected SCENE=Y,X (two integers), got 'a=1'"),
     (("quality_figure.py", "--before", "/nonexistent", "--after", "/nonexistent", "--scenes", "a", "--zoom", "8",
@@ -59,3 +60,31 @@ def test_a_damaged_dump_is_one_line_and_exit_code_2(tmp_path):
         assert done.returncode == 2, done.stderr
         lines = done.stderr.strip().splitlines()
         assert len(lines) == 1 and str(path) in lines[0] and "not a dump" in lines[0]
+
+
+def test_the_bound_of_a_window_outside_the_margin_is_one_line_and_exit_code_2(tmp_path):
+    """refit_stage.py bound on a small dump (a real capture of a synthetic scene, the other arrays zeros): a window
+    that leaves the margin is refused in one line; one inside prints a line per disparity, and a pixel no usable
+    measurement sees (every weight 0) has no bound (infinite stops: the inverse of zero information)."""
+    import pickle
+
+    import numpy as np
+
+    from lfproc.camera.simulate import simulate_capture
+    from lfproc.synth import synthesize
+
+    cap = simulate_capture(synthesize("layers", size=(16, 16), random_state=0), shots=2, random_state=0)
+    zeros = np.zeros((2, 16, 16))
+    lf = np.ones((5, 5, 16, 16, 3))
+    path = tmp_path / "small.pkl"
+    path.write_bytes(pickle.dumps({"T": zeros, "W": zeros, "W_bound": zeros, "capture": cap, "disparities": (0.0, 1.0),
+                                   "first": lf, "margin": 2, "truth": lf}))
+    done = _run("refit_stage.py", "bound", str(path), "0", "2", "8")
+    assert done.returncode == 2 and done.stdout == ""
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "window 0 2 8: expected a window" in lines[0] and "margin 2" in lines[0]
+    done = _run("refit_stage.py", "bound", str(path), "2", "2", "8")
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.strip().splitlines()
+    assert len(lines) == 3 and lines[1].strip().startswith("+0.00:") and lines[2].strip().startswith("+1.00:")
+    assert "1e0: inf (64)" in lines[1]  # 8 x 8 pixels of truth 1, seen by no usable measurement
