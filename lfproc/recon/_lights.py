@@ -349,8 +349,8 @@ RHO = 0.9
 #: standard deviation BOUND_RIDGE times the window's brightest measurement (module notes "Why a ridge"; 0: off).
 BOUND_RIDGE = 3.0
 BOUND_SHARE = 0.1
-#: Rounds of alternating least squares on the accepted fit's one-colour layer, its colour then its intensities (module
-#: notes "Why the colour is fitted"; 0: the colour of the free fit's excess, as ranked).
+#: Rounds of alternating least squares on the chosen fit's one-colour layer in the first pass, its colour then its
+#: intensities (module notes "Why the colour is fitted"; 0: the colour of the free fit's excess, as ranked).
 RECOLOUR = 1
 #: ... only where every colour of the light is measured (no colour seen by less than BOUND_SHARE of usable measurements)
 MEASURED_ONLY = True
@@ -602,7 +602,8 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
 def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cache, accept, misfit=None, recolour=0):
     """One pass of :func:`refit_lights`: the new light field, the number of windows and of windows refitted.
     ``cache``: the sparse shears by ``(disparity index, p)``, kept between passes; ``accept``: a fit is accepted
-    below this times the first estimate's chi-square (and ``CHI2_MAX``)."""
+    below this times the first estimate's chi-square (and ``CHI2_MAX``); ``recolour``: rounds of
+    :func:`_recoloured` on each window's chosen fit (0: none)."""
     nv, nu, h, w_ = first.shape[:4]
     centre = first[nv // 2, nu // 2]
     boxes, light = candidates(centre, noise, misfit)
@@ -681,7 +682,7 @@ def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cach
                         break
             if chosen is not None and (best is None or chosen[0][2] < best[0][2]):  # the higher evidence
                 best = chosen
-        if best is not None and recolour:  # the accepted fit's colour (module notes "Why the colour is fitted")
+        if best is not None and recolour:  # its colour fitted, before the bound: a fit can pass it once its colour fits
             out, shear, m, prior, x0, cols = best
             best = (_recoloured(out, m, y, w, wb, x0, cols, prior, recolour), shear)
         if best is None or not best[0][1] < bound:
