@@ -589,9 +589,10 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
                         dtype=np.float64) if MISFIT else None
     for i in range(max(PASSES, 1)):
         misfit = misfit_map(out, T, W, W_bound, op) if op is not None else None
-        accept = ACCEPT_FIRST if i == 0 else ACCEPT  # the first estimate of the first pass blurs its lights
-        out, n, k = _refit_once(out, T, W, W_bound, capture, shears, margin, pool, noise, cache, accept, misfit,
-                                RECOLOUR if i == 0 else 0)  # later passes fit a correction: its colour is not a light's
+        # the first estimate of the first pass blurs its lights; later passes fit a correction, whose colour is not a
+        # light's
+        settings = (ACCEPT_FIRST, RECOLOUR) if i == 0 else (ACCEPT, 0)
+        out, n, k = _refit_once(out, T, W, W_bound, capture, shears, margin, pool, noise, cache, settings, misfit)
         passes.append([n, k])
         if not k:  # nothing changed: another pass would find the same
             break
@@ -599,11 +600,12 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
     return out, {"windows": passes[0][0], "refitted": passes[0][1], "passes": passes}
 
 
-def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cache, accept, misfit=None, recolour=0):
+def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cache, settings, misfit=None):
     """One pass of :func:`refit_lights`: the new light field, the number of windows and of windows refitted.
-    ``cache``: the sparse shears by ``(disparity index, p)``, kept between passes; ``accept``: a fit is accepted
-    below this times the first estimate's chi-square (and ``CHI2_MAX``); ``recolour``: rounds of
-    :func:`_recoloured` on each window's chosen fit (0: none)."""
+    ``cache``: the sparse shears by ``(disparity index, p)``, kept between passes; ``settings``: ``(accept,
+    recolour)``, a fit is accepted below ``accept`` times the first estimate's chi-square (and ``CHI2_MAX``), after
+    ``recolour`` rounds of :func:`_recoloured` on each window's chosen fit (0: none)."""
+    accept, recolour = settings
     nv, nu, h, w_ = first.shape[:4]
     centre = first[nv // 2, nu // 2]
     boxes, light = candidates(centre, noise, misfit)
