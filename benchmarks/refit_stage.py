@@ -159,8 +159,11 @@ def run(path: Path, settings: list[str], save: Path | None = None) -> None:
 def bound(path: Path, top: int, left: int, size: int) -> None:
     """Per decade of the truth's luminance in the centre view of the window ``(top, left, size)``: how well the
     capture can fix a pixel's light at all. A lower bound on the standard deviation of a grey light on one pixel (the
-    inverse square root of the diagonal of the Fisher information: the squared weights of the usable measurements that
-    see it, every other unknown known), in stops above the truth (``log2(1 + bound / truth)``), at each disparity."""
+    inverse square root of the diagonal of the Fisher information of its luminance, a grey light being that luminance
+    in each colour: the squared weights of the usable measurements that see it, every other unknown known: "alone"),
+    and the Cramér-Rao bound with every pixel of the window and its margin unknown and no prior (the diagonal of the
+    Fisher information's pseudo-inverse: "jointly"), in stops above the truth (``log2(1 + bound / truth)``), at each
+    disparity."""
     import lfproc.recon._lights as lights
     from lfproc.lightfield import luminance
     from lfproc.recon._gmm import shear_matrix
@@ -179,19 +182,24 @@ def bound(path: Path, top: int, left: int, size: int) -> None:
     cols, vals = ops.cols[0].astype(np.intp), ops.vals[0].astype(np.float64)
     truth = luminance(d["truth"][nv // 2, nu // 2, top:top + size, left:left + size].astype(np.float64))
     decades = np.floor(np.log10(np.maximum(truth, 1e-30))).astype(int)
-    print(f"{path.name}: window {top} {left} {size}; per decade of the truth (pixels): median one-sigma bound in "
-          f"stops at each disparity")
+    counts = ", ".join(f"1e{k}: {int((decades == k).sum())}" for k in sorted(set(decades.ravel())) if k >= -1)
+    print(f"{path.name}: window {top} {left} {size}; pixels per decade of the truth {counts}; median one-sigma bound "
+          f"in stops at each disparity, each pixel alone and all jointly")
     for disparity in d["disparities"]:
         m = lights._window_matrix(cols, vals, lights.sparse.csr_array(shear_matrix((nv, nu), size, r, disparity)))
         m = m.toarray() if lights.sparse.issparse(m) else np.asarray(m)
-        grey = m.reshape(len(m), e * e, 3).sum(axis=2) / 3  # a grey light: its three colours together
-        fisher = ((weights[:, None] * grey) ** 2).sum(axis=0).reshape(e, e)[r:r + size, r:r + size]
-        with np.errstate(divide="ignore"):  # no usable measurement sees the pixel: no bound (inf)
-            sd = 1.0 / np.sqrt(fisher) / float(cap.radiance_scale)  # light-field units
-        stops = np.log2(1.0 + sd / np.maximum(truth, 1e-30))
-        cells = [f"1e{k}: {np.median(stops[decades == k]):.2f} ({int((decades == k).sum())})"
-                 for k in sorted(set(decades.ravel())) if k >= -1]
-        print(f"  {disparity:+.2f}: " + ", ".join(cells))
+        grey = m.reshape(len(m), e * e, 3).sum(axis=2) * weights[:, None]  # a grey light of luminance 1 on a pixel
+        seen = np.abs(grey).sum(axis=0) > 0
+        fisher = grey[:, seen].T @ grey[:, seen]
+        cells = []
+        for how, var in (("alone", np.diag(fisher) ** -1.0), ("jointly", np.diag(np.linalg.pinv(fisher)))):
+            sd = np.full(e * e, np.inf)  # no usable measurement sees the pixel: no bound (inf)
+            sd[seen] = np.sqrt(np.maximum(var, 0.0))
+            sd = sd.reshape(e, e)[r:r + size, r:r + size] / float(cap.radiance_scale)  # light-field units
+            stops = np.log2(1.0 + sd / np.maximum(truth, 1e-30))
+            cells.append(how + " " + ", ".join(f"1e{k}: {np.median(stops[decades == k]):.2f}"
+                                               for k in sorted(set(decades.ravel())) if k >= -1))
+        print(f"  {disparity:+.2f}: " + "; ".join(cells))
 
 
 def main() -> None:
