@@ -40,7 +40,8 @@ def test_a_bad_option_or_file_is_one_line_and_exit_code_2(argv, expected):
 
 def test_a_damaged_dump_is_one_line_and_exit_code_2(tmp_path):
     """A dump cut short, a pickle of the wrong thing, and one with every key but values of the wrong types and
-    shapes (refit_stage.py's reader, Python's pickle; a scratch file, loaded only from dumps you made)."""
+    shapes, to ``run`` and ``bound`` (refit_stage.py's one reader, Python's pickle; a scratch file, loaded only from
+    dumps you made)."""
     import pickle
 
     import numpy as np
@@ -55,8 +56,8 @@ def test_a_damaged_dump_is_one_line_and_exit_code_2(tmp_path):
     shapes = tmp_path / "shapes.pkl"
     shapes.write_bytes(pickle.dumps({**dict.fromkeys(keys, np.zeros((2, 4, 4))), "first": np.zeros((5, 5, 4, 4, 3)),
                                      "truth": np.zeros((5, 5, 4, 4, 3)), "capture": "a capture"}))
-    for path in (cut, wrong, types, shapes):
-        done = _run("refit_stage.py", "run", str(path))
+    for path, command in [(p, c) for p in (cut, wrong, types, shapes) for c in (["run"], ["bound", "2", "2", "8"])]:
+        done = _run("refit_stage.py", command[0], str(path), *command[1:])
         assert done.returncode == 2, done.stderr
         lines = done.stderr.strip().splitlines()
         assert len(lines) == 1 and str(path) in lines[0] and "not a dump" in lines[0]
