@@ -474,6 +474,36 @@ def test_median_noise_of_a_patch_is_one_measurements_radiance_std():
     np.testing.assert_allclose(_median_noise(wn, rowsum), [0.25, 0.0])  # median of 1/2, 1/4, 1/8
 
 
+@pytest.mark.parametrize("profile", ["paper-none", "paper-low", "paper-medium"])
+def test_weights_assume_at_least_one_electron_of_read_noise(profile):
+    """Known answer (reference: the sensor model's own variances, lfproc.camera.capture.observations, and the
+    profile's read noise from lfproc.sensor.iso_maps): a measurement's weight is 1/sqrt(variance + (F^2 -
+    read^2) / t^2) with F = READ_FLOOR_E where the read noise is below F (paper-none: 0 e-), the model's weight
+    bit for bit where it is not (paper-low 1.1 e-, paper-medium 2.0 e-); unusable measurements keep weight 0."""
+    from lfproc.camera.capture import observations
+    from lfproc.recon._gmm import READ_FLOOR_E, _measurements
+    from lfproc.sensor import iso_maps
+
+    assert READ_FLOOR_E == 1.0
+    rng = np.random.default_rng(3)
+    lf = LightField((10 ** rng.uniform(-3, 0, (5, 5, 16, 16, 3))).astype(np.float32), units="relative")
+    # dark: about an electron a measurement, none saturated
+    cap = simulate_capture(lf, profile=profile, mask_period=4, shots=2, random_state=3, radiance_scale=1e2)
+    obs = observations(cap, variance_from="local", warn_saturation=False)
+    W = _measurements(cap, "ignore").W
+    read = iso_maps(profile, cap.iso[0], cap.size)["read_noise_e"]
+    if read.max() >= 1.0:
+        np.testing.assert_array_equal(W, obs.weight.astype(np.float64))
+        return
+    t = np.asarray(cap.exposures_s)[:, None, None]
+    want = np.where(obs.weight > 0, 1.0 / np.sqrt(obs.variance.astype(np.float64) + 1.0 / t ** 2), 0.0)
+    assert (obs.weight > 0).mean() > 0.9
+    np.testing.assert_allclose(W, want, rtol=1e-6)
+    assert ((W > 0) == (obs.weight > 0)).all() and (W[W > 0] < obs.weight[W > 0]).all()
+    ratio = obs.weight[W > 0] / W[W > 0]  # sqrt(1 + 1 e- / signal) with the signal near 1 e-
+    assert 1.2 < np.median(ratio) < 2.0, np.median(ratio)
+
+
 def test_positive_is_the_mean_of_the_truncated_gaussian():
     """_positive(x, s) = E[X | X > 0] for X ~ N(x, s^2); reference: scipy.stats.truncnorm's mean. Far below 0 it
     stays positive (s^2 / |x|, where max(x, 0) gave 0), far above it is x; std 0 is max(x, 0)."""
