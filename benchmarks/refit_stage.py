@@ -164,9 +164,12 @@ def bound(path: Path, top: int, left: int, size: int) -> None:
     and the Cramér-Rao bound with every pixel of the window and its margin unknown and no prior (the diagonal of the
     Fisher information's pseudo-inverse: "jointly"), in stops above the truth (``log2(1 + bound / truth)``), at each
     disparity."""
-    import lfproc.recon._lights as lights
+    from scipy import sparse
+
+    from lfproc.camera.projection import patch_operators
     from lfproc.lightfield import luminance
     from lfproc.recon._gmm import shear_matrix
+    from lfproc.recon._lights import _window_matrix
 
     d = _load(path)
     cap, first = d["capture"], d["first"]
@@ -177,17 +180,18 @@ def bound(path: Path, top: int, left: int, size: int) -> None:
               f"{h} x {w} views")
     e = size + 2 * r
     weights = d["W"][:, top:top + size, left:left + size].reshape(-1)
-    ops = lights.patch_operators(cap.mask, views=cap.views, cfa_pattern=cap.cfa_pattern, tops=[top], lefts=[left],
+    ops = patch_operators(cap.mask, views=cap.views, cfa_pattern=cap.cfa_pattern, tops=[top], lefts=[left],
                                  size=size, sensor_size=cap.size)
     cols, vals = ops.cols[0].astype(np.intp), ops.vals[0].astype(np.float64)
     truth = luminance(d["truth"][nv // 2, nu // 2, top:top + size, left:left + size].astype(np.float64))
     decades = np.floor(np.log10(np.maximum(truth, 1e-30))).astype(int)
-    counts = ", ".join(f"1e{k}: {int((decades == k).sum())}" for k in sorted(set(decades.ravel())) if k >= -1)
+    shown = [k for k in sorted(set(decades.ravel())) if k >= -1]
+    counts = ", ".join(f"1e{k}: {int((decades == k).sum())}" for k in shown)
     print(f"{path.name}: window {top} {left} {size}; pixels per decade of the truth {counts}; median one-sigma bound "
           f"in stops at each disparity, each pixel alone and all jointly")
     for disparity in d["disparities"]:
-        m = lights._window_matrix(cols, vals, lights.sparse.csr_array(shear_matrix((nv, nu), size, r, disparity)))
-        m = m.toarray() if lights.sparse.issparse(m) else np.asarray(m)
+        m = _window_matrix(cols, vals, sparse.csr_array(shear_matrix((nv, nu), size, r, disparity)))
+        m = m.toarray() if sparse.issparse(m) else np.asarray(m)
         grey = m.reshape(len(m), e * e, 3).sum(axis=2) * weights[:, None]  # a grey light of luminance 1 on a pixel
         seen = np.abs(grey).sum(axis=0) > 0
         fisher = grey[:, seen].T @ grey[:, seen]
@@ -197,8 +201,7 @@ def bound(path: Path, top: int, left: int, size: int) -> None:
             sd[seen] = np.sqrt(np.maximum(var, 0.0))
             sd = sd.reshape(e, e)[r:r + size, r:r + size] / float(cap.radiance_scale)  # light-field units
             stops = np.log2(1.0 + sd / np.maximum(truth, 1e-30))
-            cells.append(how + " " + ", ".join(f"1e{k}: {np.median(stops[decades == k]):.2f}"
-                                               for k in sorted(set(decades.ravel())) if k >= -1))
+            cells.append(how + " " + ", ".join(f"1e{k}: {np.median(stops[decades == k]):.2f}" for k in shown))
         print(f"  {disparity:+.2f}: " + "; ".join(cells))
 
 

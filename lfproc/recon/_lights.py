@@ -543,15 +543,16 @@ def _recoloured(out, m, y, w, w_bound, x0, cols, prior, rounds):
     """The tinted fit ``out`` (:func:`_fit`) refined by alternating least squares on its one-colour layer
     ``l = s c``: the colour ``c`` fitted to the intensities ``s``, then ``s`` to ``c``, ``rounds`` times, each kept
     while the evidence rises (module notes "Why the colour is fitted")."""
+    lc = None
+    if MEASURED_ONLY:  # the light layer's columns, dense, for _bound_only (the same every round)
+        lc = m[:, cols]
+        lc = lc.toarray() if sparse.issparse(lc) else np.asarray(lc)
     for _ in range(rounds):
         s = out[3][cols].reshape(-1, 3).sum(axis=1)
         if not s.sum() > 0:
             break
-        if MEASURED_ONLY:
-            lc = m[:, cols]
-            lc = lc.toarray() if sparse.issparse(lc) else np.asarray(lc)
-            if _bound_only(lc, w, w_bound, None, s / s.sum()).any():
-                break
+        if lc is not None and _bound_only(lc, w, w_bound, None, s / s.sum()).any():
+            break
         c = _fit(m, y, w, w_bound, x0, cols, _BOUND_PASSES, prior=prior, pattern=s / s.sum())
         tint = None if c is None else c[3][cols].reshape(-1, 3).sum(axis=0)
         if tint is None or not tint.sum() > 0:
