@@ -613,7 +613,8 @@ def observations(capture: Capture, *, warn_saturation: bool = True, **options) -
         :data:`lfproc.errors.SATURATION_WARNING_FRACTION` of the pixels are saturated.
     **options
         Passed to :func:`lfproc.camera.sensor.calibrated_observation` (``saturation_margin_dn``,
-        ``variance_from``, ``radiance_estimate`` of shape (S, H, W)...). ``variance_from="local"``
+        ``variance_from``, ``radiance_estimate`` of shape (S, H, W), ``read_floor_e``: the
+        reconstructions pass :data:`READ_FLOOR_E`...). ``variance_from="local"``
         (capture level only) takes the photon-noise signal of every measurement from its
         neighbours instead of itself (:func:`local_signal`).
 
@@ -700,6 +701,12 @@ def local_signal(capture: Capture, obs: Observation, *, radius: int = 1) -> np.n
     return out
 
 
+#: The read noise (electrons) the reconstructions' weights assume at least (``observations(..., read_floor_e=...)``)
+#: and the noise floor's electron (:func:`noise_floor`): a Poisson count of about one electron is 0, 1 or 2, not
+#: known to a fraction of an electron as a sensor without read noise (``paper-none``) would otherwise claim.
+READ_FLOOR_E = 1.0
+
+
 def noise_floor(capture: Capture) -> float:
     """The light-field radiance at which one measurement has as much signal as read noise, and at least one electron.
 
@@ -737,7 +744,7 @@ def noise_floor(capture: Capture) -> float:
     """
     if not isinstance(capture, Capture):
         raise InputError(f"noise_floor: expected a Capture, got {type(capture).__name__}")
-    read = max(float(iso_maps(capture.profile, max(capture.isos), (1,))["read_noise_e"][0]), 1.0)
+    read = max(float(iso_maps(capture.profile, max(capture.isos), (1,))["read_noise_e"][0]), READ_FLOOR_E)
     r = float(np.mean(capture.mask.codes)) * capture.views[0] * capture.views[1]
     scale = 1.0 if capture.radiance_scale is None else float(capture.radiance_scale)
     return read / (float(np.min(capture.exposures_s)) * max(r, 1e-30) * scale)

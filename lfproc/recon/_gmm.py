@@ -144,8 +144,7 @@ from ._reconstruct import _gather, _int_option
 from .. import _untrusted as ut
 from .._shared.patches import patch_grid
 from .._shared.random import check_random_state
-from ..camera.capture import Capture, load_capture, observations
-from ..sensor import iso_maps
+from ..camera.capture import READ_FLOOR_E as _READ_FLOOR_E, Capture, load_capture, observations
 from ..camera.projection import patch_operators, transmittance_map
 from ..io._atomic import atomic_file
 
@@ -595,8 +594,9 @@ def _checked_options(capture, model, *, stride, search_stride, disparities, scal
     return out
 
 
-#: The read noise (electrons) the measurement weights assume at least (module notes, "A floor under the weights").
-READ_FLOOR_E = 1.0
+#: The read noise (electrons) the measurement weights assume at least (module notes, "A floor under the weights";
+#: the camera layer's :data:`lfproc.camera.capture.READ_FLOOR_E`, which the dictionary method uses too).
+READ_FLOOR_E = _READ_FLOOR_E
 
 
 class _Data(NamedTuple):
@@ -611,17 +611,10 @@ class _Data(NamedTuple):
 
 def _measurements(capture, saturation: str) -> _Data:
     """The observations (local photon-noise signal), saturated ones imputed or kept as bounds (module notes)."""
-    obs = observations(capture, variance_from="local")
+    obs = observations(capture, variance_from="local", read_floor_e=READ_FLOOR_E)  # module notes: a floor
     T = np.asarray(obs.radiance, np.float64)
     W = np.asarray(obs.weight, np.float64)
     var = np.asarray(obs.variance, np.float64)
-    if READ_FLOOR_E > 0:  # at least READ_FLOOR_E electrons of read noise (module notes)
-        t = np.asarray(capture.exposures_s, np.float64)[:, None, None]
-        read = np.stack([iso_maps(capture.profile, capture.iso[s], capture.size)["read_noise_e"]
-                         for s in range(capture.shots)])
-        extra = np.maximum(READ_FLOOR_E ** 2 - read ** 2, 0.0) / t ** 2
-        var = var + extra
-        W = np.where((W > 0) & (extra > 0), 1.0 / np.sqrt(var), W)  # the model's own weight where read >= floor
     if not (W > 0).any():
         raise InputError("capture: every measurement has weight zero (all saturated or black-clipped); nothing to "
                          "reconstruct from")

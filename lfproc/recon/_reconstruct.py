@@ -83,7 +83,7 @@ from threadpoolctl import threadpool_limits
 
 from ._solvers import SOLVERS, BatchOperator, SharedOperator, _Factor, admm, fista, omp
 from .._shared.patches import patch_grid
-from ..camera.capture import Capture, load_capture, observations
+from ..camera.capture import READ_FLOOR_E, Capture, load_capture, observations
 from ..camera.projection import patch_operators, PatchOperators
 from ..dictionary import Dictionary, load_dictionary
 
@@ -520,8 +520,9 @@ def _execution(workers, threads) -> tuple[int | None, int]:
 
 
 def _weighted_observations(capture, variance: str) -> tuple[np.ndarray, np.ndarray]:
-    """The calibrated observations ``T`` (e-/s) and their weights ``W = 1/std(T)``, float32 ``(S, H, W)``."""
-    obs = observations(capture, variance_from=variance)
+    """The calibrated observations ``T`` (e-/s) and their weights ``W = 1/std(T)``, float32 ``(S, H, W)``; the weights
+    assume at least ``READ_FLOOR_E`` electrons of read noise (:func:`lfproc.camera.capture.observations`)."""
+    obs = observations(capture, variance_from=variance, read_floor_e=READ_FLOOR_E)
     T = np.ascontiguousarray(obs.radiance, dtype=np.float32)
     W = np.ascontiguousarray(obs.weight, dtype=np.float32)
     if not (W > 0).any():

@@ -41,7 +41,9 @@ Imaging, 2021 (section III-B, the noise model and calibration of multi-ISO senso
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
 import numpy as np
 
 from .._shared.frozen import ReadOnlyState, freeze, frozen_array
@@ -487,6 +489,7 @@ def calibrated_observation(
     variance_from: str = "measurement",
     radiance_estimate: np.ndarray | None = None,
     correct_fixed_pattern: "bool | FixedPattern" = True,
+    read_floor_e: float = 0.0,
 ) -> Observation:
     """Radiance estimate ``T``, its variance and weights from sensor codes (Miandji et al. 2021, eqs. 5-7).
 
@@ -510,6 +513,12 @@ def calibrated_observation(
         for a profile without fixed pattern); a :class:`FixedPattern` of ``dn``'s shape: use
         those maps; False: no correction (for codes that are not a sensor image, e.g. a table
         of codes or decoded views).
+    read_floor_e : float, default 0
+        Read noise (electrons) the variance assumes at least: ``max(read noise, read_floor_e)``.
+        Without read noise (``paper-none``) a dark measurement is otherwise known to its
+        quantisation step, a fraction of an electron, while its photon count of about one
+        electron is 0, 1 or 2; 1 (the electron of :func:`lfproc.camera.noise_floor`) is what
+        the reconstructions use. A profile with at least that much read noise is unchanged.
 
     Returns
     -------
@@ -520,7 +529,8 @@ def calibrated_observation(
     Raises
     ------
     lfproc.errors.InputError
-        Bad codes, ``exposure_s <= 0``, ``gamma < 1`` or an unknown ``variance_from``.
+        Bad codes, ``exposure_s <= 0``, ``gamma < 1``, an unknown ``variance_from`` or a negative
+        ``read_floor_e``.
     lfproc.errors.ProfileError
         An ISO is not in the profile.
 
@@ -537,6 +547,12 @@ def calibrated_observation(
     """
     profile = load_profile(profile)
     t = check_positive("exposure_s", exposure_s)
+    try:
+        floor = float(read_floor_e)
+    except (TypeError, ValueError):
+        floor = math.nan
+    if not (math.isfinite(floor) and floor >= 0):
+        raise InputError(f"read_floor_e: expected a number of electrons >= 0, got {read_floor_e!r}")
     dn = _sensor_codes(dn)
     gamma = profile.gamma if gamma is None else check_positive("gamma", gamma)
     if gamma < 1:
@@ -563,7 +579,7 @@ def calibrated_observation(
     else:
         half = 0.5 / imax
         var_q = (imax * (_power(rel + half, gamma) - _power(rel - half, gamma))) ** 2 / 12.0
-    read_dn2 = (m["read_noise_e"] * h) ** 2
+    read_dn2 = (np.maximum(m["read_noise_e"], floor) * h) ** 2
     var_dn = h**2 * t * (signal * g + m["dark_current_e_per_s"]) + read_dn2 + var_q
     variance = var_dn / (h * t * g) ** 2
     if fp is not None:  # the maps' own uncertainty (module documentation)

@@ -817,3 +817,22 @@ def test_overlap_add_groups_do_not_overlap_and_cover_every_used_patch(stride):
             cover[gt[b]:gt[b] + size, gl[b]:gl[b] + size] += 1
         assert cover.max() == 1
     assert len(groups) <= -(-size // stride) ** 2 + 37 + 50  # a few groups, not one per patch
+
+
+def test_dictionary_weights_assume_at_least_one_electron_of_read_noise():
+    """Known answer (reference: lfproc.camera.capture.observations with and without ``read_floor_e``): the dictionary
+    method weighs a capture without read noise (paper-none) as one with one electron of it, the gmm method's floor,
+    and a capture with more read noise (paper-medium, 2 e-) as its sensor model says, bit for bit."""
+    from lfproc.camera.capture import READ_FLOOR_E
+    from lfproc.recon._reconstruct import _weighted_observations
+    from lfproc.synth import synthesize
+
+    assert READ_FLOOR_E == 1.0
+    lf = synthesize("layers", size=(16, 16), views=5, random_state=4)
+    for profile, floored in (("paper-none", True), ("paper-medium", False)):
+        cap = simulate_capture(lf, profile=profile, shots=2, mask_period=4, random_state=4, radiance_scale=1e2)
+        _, W = _weighted_observations(cap, "local")
+        plain = observations(cap, variance_from="local", warn_saturation=False).weight
+        want = observations(cap, variance_from="local", warn_saturation=False, read_floor_e=1.0).weight
+        np.testing.assert_array_equal(W, want)
+        assert (W < plain).any() if floored else np.array_equal(W, plain)

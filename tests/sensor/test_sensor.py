@@ -63,3 +63,35 @@ def test_bad_inputs():
         expose(np.ones((2, 2)), exposure_s=1, iso=123, profile=p)
     with pytest.raises(InputError, match="gamma"):
         expose(np.ones((2, 2)), exposure_s=1, iso=100, profile=p, gamma=0.5)
+
+
+@pytest.mark.parametrize("name", ["paper-none", "paper-low", "paper-medium"])
+def test_read_floor_adds_the_missing_read_noise_only(name):
+    """Known answer (reference: the profile's read noise from lfproc.sensor.iso_maps and the variance without the
+    floor): ``read_floor_e=F`` adds ``(F^2 - read^2) / (t g)^2`` where the read noise is below F (paper-none: 0 e-;
+    its flat field g is 1) and leaves the observation bit for bit where it is not (paper-low 1.1 e-, -medium 2.0)."""
+    from lfproc.sensor import iso_maps
+
+    p = load_profile(name)
+    rng = np.random.default_rng(2)
+    iso = rng.choice([100, 1600], size=(40, 40))
+    dn = expose(rng.uniform(0, 2e3, iso.shape), exposure_s=0.004, iso=iso, profile=p, random_state=2)
+    plain = calibrated_observation(dn, exposure_s=0.004, iso=iso, profile=p)
+    floored = calibrated_observation(dn, exposure_s=0.004, iso=iso, profile=p, read_floor_e=1.0)
+    read = iso_maps(p, iso, iso.shape)["read_noise_e"]
+    np.testing.assert_array_equal(floored.radiance, plain.radiance)
+    if read.min() >= 1.0:
+        np.testing.assert_array_equal(floored.variance, plain.variance)
+        np.testing.assert_array_equal(floored.weight, plain.weight)
+        return
+    want = plain.variance.astype(np.float64) + (1.0 - read ** 2) / 0.004 ** 2
+    np.testing.assert_allclose(floored.variance, want, rtol=1e-5)
+    usable = plain.weight > 0
+    np.testing.assert_allclose(floored.weight[usable], 1 / np.sqrt(want[usable]), rtol=1e-5)
+
+
+@pytest.mark.parametrize("value", [-1.0, float("nan"), "one"])
+def test_a_bad_read_floor_is_one_line(value):
+    with pytest.raises(InputError, match=r"^read_floor_e: expected a number of electrons >= 0, got "):
+        calibrated_observation(np.full((2, 2), 100), exposure_s=0.01, iso=100, profile="paper-low",
+                               read_floor_e=value)
