@@ -181,7 +181,7 @@ def bound(path: Path, top: int, left: int, size: int) -> None:
     e = size + 2 * r
     weights = d["W"][:, top:top + size, left:left + size].reshape(-1)
     ops = patch_operators(cap.mask, views=cap.views, cfa_pattern=cap.cfa_pattern, tops=[top], lefts=[left],
-                                 size=size, sensor_size=cap.size)
+                          size=size, sensor_size=cap.size)
     cols, vals = ops.cols[0].astype(np.intp), ops.vals[0].astype(np.float64)
     truth = luminance(d["truth"][nv // 2, nu // 2, top:top + size, left:left + size].astype(np.float64))
     decades = np.floor(np.log10(np.maximum(truth, 1e-30))).astype(int)

@@ -144,7 +144,7 @@ from ._reconstruct import _gather, _int_option
 from .. import _untrusted as ut
 from .._shared.patches import patch_grid
 from .._shared.random import check_random_state
-from ..camera.capture import READ_FLOOR_E as _READ_FLOOR_E, Capture, load_capture, observations
+from ..camera.capture import READ_FLOOR_E, Capture, load_capture, observations
 from ..camera.projection import patch_operators, transmittance_map
 from ..io._atomic import atomic_file
 
@@ -594,11 +594,6 @@ def _checked_options(capture, model, *, stride, search_stride, disparities, scal
     return out
 
 
-#: The read noise (electrons) the measurement weights assume at least (module notes, "A floor under the weights";
-#: the camera layer's :data:`lfproc.camera.capture.READ_FLOOR_E`, which the dictionary method uses too).
-READ_FLOOR_E = _READ_FLOOR_E
-
-
 class _Data(NamedTuple):
     """The measurements of a capture as :func:`reconstruct_gmm` uses them, ``(S, H, W)`` each."""
 
@@ -611,7 +606,8 @@ class _Data(NamedTuple):
 
 def _measurements(capture, saturation: str) -> _Data:
     """The observations (local photon-noise signal), saturated ones imputed or kept as bounds (module notes)."""
-    obs = observations(capture, variance_from="local", read_floor_e=READ_FLOOR_E)  # module notes: a floor
+    # READ_FLOOR_E (lfproc.camera.capture, both methods): module notes, "A floor under the weights"
+    obs = observations(capture, variance_from="local", read_floor_e=READ_FLOOR_E)
     T = np.asarray(obs.radiance, np.float64)
     W = np.asarray(obs.weight, np.float64)
     var = np.asarray(obs.variance, np.float64)

@@ -41,9 +41,7 @@ Imaging, 2021 (section III-B, the noise model and calibration of multi-ISO senso
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-
 import numpy as np
 
 from .._shared.frozen import ReadOnlyState, freeze, frozen_array
@@ -547,12 +545,7 @@ def calibrated_observation(
     """
     profile = load_profile(profile)
     t = check_positive("exposure_s", exposure_s)
-    try:
-        floor = float(read_floor_e)
-    except (TypeError, ValueError):
-        floor = math.nan
-    if not (math.isfinite(floor) and floor >= 0):
-        raise InputError(f"read_floor_e: expected a number of electrons >= 0, got {read_floor_e!r}")
+    floor = check_positive("read_floor_e", read_floor_e, allow_zero=True)
     dn = _sensor_codes(dn)
     gamma = profile.gamma if gamma is None else check_positive("gamma", gamma)
     if gamma < 1:
