@@ -7,7 +7,8 @@ Usage::
     python benchmarks/quality_figure.py --before BEFORE --after AFTER --scenes city-interior,night-studio \\
         --capture "2 random" -o docs/figures/quality_before_after.png
 
-``--zoom N`` shows N x N pixels around the truth's brightest pixel, or around ``--at SCENE=Y,X``. The refit stage's
+``--zoom N`` shows N x N pixels around the truth's brightest pixel, or around ``--at SCENE=Y,X``, white at its maximum
+or at ``--white-percentile P`` of the window (colours around a small light). The refit stage's
 outputs (``refit_stage.py run DUMP --save DIR``: ``<scene>__refit.npy``) serve with ``--capture refit``.
 
 One row per scene: the truth, the result before and after (centre view over a horizontal EPI of
@@ -54,8 +55,13 @@ def main() -> None:
                         help="show N x N pixels around the truth's brightest centre-view pixel (white: its maximum)")
     parser.add_argument("--at", action="append", default=[], metavar="SCENE=Y,X",
                         help="with --zoom: centre that scene's window on centre-view pixel (Y, X), not its brightest")
+    parser.add_argument("--white-percentile", type=float, default=None, metavar="P",
+                        help="with --zoom: white at this percentile of the window's luminance, not its maximum "
+                             "(colour around a small light)")
     parser.add_argument("-o", "--output", type=Path, required=True)
     args = parser.parse_args()
+    if args.white_percentile is not None and not 0 < args.white_percentile <= 100:
+        parser.error(f"--white-percentile: expected a percentile in (0, 100], got {args.white_percentile}")
     if args.zoom < 0:
         parser.error(f"--zoom: expected a window size in pixels >= 0 (0: whole frames), got {args.zoom}")
     at = {}
@@ -70,6 +76,8 @@ def main() -> None:
     scenes = args.scenes.split(",")
     if at and not args.zoom:
         parser.error("--at: expected with --zoom N (it centres the zoomed window), got no --zoom")
+    if args.white_percentile is not None and not args.zoom:
+        parser.error("--white-percentile: expected with --zoom N (whole frames use the 99th), got no --zoom")
     if set(at) - set(scenes):
         parser.error(f"--at: expected a scene of --scenes ({args.scenes}), got {sorted(set(at) - set(scenes))[0]!r}")
     labels = args.labels.split(",")
@@ -88,7 +96,9 @@ def main() -> None:
             x0 = int(np.clip(ix - args.zoom // 2, 0, lum.shape[1] - args.zoom))
             window = (slice(None), slice(None), slice(y0, y0 + args.zoom), slice(x0, x0 + args.zoom))
             truth, results = truth[window], [r[window] for r in results]
-            white = float(luminance(truth[2, 2]).max())
+            window_lum = luminance(truth[2, 2])
+            white = float(window_lum.max() if args.white_percentile is None
+                          else np.percentile(window_lum, args.white_percentile))
         panels = [("truth", truth)] + list(zip(labels, results))
         for ax, (name, lf) in zip(row[:3], panels):
             ax.imshow(np.vstack([_tone(lf[2, 2], white), _tone(_epi(lf), white)]), interpolation="nearest")

@@ -35,6 +35,10 @@ def _run(*argv: str) -> subprocess.CompletedProcess:
       "--at", "b=1,2", "-o", "/nonexistent/f.png"), "--at: expected a scene of --scenes (a), got 'b'"),
     (("quality_figure.py", "--before", "/nonexistent", "--after", "/nonexistent", "--scenes", "a",
       "--at", "a=1,2", "-o", "/nonexistent/f.png"), "--at: expected with --zoom N"),
+    (("quality_figure.py", "--before", "/nonexistent", "--after", "/nonexistent", "--scenes", "a", "--zoom", "8",
+      "--white-percentile", "0", "-o", "/nonexistent/f.png"), "--white-percentile: expected a percentile in (0, 100]"),
+    (("quality_figure.py", "--before", "/nonexistent", "--after", "/nonexistent", "--scenes", "a",
+      "--white-percentile", "99", "-o", "/nonexistent/f.png"), "--white-percentile: expected with --zoom N"),
 ])
 def test_a_bad_option_or_file_is_one_line_and_exit_code_2(argv, expected):
     done = _run(*argv)
