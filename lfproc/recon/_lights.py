@@ -755,7 +755,8 @@ def _median_colours(fit: np.ndarray) -> np.ndarray:
     repeated), its green kept; not on the light (the mean of the three colours above ``MEDIAN_KEEP`` times the
     window's largest) nor where a colour would not be positive. ``fit`` is not modified."""
     green = fit[..., 1:2]
-    median = ndimage.median_filter(fit - green, size=(1, 1, 3, 3, 1), mode="nearest") + green
+    red_blue = ndimage.median_filter(fit[..., ::2] - green, size=(1, 1, 3, 3, 1), mode="nearest") + green
+    median = np.concatenate([red_blue[..., :1], green, red_blue[..., 1:]], axis=-1)  # green's difference is 0
     level = fit.mean(axis=-1, keepdims=True)
     keep = (level > MEDIAN_KEEP * level.max()) | (median <= 0).any(axis=-1, keepdims=True)
     return np.where(keep, fit, median)
