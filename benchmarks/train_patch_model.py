@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/train_patch_model.py [--out lfproc/recon/data/gaussian_patch_model.npz] [--components 4]
-                                           [--patches 60000] [--force]
+                                           [--orientations 0] [--patches 60000] [--force]
 
 The training images are the photographs of the ``TUNE`` scenes of :mod:`quality_scenes` (the shared
 data's ``hdr/ScanLines_Desk``, ``Cannon``, ``Carrots``, ``StillLife`` and ``hdr_cc0/sunset``,
@@ -36,15 +36,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=OUT)
     parser.add_argument("--components", type=int, default=4)
+    parser.add_argument("--orientations", type=int, default=0,
+                        help="of the components, those started from oriented edges (docs/benchmarks.md: 4 of 8 tried)")
     parser.add_argument("--patches", type=int, default=60000)
     parser.add_argument("--margin", type=int, default=2)
     parser.add_argument("--data", type=Path, default=quality_scenes.DATA)
     parser.add_argument("--force", action="store_true")
     args = parser.parse_args()
+    if args.orientations and not 0 <= args.orientations <= args.components - 2:
+        parser.error(f"--orientations: expected 0 .. --components - 2 = {args.components - 2}, got {args.orientations}")
     t = time.perf_counter()
     names, images = training_images(args.data)
-    model = train_patch_model(images, components=args.components, n_patches=args.patches, margin=args.margin,
-                              random_state=0)
+    model = train_patch_model(images, components=args.components, orientations=args.orientations,
+                              n_patches=args.patches, margin=args.margin, random_state=0)
     model.attrs.update(source="benchmarks/train_patch_model.py", photographs=names,
                        command=" ".join(["python", "benchmarks/train_patch_model.py"] + sys.argv[1:]))
     args.out.parent.mkdir(parents=True, exist_ok=True)

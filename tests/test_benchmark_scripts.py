@@ -20,6 +20,9 @@ def _run(*argv: str) -> subprocess.CompletedProcess:
 @pytest.mark.parametrize("argv, expected", [
     (("reconstruct_realistic.py", "--first-seed", "-1"), "--first-seed: expected a number >= 0, got -1"),
     (("reconstruct_realistic.py", "--seeds", "0"), "--seeds: expected a number of captures >= 1, got 0"),
+    (("train_patch_model.py", "--components", "4", "--orientations", "3"),
+     "--orientations: expected 0 .. --components - 2 = 2, got 3"),
+    (("train_patch_model.py", "--orientations", "-1"), "--orientations: expected 0 .. --components - 2 = 2, got -1"),
     (("refit_stage.py", "run", "/nonexistent/dump.pkl"), "/nonexistent/dump.pkl: not found"),
     (("refit_stage.py", "run", "/nonexistent/dump.pkl", "NOPE=1"), "'NOPE=1': expected NAME=VALUE"),
     (("refit_stage.py", "run", "/nonexistent/dump.pkl", "RATIO=abc"), "expected a number for RATIO, got 'abc'"),

@@ -747,3 +747,35 @@ def test_staged_search_of_a_mixture_matches_the_joint_search(monkeypatch):
     monkeypatch.setattr(gmm, "_chosen_component", lambda *args: 1 - chosen(*args))
     control = score("staged")
     assert control < staged - 0.5, (control, staged)
+
+
+def test_oriented_components_start_from_the_edges_orientation():
+    """Known answers (hand-made patches): with two oriented components, a patch of horizontal stripes starts in the
+    first (bin 0 is centred on a horizontal edge), one of vertical stripes in the second, a flat noisy patch and an
+    incoherent one (a checkerboard) in the contrast components; without orientations the start is the contrast
+    quantiles alone."""
+    from lfproc.recon._gmm import _initial_labels
+
+    e = 12
+    rng = np.random.default_rng(0)
+    i = np.arange(e)
+    vertical = np.broadcast_to((1 + 0.8 * np.sin(i * 1.3))[None, :, None], (e, e, 3))
+    horizontal = vertical.transpose(1, 0, 2)
+    checker = np.broadcast_to((1 + 0.8 * ((i[:, None] + i[None, :]) % 2))[..., None], (e, e, 3))
+    flat = 1 + 0.01 * rng.standard_normal((e, e, 3))
+    x = np.stack([vertical, horizontal, checker, flat]).reshape(4, -1)
+    labels = _initial_labels(x, e, n_contrast=2, n_orient=2)
+    assert labels[0] == 3 and labels[1] == 2, labels  # the contrast components are 0 and 1; oriented 2 and 3
+    assert labels[2] < 2 and labels[3] == 0, labels  # the checkerboard has contrast but no orientation
+    assert _initial_labels(x, e, n_contrast=4, n_orient=0).max() <= 3
+
+
+def test_a_model_with_oriented_components_is_trained_and_bad_counts_are_refused():
+    rng = np.random.default_rng(0)
+    images = [np.exp(rng.standard_normal((40, 50, 3))).astype(np.float32) for _ in range(2)]
+    model = train_patch_model(images, n_patches=3000, components=4, orientations=2, max_iter=1, random_state=0)
+    assert model.components == 4 and model.attrs["orientations"] == 2
+    with pytest.raises(InputError, match=r"orientations: expected 0 .. components - 2 = 2, got 3"):
+        train_patch_model(images, n_patches=3000, components=4, orientations=3)
+    with pytest.raises(InputError, match="orientations: expected an integer >= 0"):
+        train_patch_model(images, n_patches=3000, components=4, orientations=-1)
