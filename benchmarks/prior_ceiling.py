@@ -3,7 +3,8 @@
 Usage::
 
     python benchmarks/prior_ceiling.py [--set tune|test|all] [--scenes a,b] [--crop Y0 Y1 X0 X1 | --crop none]
-                                       [--captures "2 random"] [--own-components 4] [--rounds 1]
+                                       [--captures "2 random"] [--own-components 4] [--rounds 1] [--scene-exposure]
+                                       [--global-disparity D [--global-weights 0.1:10,1:10]]
 
 For each scene of :mod:`quality_scenes` (a crop of it, by default the 128 x 160 pixels at its centre; ``--crop none``:
 the whole 434 x 625 frame) and each capture of ``--captures`` (the names of ``reconstruct_realistic.py``), the capture is
@@ -23,6 +24,19 @@ floor (``1e1`` is 10-100 in light-field units; ``reconstruct_realistic.py``'s fi
 times include learning the components). The gap between ``shipped`` and ``oracle`` bounds what any re-training of the
 Gaussian components (more data, other components) can give on that scene; a representation that is not a Gaussian
 mixture is needed beyond it.
+
+With ``--global-disparity D`` (an integer, the crop's true disparity: a crop of one layer), two classical priors that
+are not patch priors are measured on the same capture: the centre view ``C`` of one Lambertian light field at that
+disparity, solved over the whole crop at once (:func:`global_deconvolution`, conjugate gradients on the normal
+equations) from the weighted measurements with a quadratic prior on the gradients of its luminance (weight ``LAM``) and
+of its two colour differences (``MU``), for each ``LAM:MU`` of ``--global-weights`` (rows ``tikhonov``). It knows
+the true disparity, which no reconstruction does, and uses every measurement of the crop at once; where it still
+scores below ``shipped``, the patch prior is not the weak part. (Reweighted passes towards a total variation of the
+luminance relative to its level were tried at stop 30 and scored below these: they free the noise of dark regions.)
+
+``--scene-exposure`` captures the crop at the whole scene's radiance scale (the electrons the crop gets in the
+scene's own capture, as ``reconstruct_realistic.py`` sees it) instead of exposing for the crop's own peak (the
+default, as until stop 30): a dark crop is then as dark as in the scene.
 """
 
 from __future__ import annotations
@@ -85,12 +99,122 @@ def with_own_components(base, image: np.ndarray, k: int):
                       weights, base.patch, base.margin, attrs={"source": "benchmarks/prior_ceiling.py"})
 
 
+def _shear(c: np.ndarray, d: int, views: tuple[int, int]) -> np.ndarray:
+    """The Lambertian light field ``(V, U, H, W, 3)`` of centre view ``c`` at integer disparity ``d`` (edges
+    replicated): view ``(v, u)`` pixel ``(y, x)`` shows ``c[y - (v - V // 2) d, x - (u - U // 2) d]``."""
+    nv, nu = views
+    h, w = c.shape[:2]
+    p = max(nv // 2, nu // 2) * abs(d)
+    cp = np.pad(c, ((p, p), (p, p), (0, 0)), mode="edge")
+    out = np.empty((nv, nu, h, w, c.shape[2]))
+    for v in range(nv):
+        for u in range(nu):
+            sy, sx = p - (v - nv // 2) * d, p - (u - nu // 2) * d
+            out[v, u] = cp[sy:sy + h, sx:sx + w]
+    return out
+
+
+def _shear_adjoint(lf: np.ndarray, d: int) -> np.ndarray:
+    """The adjoint of :func:`_shear` (the replicated edges folded back)."""
+    nv, nu, h, w, nc = lf.shape
+    p = max(nv // 2, nu // 2) * abs(d)
+    cp = np.zeros((h + 2 * p, w + 2 * p, nc))
+    for v in range(nv):
+        for u in range(nu):
+            sy, sx = p - (v - nv // 2) * d, p - (u - nu // 2) * d
+            cp[sy:sy + h, sx:sx + w] += lf[v, u]
+    if p:
+        cp[p] += cp[:p].sum(0)
+        cp[-p - 1] += cp[-p:].sum(0)
+        cp[:, p] += cp[:, :p].sum(1)
+        cp[:, -p - 1] += cp[:, -p:].sum(1)
+    return cp[p:p + h, p:p + w]
+
+
+#: Luminance and two colour differences (the quadratic prior's coordinates).
+_OPPONENT = np.array([[1 / 3, 1 / 3, 1 / 3], [1 / 2, 0, -1 / 2], [-1 / 4, 1 / 2, -1 / 4]])
+
+
+def global_deconvolution(cap, d: int, lam: float, mu: float, *, start=None):
+    """Centre view ``(H, W, 3)`` of the Lambertian light field at disparity ``d`` that minimises
+    ``sum (w (y - K A S_d C))^2 + lam |grad Y(C)|^2 + mu |grad (colour differences)|^2`` (``w`` the measurements'
+    weights, saturated ones left out; ``K`` the capture's radiance scale), by conjugate gradients (300 at most, from
+    ``start``)."""
+    from scipy.sparse.linalg import LinearOperator, cg
+
+    from lfproc.camera.capture import observations
+
+    obs = observations(cap, variance_from="local", read_floor_e=1.0, warn_saturation=False)
+    op = cap.operator(dtype=np.float64)
+    w2 = np.where(np.asarray(obs.saturated), 0.0, np.asarray(obs.weight, float) ** 2)
+    k = float(cap.radiance_scale or 1.0)
+    h, w = cap.size
+    shape = (h, w, 3)
+    prior = np.array([lam, mu, mu])
+
+    def gradient_term(c):
+        z = c @ _OPPONENT.T
+        out = np.zeros_like(z)
+        for ax in (0, 1):
+            g = np.diff(z, axis=ax)
+            lo, hi = [slice(None)] * 3, [slice(None)] * 3
+            lo[ax], hi[ax] = slice(None, -1), slice(1, None)
+            out[tuple(lo)] -= g
+            out[tuple(hi)] += g
+        return (out * prior) @ _OPPONENT
+
+    def normal(x):
+        c = x.reshape(shape)
+        data = _shear_adjoint(op.adjoint(w2 * op.forward(_shear(c, d, cap.views))), d)
+        return (k * k * data + gradient_term(c)).ravel()
+
+    a = LinearOperator((h * w * 3, h * w * 3), matvec=normal, dtype=float)
+    b = (k * _shear_adjoint(op.adjoint(w2 * np.asarray(obs.radiance, float)), d)).ravel()
+    x0 = None if start is None else np.asarray(start, float).ravel()
+    x, _ = cg(a, b, x0=x0, maxiter=300, rtol=1e-6)
+    return np.maximum(x.reshape(shape), 1e-6)
+
+
+def _weights(parser, value: str) -> list[tuple[float, float]]:
+    out = []
+    for item in value.split(","):
+        try:
+            lam, mu = (float(v) for v in item.split(":"))
+        except ValueError:
+            parser.error(f"--global-weights: expected LAM:MU pairs like 0.1:10,1:10, got {value!r}")
+        if not (lam > 0 and mu > 0):
+            parser.error(f"--global-weights: expected positive weights, got {item!r}")
+        out.append((lam, mu))
+    return out
+
+
 def row(name: str, result, truth, floor: float, seconds: float) -> str:
     sc = figures(result, truth, floor)  # as reconstruct_realistic.py scores a cell
     decades = " ".join(f"1e{np.log10(d['decade'][0]):.0f}: {d['median_stops']:.2f}" for d in sc["stops_by_decade"])
     return (f"  {name:10s} PU21-PSNR {sc['pu21_psnr_db']:6.2f} dB  SSIM {sc['pu21_ssim']:.3f}  detail "
             f"{sc['detail_ratio']:.2f}  sharpness {sharpness(result.data, truth.data):.2f}  stops by decade "
             f"{decades}  {seconds:5.1f} s")
+
+
+def _capture(full, truth, name: str, cap_name: str, scene_exposure: bool):
+    """The crop's capture; with ``scene_exposure`` at the radiance scale of the whole scene's capture."""
+    if not scene_exposure:
+        return capture_cell(truth, name, cap_name, 0, 4)
+    from lfproc.camera.simulate import simulate_capture
+
+    scale = capture_cell(full, name, cap_name, 0, 4).radiance_scale
+    seed = quality_scenes.SETS["all"][name][-1]  # capture_cell's seed at index 0
+    return simulate_capture(truth, mask_period=4, random_state=seed, radiance_scale=scale, **parse_capture(cap_name))
+
+
+def _global_rows(cap, truth, floor, d, weights, start) -> None:
+    from lfproc.lightfield import LightField
+
+    for lam, mu in weights:
+        t = time.perf_counter()
+        c = global_deconvolution(cap, d, lam, mu, start=start)
+        lf = LightField(_shear(c, d, cap.views))
+        print(row(f"tikhonov {lam:g}:{mu:g}", lf, truth, floor, time.perf_counter() - t), flush=True)
 
 
 def main() -> None:
@@ -101,6 +225,10 @@ def main() -> None:
     parser.add_argument("--captures", default="2 random")
     parser.add_argument("--own-components", type=int, default=4)
     parser.add_argument("--rounds", type=int, default=1)
+    parser.add_argument("--scene-exposure", action="store_true", help="the crop at the whole scene's radiance scale")
+    parser.add_argument("--global-disparity", type=int, default=None, metavar="D",
+                        help="also the global Lambertian deconvolutions at this integer disparity")
+    parser.add_argument("--global-weights", default="0.1:10,1:10,3:10", metavar="LAM:MU,...")
     args = parser.parse_args()
     scenes = quality_scenes.SETS[args.set]
     names = list(scenes) if args.scenes is None else args.scenes.split(",")
@@ -118,6 +246,9 @@ def main() -> None:
     if args.rounds < 1:
         parser.error(f"--rounds: expected a number >= 1, got {args.rounds}")
     y0, y1, x0, x1 = _crop(parser, args.crop, (434, 625))
+    if args.global_disparity is not None and not -2 <= args.global_disparity <= 2:
+        parser.error(f"--global-disparity: expected an integer in -2..2, got {args.global_disparity}")
+    weights = _weights(parser, args.global_weights)
 
     from lfproc.camera import noise_floor
     from lfproc.lightfield import LightField
@@ -130,7 +261,7 @@ def main() -> None:
         truth = LightField(np.ascontiguousarray(full.data[:, :, y0:y1, x0:x1]))
         for cap_name in captures:
             print(f"{name}, rows {y0}:{y1}, columns {x0}:{x1}, {cap_name}:", flush=True)
-            cap = capture_cell(truth, name, cap_name, 0, 4)
+            cap = _capture(full, truth, name, cap_name, args.scene_exposure)
             floor = noise_floor(cap)
             t = time.perf_counter()
             result = reconstruct_gmm(cap, progress_bar=False)
@@ -144,6 +275,8 @@ def main() -> None:
             oracle = reconstruct_gmm(cap, with_own_components(base, _centre(truth.data), args.own_components),
                                      progress_bar=False)
             print(row("oracle", oracle, truth, floor, time.perf_counter() - t), flush=True)
+            if args.global_disparity is not None:
+                _global_rows(cap, truth, floor, args.global_disparity, weights, _centre(result.data))
 
 
 if __name__ == "__main__":
