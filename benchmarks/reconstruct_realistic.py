@@ -69,13 +69,14 @@ def parse_capture(name: str) -> dict:
     return dict(shots=int(parts[0]), iso_pattern_kind=parts[1], profile=f"paper-{noise}")
 
 
-def capture_cell(lf, scene: str, name: str, index: int, period):
+def capture_cell(lf, scene: str, name: str, index: int, period, transmittance: str = "uniform"):
     """The capture ``name`` (:func:`parse_capture`) of ``lf``, the scene ``scene``'s ``index``-th seed (the scene's
-    seed + 1000 ``index``), mask period ``period`` (None: not periodic)."""
+    seed + 1000 ``index``), mask period ``period`` (None: not periodic) and transmittances ``transmittance``."""
     from lfproc.camera.simulate import simulate_capture
 
     seed = quality_scenes.SETS["all"][scene][-1] + 1000 * index
-    return simulate_capture(lf, mask_period=period, random_state=seed, **parse_capture(name))
+    return simulate_capture(lf, mask_period=period, mask_transmittance=transmittance, random_state=seed,
+                            **parse_capture(name))
 
 
 def reconstruct_capture(cap, method: str, options: dict):
@@ -118,6 +119,8 @@ def main() -> None:
     parser.add_argument("--size", type=int, nargs=2, default=[434, 625], metavar=("H", "W"))
     parser.add_argument("--captures", default="2 random,1 random")
     parser.add_argument("--mask-period", default="4", help="mask tile period in pixels, or 'none' (default 4)")
+    parser.add_argument("--mask-transmittance", choices=("uniform", "binary"), default="uniform",
+                        help="the mask's transmittances (lfproc simulate --mask-transmittance; default uniform)")
     parser.add_argument("--data", type=Path, default=quality_scenes.DATA)
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--save", type=Path, default=None, help="write truth and results as .npy here (for pictures)")
@@ -138,7 +141,8 @@ def main() -> None:
     options = json.loads(args.options)
     names = [c.strip() for c in args.captures.split(",")]
     scenes = args.scenes.split(",") if args.scenes else list(quality_scenes.SETS[args.set])
-    print(f"{args.method} {options}, 5x5 x {args.size[0]}x{args.size[1]}, mask period {period}; per cell: PU21-PSNR dB / SSIM / worst decade "
+    print(f"{args.method} {options}, 5x5 x {args.size[0]}x{args.size[1]}, mask period {period}, "
+          f"{args.mask_transmittance} transmittances; per cell: PU21-PSNR dB / SSIM / worst decade "
           "(stops) / zeros / highlight energy / detail ratio / seconds")
     print("| scene | stops | " + " | ".join(names) + " |")
     print("|---|---|" + "---|" * len(names))
@@ -154,7 +158,7 @@ def main() -> None:
         for name in names:
             runs = []
             for i in range(args.first_seed, args.first_seed + args.seeds):
-                cap = capture_cell(lf, scene, name, i, period)
+                cap = capture_cell(lf, scene, name, i, period, args.mask_transmittance)
                 t = time.perf_counter()
                 out = reconstruct_capture(cap, args.method, options)
                 seconds = time.perf_counter() - t

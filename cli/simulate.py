@@ -50,6 +50,8 @@ def register(sub, common) -> None:
     p.add_argument("--exposure-s", type=float, default=0.004, help="exposure time of a shot in seconds")
     p.add_argument("--gamma", type=float, default=None, help="power-law sensor response (default: the profile's)")
     p.add_argument("--mask", choices=("random", "shifted"), default="random", help="mask model (default random)")
+    p.add_argument("--mask-transmittance", choices=("uniform", "binary"), default="uniform",
+                   help="the mask's transmittances: every level equally likely (the paper's model, default) or 0/1")
     p.add_argument("--mask-period", type=_period, default="default", metavar="N|none",
                    help="tile the mask with this period in pixels (default 4 for a random mask, none for shifted: "
                         "patches share one operator; 'none': one code per pixel, minutes to reconstruct at the Lytro "
@@ -91,6 +93,7 @@ def run(args) -> int:
         exposure_s=args.exposure_s,
         gamma=args.gamma,
         mask=args.mask,
+        mask_transmittance=args.mask_transmittance,
         mask_period=args.mask_period,
         baseline=args.baseline,
         relative_exposures=rel,

@@ -49,7 +49,7 @@ API = {
         "check_slopes", "focal_stack", "refocus",
     ],
     "lfproc.camera": [
-        "BASELINES", "Capture", "CaptureDesign", "DEFAULT_ISOS", "ISO_PATTERNS", "MASK_KINDS", "MaskCode",
+        "BASELINES", "Capture", "CaptureDesign", "DEFAULT_ISOS", "ISO_PATTERNS", "MASK_KINDS", "MASK_TRANSMITTANCES", "MaskCode",
         "NOISE_PROFILES", "ProjectionOperator", "build_operator", "capture_from_raw", "describe_capture",
         "is_capture_file", "iso_pattern", "load_capture", "make_mask", "noise_floor", "observations",
         "simulate_capture", "simulate_file",

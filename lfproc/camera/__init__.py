@@ -20,12 +20,12 @@ Imports go one way: ``projection``, ``iso`` <- ``capture`` <- ``simulate``.
 from .capture import (Capture, capture_from_raw, describe_capture, is_capture_file, load_capture, noise_floor,
                       observations)
 from .iso import DEFAULT_ISOS, ISO_PATTERNS, iso_pattern
-from .projection import MASK_KINDS, MaskCode, ProjectionOperator, build_operator, make_mask
+from .projection import MASK_KINDS, MASK_TRANSMITTANCES, MaskCode, ProjectionOperator, build_operator, make_mask
 from .simulate import BASELINES, NOISE_PROFILES, CaptureDesign, simulate_capture, simulate_file
 
 __all__ = [
     "simulate_capture", "CaptureDesign", "simulate_file", "BASELINES", "NOISE_PROFILES",
     "Capture", "load_capture", "is_capture_file", "describe_capture", "observations", "noise_floor", "capture_from_raw",
-    "MASK_KINDS", "MaskCode", "make_mask", "ProjectionOperator", "build_operator",
+    "MASK_KINDS", "MASK_TRANSMITTANCES", "MaskCode", "make_mask", "ProjectionOperator", "build_operator",
     "ISO_PATTERNS", "DEFAULT_ISOS", "iso_pattern",
 ]

@@ -53,6 +53,7 @@ from ..errors import InputError, ShapeError
 
 __all__ = [
     "MASK_KINDS",
+    "MASK_TRANSMITTANCES",
     "CFA_PATTERNS",
     "MaskCode",
     "ProjectionOperator",
@@ -70,6 +71,8 @@ __all__ = [
 ]
 
 MASK_KINDS = ("random", "shifted")
+#: Distributions of a mask's transmittances (:func:`make_mask`): uniform over the levels, or 0 / 1 (binary).
+MASK_TRANSMITTANCES = ("uniform", "binary")
 CFA_PATTERNS = ("RGGB", "GRBG", "GBRG", "BGGR")
 #: Number of transmittance levels of the masks :func:`make_mask` draws.
 MASK_LEVELS = 256
@@ -252,11 +255,17 @@ def make_mask(
     period: int | None = None,
     shift: int = 1,
     random_state=None,
+    transmittance: str = "uniform",
 ) -> MaskCode:
-    """Draw mask codes for ``shots`` shots (each its own code), transmittance uniform in [0, 1].
+    """Draw mask codes for ``shots`` shots (each its own code), transmittances i.i.d. with mean 1/2.
 
     Transmittances take the 256 levels ``k / 255`` (a printed mask has finitely many
-    levels), so capture files store them exactly as 8-bit codes (:func:`encode_levels`).
+    levels), so capture files store them exactly as 8-bit codes (:func:`encode_levels`):
+    ``transmittance="uniform"`` draws every level with the same probability (the paper's model),
+    ``"binary"`` draws 0 or 1 with probability 1/2 each (a chrome-on-glass mask). Both pass half the
+    light on average; the binary code's variance is 1/4 against 1/12, and with it the part of a
+    pixel's coded sum over the views that tells neighbouring pixels apart (at a disparity
+    other than 0 each sum mixes ``V x U`` pixels; the mean code only blurs them).
 
     Parameters
     ----------
@@ -270,12 +279,22 @@ def make_mask(
     shift : int
         Mask shift per angular step for ``shifted``.
     random_state : int, Generator or None
+    transmittance : {"uniform", "binary"}, default "uniform"
+        The transmittances' distribution (:data:`MASK_TRANSMITTANCES`).
 
     Returns
     -------
     MaskCode
+
+    Examples
+    --------
+    >>> from lfproc.camera import make_mask
+    >>> m = make_mask(shots=1, views=(5, 5), size=(8, 8), period=4, transmittance="binary", random_state=0)
+    >>> sorted(set(m.codes.ravel().tolist()))
+    [0.0, 1.0]
     """
     check_choice("mask", kind, MASK_KINDS)
+    check_choice("mask transmittance", transmittance, MASK_TRANSMITTANCES)
     shots = _as_int(shots, "shots", low=1)
     nv, nu = _pair(views, "mask views (V, U)")
     size = _pair(size, "mask size (H, W)")
@@ -285,13 +304,18 @@ def make_mask(
     rng = check_random_state(random_state)
     if kind == "random":
         tile = (period, period) if period is not None else tuple(size)
-        codes = decode_levels(rng.integers(0, MASK_LEVELS, (shots, nv, nu, *tile, channels), dtype=np.uint8))
+        shape = (shots, nv, nu, *tile, channels)
     else:
         if period is not None:
             base = (period, period)
         else:
             base = (size[0] + shift * (nv - 1), size[1] + shift * (nu - 1))
-        codes = decode_levels(rng.integers(0, MASK_LEVELS, (shots, *base, channels), dtype=np.uint8))
+        shape = (shots, *base, channels)
+    if transmittance == "binary":
+        levels = rng.integers(0, 2, shape, dtype=np.uint8) * np.uint8(MASK_LEVELS - 1)
+    else:
+        levels = rng.integers(0, MASK_LEVELS, shape, dtype=np.uint8)
+    codes = decode_levels(levels)
     return MaskCode(kind=kind, codes=freeze(codes), period=period, shift=shift)
 
 

@@ -81,7 +81,7 @@ from .capture import MAX_SHOTS, Capture, _warn_saturation, capture_streams, file
 from ..sensor import expose, load_profile
 from ..errors import InputError, ShapeError, ViewCountWarning, option_name
 from ..lightfield import LightField, clean_nonfinite
-from .projection import MASK_KINDS, build_operator, make_mask
+from .projection import MASK_KINDS, MASK_TRANSMITTANCES, build_operator, make_mask
 from .. import _untrusted as ut
 from ..dictionary import SHIPPED
 from ..dictionary._files import dictionary_patch
@@ -215,6 +215,7 @@ class CaptureDesign:
     exposure_s: float = 0.004
     gamma: float | None = None
     mask: str = "random"
+    mask_transmittance: str = "uniform"
     mask_period: int | None | str = "default"
     mask_shift: int = 1
     block_px: int = DEFAULT_BLOCK_PX
@@ -252,6 +253,7 @@ def _checked_design(design: CaptureDesign, profile, shape) -> CaptureDesign:
         if gamma < 1:
             raise InputError(f"gamma: expected a value >= 1, got {gamma}")
     check_choice("mask", design.mask, MASK_KINDS)
+    check_choice("mask_transmittance", design.mask_transmittance, MASK_TRANSMITTANCES)
     if design.baseline is not None:
         check_choice("baseline", design.baseline, BASELINES)
     shots, relative_exposures = design.shots, design.relative_exposures
@@ -343,6 +345,7 @@ def _parameters(design: CaptureDesign, lf, *, seed, profile, iso_info, rel, mask
         "relative_exposures": rel,
         "gamma": design.gamma,
         "mask": design.mask,
+        "mask_transmittance": design.mask_transmittance,
         "mask_period": mask_period,
         "mask_shift": int(design.mask_shift),
         "baseline": design.baseline,
@@ -386,6 +389,9 @@ def simulate_capture(
     gamma : float, optional
         Power-law response (default: the profile's).
     mask : {"random", "shifted"}, default "random"
+    mask_transmittance : {"uniform", "binary"}, default "uniform"
+        The mask's transmittances: every level equally likely (the paper's model) or 0 / 1
+        (:func:`lfproc.camera.make_mask`).
     mask_period : int, None or "default", default "default"
         Tile the mask with this period (pixels); lets patches share one operator. ``"default"``:
         :data:`DEFAULT_MASK_PERIOD` (4) for a ``random`` mask, none for ``shifted``; None: no
@@ -455,7 +461,7 @@ def simulate_capture(
     scale, scale_rule, reference_exposure_s = _scale_of(design, data, float(iso_maps.min()))
     mask_period = _mask_period(design)
     code = make_mask(design.mask, shots=shots, views=(nv, nu), size=(h, w), period=mask_period,
-                     shift=design.mask_shift, random_state=mask_rng)
+                     shift=design.mask_shift, random_state=mask_rng, transmittance=design.mask_transmittance)
     cfa = profile.cfa_pattern
     op = build_operator(code, views=(nv, nu), size=(h, w), cfa_pattern=cfa)
     irradiance = op.forward(data) * np.float32(scale)  # (S, H, W) e-/s
