@@ -69,14 +69,15 @@ def parse_capture(name: str) -> dict:
     return dict(shots=int(parts[0]), iso_pattern_kind=parts[1], profile=f"paper-{noise}")
 
 
-def capture_cell(lf, scene: str, name: str, index: int, period, transmittance: str = "uniform"):
+def capture_cell(lf, scene: str, name: str, index: int, period, transmittance: str | None = None):
     """The capture ``name`` (:func:`parse_capture`) of ``lf``, the scene ``scene``'s ``index``-th seed (the scene's
-    seed + 1000 ``index``), mask period ``period`` (None: not periodic) and transmittances ``transmittance``."""
-    from lfproc.camera.simulate import simulate_capture
+    seed + 1000 ``index``), mask period ``period`` (None: not periodic) and transmittances ``transmittance`` (None:
+    ``lfproc simulate``'s default)."""
+    from lfproc.camera.simulate import DEFAULT_MASK_TRANSMITTANCE, simulate_capture
 
     seed = quality_scenes.SETS["all"][scene][-1] + 1000 * index
-    return simulate_capture(lf, mask_period=period, mask_transmittance=transmittance, random_state=seed,
-                            **parse_capture(name))
+    return simulate_capture(lf, mask_period=period, mask_transmittance=transmittance or DEFAULT_MASK_TRANSMITTANCE,
+                            random_state=seed, **parse_capture(name))
 
 
 def reconstruct_capture(cap, method: str, options: dict):
@@ -119,8 +120,8 @@ def main() -> None:
     parser.add_argument("--size", type=int, nargs=2, default=[434, 625], metavar=("H", "W"))
     parser.add_argument("--captures", default="2 random,1 random")
     parser.add_argument("--mask-period", default="4", help="mask tile period in pixels, or 'none' (default 4)")
-    parser.add_argument("--mask-transmittance", choices=("uniform", "binary"), default="uniform",
-                        help="the mask's transmittances (lfproc simulate --mask-transmittance; default uniform)")
+    parser.add_argument("--mask-transmittance", choices=("uniform", "binary"), default=None,
+                        help="the mask's transmittances (lfproc simulate --mask-transmittance; default: its default)")
     parser.add_argument("--data", type=Path, default=quality_scenes.DATA)
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--save", type=Path, default=None, help="write truth and results as .npy here (for pictures)")
@@ -142,7 +143,7 @@ def main() -> None:
     names = [c.strip() for c in args.captures.split(",")]
     scenes = args.scenes.split(",") if args.scenes else list(quality_scenes.SETS[args.set])
     print(f"{args.method} {options}, 5x5 x {args.size[0]}x{args.size[1]}, mask period {period}, "
-          f"{args.mask_transmittance} transmittances; per cell: PU21-PSNR dB / SSIM / worst decade "
+          f"{args.mask_transmittance or 'default'} mask transmittances; per cell: PU21-PSNR dB / SSIM / worst decade "
           "(stops) / zeros / highlight energy / detail ratio / seconds")
     print("| scene | stops | " + " | ".join(names) + " |")
     print("|---|---|" + "---|" * len(names))

@@ -55,7 +55,8 @@ def _fail(message: str) -> None:
     raise SystemExit(2)
 
 
-def dump(scene: str, out: Path, size: tuple[int, int], capture: str, seed_index: int) -> None:
+def dump(scene: str, out: Path, size: tuple[int, int], capture: str, seed_index: int,
+         transmittance: str | None = None) -> None:
     import lfproc.recon._gmm as gmm
 
     if scene not in quality_scenes.SETS["all"]:
@@ -63,7 +64,7 @@ def dump(scene: str, out: Path, size: tuple[int, int], capture: str, seed_index:
     if out.exists():
         _fail(f"{out}: exists; remove it first")
     lf = quality_scenes.make_scene(scene, size)
-    cap = capture_cell(lf, scene, capture, seed_index, 4)
+    cap = capture_cell(lf, scene, capture, seed_index, 4, transmittance)
     record = {}
 
     def keep(first, T, W, W_bound, cap_, shears, margin, pool=None):  # refit_lights' arguments, then stop
@@ -214,6 +215,8 @@ def main() -> None:
     p.add_argument("--size", type=int, nargs=2, default=[434, 625], metavar=("H", "W"))
     p.add_argument("--capture", default="2 random")
     p.add_argument("--seed-index", type=int, default=0)
+    p.add_argument("--mask-transmittance", choices=("uniform", "binary"), default=None,
+                   help="the mask's transmittances (default: lfproc simulate's)")
     p = sub.add_parser("run", help="refit a saved first estimate, with settings overridden")
     p.add_argument("path", type=Path)
     p.add_argument("settings", nargs="*")
@@ -230,7 +233,7 @@ def main() -> None:
     if args.command == "dump":
         if args.seed_index < 0:
             parser.error(f"--seed-index: expected a number >= 0, got {args.seed_index}")
-        dump(args.scene, args.out, tuple(args.size), args.capture, args.seed_index)
+        dump(args.scene, args.out, tuple(args.size), args.capture, args.seed_index, args.mask_transmittance)
     elif args.command == "bound":
         bound(args.path, args.top, args.left, args.size)
     else:

@@ -10,7 +10,8 @@ from ._common import add_json, add_value_policies, add_output, emit, parse_float
 from lfproc._shared.validation import check_count
 from lfproc.errors import InputError
 from lfproc.camera.capture import MAX_SHOTS
-from lfproc.camera.simulate import NOISE_PROFILES, simulate_file
+from lfproc.camera.projection import MASK_TRANSMITTANCES
+from lfproc.camera.simulate import DEFAULT_MASK_TRANSMITTANCE, NOISE_PROFILES, simulate_file
 
 
 def _period(text: str):
@@ -50,8 +51,9 @@ def register(sub, common) -> None:
     p.add_argument("--exposure-s", type=float, default=0.004, help="exposure time of a shot in seconds")
     p.add_argument("--gamma", type=float, default=None, help="power-law sensor response (default: the profile's)")
     p.add_argument("--mask", choices=("random", "shifted"), default="random", help="mask model (default random)")
-    p.add_argument("--mask-transmittance", choices=("uniform", "binary"), default="uniform",
-                   help="the mask's transmittances: every level equally likely (the paper's model, default) or 0/1")
+    p.add_argument("--mask-transmittance", choices=MASK_TRANSMITTANCES, default=DEFAULT_MASK_TRANSMITTANCE,
+                   help=f"the mask's transmittances (default {DEFAULT_MASK_TRANSMITTANCE}): every level equally likely "
+                        "(uniform, the paper's) or 0/1 (binary: finer detail, small lights worse)")
     p.add_argument("--mask-period", type=_period, default="default", metavar="N|none",
                    help="tile the mask with this period in pixels (default 4 for a random mask, none for shifted: "
                         "patches share one operator; 'none': one code per pixel, minutes to reconstruct at the Lytro "

@@ -53,6 +53,20 @@ share one operator per phase; without tiling (``mask_period=None``: one code per
 quality is the same on the realistic bench (27.25 against 27.11 dB at 96 x 128), but every patch
 has its own operator: minutes instead of seconds at the Lytro size.
 
+Mask transmittances (``mask_transmittance``): ``"uniform"`` (the default, the paper's model: every level of
+``[0, 1]`` equally likely) or ``"binary"`` (0 or 1). Both pass half the light; they trade detail against small
+lights. At a disparity other than 0 a pixel's coded sum mixes ``V x U`` neighbouring pixels of the centre view;
+the mean code only blurs them, and what tells them apart is the code's deviation from its mean, of variance 1/4
+for binary codes against 1/12 for uniform ones: binary codes resolve finer detail. What uniform codes have and
+binary ones lack: small transmittances, through which a light a few pixels wide is seen unsaturated by the
+shots at high ISO. Measured (``benchmarks/reconstruct_realistic.py --method gmm --mask-transmittance ...``,
+medium noise, seed 0; ``docs/benchmarks.md``, stop 30): 2 random shots, uniform -> binary, tune scenes at the
+Lytro size 37.95 -> 38.46 dB (desk-cannon +0.92, forest-stilllife +1.08; sunset-carrots -0.48, its sun of six
+pixels refitted worse, worst decade 0.20 -> 0.72 stops), at 96 x 128 (seeds 0-2) 28.03 -> 29.03 dB; test scenes
+41.89 -> 42.94 dB, detail 0.50 -> 0.42; but city-interior's lamp with one shot, row or block ISO loses
+(one shot 53.07 -> 50.76 dB; block keeps 0.47 of the brightest 1 %'s energy), and the lights refit, tuned on
+uniform codes, fails several of its known answers with binary ones. Hence uniform stays the default.
+
 Baselines (the paper's section III-B and Table IV): ``baseline="individual-iso"`` takes one shot per ISO of the
 set, each with one global ISO; ``baseline="bracketing"`` takes 2, 3 or 4 shots at the lowest
 ISO of the set with relative exposures ``[0.5, 8]``, ``[0.5, 2, 8]``, ``[0.5, 2, 4, 8]``
@@ -98,6 +112,7 @@ __all__ = [
     "auto_radiance_scale",
     "REFERENCE_EXPOSURE_S",
     "DEFAULT_MASK_PERIOD",
+    "DEFAULT_MASK_TRANSMITTANCE",
     "simulate_capture",
     "CaptureDesign",
     "simulate_file",
@@ -134,6 +149,10 @@ def _saturation_electrons(profile, iso: float) -> float:
 #: Default tile of a random mask (pixels): patches of a phase share one operator, so a Lytro-size capture
 #: reconstructs in seconds (benchmarks/reconstruct_realistic.py; lfproc.recon.reconstruct_gmm needs a tile).
 DEFAULT_MASK_PERIOD = 4
+
+#: Default distribution of the mask's transmittances (:func:`lfproc.camera.make_mask`; module notes "Mask
+#: transmittances"): the paper's uniform codes; "binary" resolves finer detail and loses small lights.
+DEFAULT_MASK_TRANSMITTANCE = "uniform"
 
 #: Exposure (s) at which the automatic radiance scale makes the brightest expected signal saturate.
 REFERENCE_EXPOSURE_S = 0.004
@@ -215,7 +234,7 @@ class CaptureDesign:
     exposure_s: float = 0.004
     gamma: float | None = None
     mask: str = "random"
-    mask_transmittance: str = "uniform"
+    mask_transmittance: str = DEFAULT_MASK_TRANSMITTANCE
     mask_period: int | None | str = "default"
     mask_shift: int = 1
     block_px: int = DEFAULT_BLOCK_PX
@@ -390,16 +409,13 @@ def simulate_capture(
         Power-law response (default: the profile's).
     mask : {"random", "shifted"}, default "random"
     mask_transmittance : {"uniform", "binary"}, default "uniform"
-        The mask's transmittances: every level equally likely (the paper's model) or 0 / 1
-        (:func:`lfproc.camera.make_mask`).
+        Every level equally likely (the paper's) or 0 / 1: finer detail, small lights worse (module notes).
     mask_period : int, None or "default", default "default"
-        Tile the mask with this period (pixels); lets patches share one operator. ``"default"``:
-        :data:`DEFAULT_MASK_PERIOD` (4) for a ``random`` mask, none for ``shifted``; None: no
-        tiling (module documentation).
+        Tile the mask with this period (pixels); ``"default"``: :data:`DEFAULT_MASK_PERIOD` (4) for
+        ``random``, none for ``shifted``; None: no tiling (module documentation).
     mask_shift : int, default 1
         Pixels of mask shift per view step (``shifted``).
-    block_px : int, default 8
-        Block size of the ``block`` ISO pattern.
+    block_px : int, default 8 (the ``block`` ISO pattern's)
     baseline : {None, "individual-iso", "bracketing"}, default None
     relative_exposures : sequence of float, optional
         Exposure of each shot relative to ``exposure_s`` (default 1, or the bracketing table).
