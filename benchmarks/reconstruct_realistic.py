@@ -120,7 +120,7 @@ def main() -> None:
     parser.add_argument("--size", type=int, nargs=2, default=[434, 625], metavar=("H", "W"))
     parser.add_argument("--captures", default="2 random,1 random")
     parser.add_argument("--mask-period", default="4", help="mask tile period in pixels, or 'none' (default 4)")
-    parser.add_argument("--mask-transmittance", choices=("uniform", "binary"), default=None,
+    parser.add_argument("--mask-transmittance", choices=("uniform", "binary", "mixed"), default=None,
                         help="the mask's transmittances (lfproc simulate --mask-transmittance; default: its default)")
     parser.add_argument("--data", type=Path, default=quality_scenes.DATA)
     parser.add_argument("--json", type=Path, default=None)

@@ -215,7 +215,7 @@ def main() -> None:
     p.add_argument("--size", type=int, nargs=2, default=[434, 625], metavar=("H", "W"))
     p.add_argument("--capture", default="2 random")
     p.add_argument("--seed-index", type=int, default=0)
-    p.add_argument("--mask-transmittance", choices=("uniform", "binary"), default=None,
+    p.add_argument("--mask-transmittance", choices=("uniform", "binary", "mixed"), default=None,
                    help="the mask's transmittances (default: lfproc simulate's)")
     p = sub.add_parser("run", help="refit a saved first estimate, with settings overridden")
     p.add_argument("path", type=Path)

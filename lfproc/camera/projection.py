@@ -54,6 +54,7 @@ from ..errors import InputError, ShapeError
 __all__ = [
     "MASK_KINDS",
     "MASK_TRANSMITTANCES",
+    "MIXED_SHARES",
     "CFA_PATTERNS",
     "MaskCode",
     "ProjectionOperator",
@@ -71,8 +72,11 @@ __all__ = [
 ]
 
 MASK_KINDS = ("random", "shifted")
-#: Distributions of a mask's transmittances (:func:`make_mask`): uniform over the levels, or 0 / 1 (binary).
-MASK_TRANSMITTANCES = ("uniform", "binary")
+#: Distributions of a mask's transmittances (:func:`make_mask`): uniform over the levels, 0 / 1 (binary), or mixed:
+#: 1, 0 or a small level (below 1/4) with probabilities MIXED_SHARES.
+MASK_TRANSMITTANCES = ("uniform", "binary", "mixed")
+#: Shares of the codes 1, 0 and a level drawn uniformly from 0 .. 63 / 255 in a ``"mixed"`` mask (mean 0.4997).
+MIXED_SHARES = (0.475, 0.325, 0.2)
 CFA_PATTERNS = ("RGGB", "GRBG", "GBRG", "BGGR")
 #: Number of transmittance levels of the masks :func:`make_mask` draws.
 MASK_LEVELS = 256
@@ -262,10 +266,12 @@ def make_mask(
     Transmittances take the 256 levels ``k / 255`` (a printed mask has finitely many
     levels), so capture files store them exactly as 8-bit codes (:func:`encode_levels`):
     ``transmittance="uniform"`` draws every level with the same probability (the paper's model),
-    ``"binary"`` draws 0 or 1 with probability 1/2 each (a chrome-on-glass mask). Both pass half the
-    light on average; the binary code's variance is 1/4 against 1/12, and with it the part of a
-    pixel's coded sum over the views that tells neighbouring pixels apart (at a disparity
-    other than 0 each sum mixes ``V x U`` pixels; the mean code only blurs them).
+    ``"binary"`` draws 0 or 1 with probability 1/2 each (a chrome-on-glass mask), ``"mixed"`` 1, 0
+    or a small level (``k / 255``, ``k < 64``) with the probabilities :data:`MIXED_SHARES`. All pass
+    half the light on average; the code's variance (1/12 uniform, 1/4 binary, 0.23 mixed) is the
+    part of a pixel's coded sum over the views that tells neighbouring pixels apart (at a disparity
+    other than 0 each sum mixes ``V x U`` pixels; the mean code only blurs them), and the small
+    levels let a light of a few pixels be seen unsaturated (binary codes have none).
 
     Parameters
     ----------
@@ -279,7 +285,7 @@ def make_mask(
     shift : int
         Mask shift per angular step for ``shifted``.
     random_state : int, Generator or None
-    transmittance : {"uniform", "binary"}, default "uniform"
+    transmittance : {"uniform", "binary", "mixed"}, default "uniform"
         The transmittances' distribution (:data:`MASK_TRANSMITTANCES`).
 
     Returns
@@ -313,6 +319,11 @@ def make_mask(
         shape = (shots, *base, channels)
     if transmittance == "binary":
         levels = rng.integers(0, 2, shape, dtype=np.uint8) * np.uint8(MASK_LEVELS - 1)
+    elif transmittance == "mixed":
+        u = rng.random(shape)
+        small = rng.integers(0, MASK_LEVELS // 4, shape, dtype=np.uint8)
+        levels = np.where(u < MIXED_SHARES[0], np.uint8(MASK_LEVELS - 1),
+                          np.where(u < MIXED_SHARES[0] + MIXED_SHARES[1], np.uint8(0), small)).astype(np.uint8)
     else:
         levels = rng.integers(0, MASK_LEVELS, shape, dtype=np.uint8)
     codes = decode_levels(levels)

@@ -408,8 +408,8 @@ def simulate_capture(
     gamma : float, optional
         Power-law response (default: the profile's).
     mask : {"random", "shifted"}, default "random"
-    mask_transmittance : {"uniform", "binary"}, default "uniform"
-        Every level equally likely (the paper's) or 0 / 1: finer detail, small lights worse (module notes).
+    mask_transmittance : {"uniform", "binary", "mixed"}, default "uniform"
+        Every level equally likely (the paper's), 0 / 1, or 0 / 1 / small levels (module notes).
     mask_period : int, None or "default", default "default"
         Tile the mask with this period (pixels); ``"default"``: :data:`DEFAULT_MASK_PERIOD` (4) for
         ``random``, none for ``shifted``; None: no tiling (module documentation).
