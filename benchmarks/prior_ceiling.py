@@ -142,9 +142,9 @@ def global_deconvolution(cap, d: int, lam: float, mu: float, *, start=None):
     ``start``)."""
     from scipy.sparse.linalg import LinearOperator, cg
 
-    from lfproc.camera.capture import observations
+    from lfproc.camera.capture import READ_FLOOR_E, observations
 
-    obs = observations(cap, variance_from="local", read_floor_e=1.0, warn_saturation=False)
+    obs = observations(cap, variance_from="local", read_floor_e=READ_FLOOR_E, warn_saturation=False)
     op = cap.operator(dtype=np.float64)
     w2 = np.where(np.asarray(obs.saturated), 0.0, np.asarray(obs.weight, float) ** 2)
     k = float(cap.radiance_scale or 1.0)
@@ -200,11 +200,8 @@ def _capture(full, truth, name: str, cap_name: str, scene_exposure: bool):
     """The crop's capture; with ``scene_exposure`` at the radiance scale of the whole scene's capture."""
     if not scene_exposure:
         return capture_cell(truth, name, cap_name, 0, 4)
-    from lfproc.camera.simulate import simulate_capture
-
     scale = capture_cell(full, name, cap_name, 0, 4).radiance_scale
-    seed = quality_scenes.SETS["all"][name][-1]  # capture_cell's seed at index 0
-    return simulate_capture(truth, mask_period=4, random_state=seed, radiance_scale=scale, **parse_capture(cap_name))
+    return capture_cell(truth, name, cap_name, 0, 4, radiance_scale=scale)
 
 
 def _global_rows(cap, truth, floor, d, weights, start) -> None:

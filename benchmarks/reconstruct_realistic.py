@@ -69,15 +69,16 @@ def parse_capture(name: str) -> dict:
     return dict(shots=int(parts[0]), iso_pattern_kind=parts[1], profile=f"paper-{noise}")
 
 
-def capture_cell(lf, scene: str, name: str, index: int, period, transmittance: str | None = None):
+def capture_cell(lf, scene: str, name: str, index: int, period, transmittance: str | None = None, **design):
     """The capture ``name`` (:func:`parse_capture`) of ``lf``, the scene ``scene``'s ``index``-th seed (the scene's
     seed + 1000 ``index``), mask period ``period`` (None: not periodic) and transmittances ``transmittance`` (None:
-    ``lfproc simulate``'s default)."""
-    from lfproc.camera.simulate import DEFAULT_MASK_TRANSMITTANCE, simulate_capture
+    ``lfproc simulate``'s default); ``design``: more fields of ``CaptureDesign`` (``radiance_scale``...)."""
+    from lfproc.camera.simulate import simulate_capture
 
     seed = quality_scenes.SETS["all"][scene][-1] + 1000 * index
-    return simulate_capture(lf, mask_period=period, mask_transmittance=transmittance or DEFAULT_MASK_TRANSMITTANCE,
-                            random_state=seed, **parse_capture(name))
+    if transmittance is not None:
+        design["mask_transmittance"] = transmittance
+    return simulate_capture(lf, mask_period=period, random_state=seed, **parse_capture(name), **design)
 
 
 def reconstruct_capture(cap, method: str, options: dict):
@@ -112,6 +113,7 @@ def combine(runs: list[dict]) -> dict:
 
 
 def main() -> None:
+    from lfproc.camera import MASK_TRANSMITTANCES
     from lfproc.camera.capture import noise_floor
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -120,7 +122,7 @@ def main() -> None:
     parser.add_argument("--size", type=int, nargs=2, default=[434, 625], metavar=("H", "W"))
     parser.add_argument("--captures", default="2 random,1 random")
     parser.add_argument("--mask-period", default="4", help="mask tile period in pixels, or 'none' (default 4)")
-    parser.add_argument("--mask-transmittance", choices=("uniform", "binary", "mixed"), default=None,
+    parser.add_argument("--mask-transmittance", choices=MASK_TRANSMITTANCES, default=None,
                         help="the mask's transmittances (lfproc simulate --mask-transmittance; default: its default)")
     parser.add_argument("--data", type=Path, default=quality_scenes.DATA)
     parser.add_argument("--json", type=Path, default=None)

@@ -207,6 +207,8 @@ def bound(path: Path, top: int, left: int, size: int) -> None:
 
 
 def main() -> None:
+    from lfproc.camera import MASK_TRANSMITTANCES
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("dump", help="save the refit's input for a scene and capture")
@@ -215,7 +217,7 @@ def main() -> None:
     p.add_argument("--size", type=int, nargs=2, default=[434, 625], metavar=("H", "W"))
     p.add_argument("--capture", default="2 random")
     p.add_argument("--seed-index", type=int, default=0)
-    p.add_argument("--mask-transmittance", choices=("uniform", "binary", "mixed"), default=None,
+    p.add_argument("--mask-transmittance", choices=MASK_TRANSMITTANCES, default=None,
                    help="the mask's transmittances (default: lfproc simulate's)")
     p = sub.add_parser("run", help="refit a saved first estimate, with settings overridden")
     p.add_argument("path", type=Path)

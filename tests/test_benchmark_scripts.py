@@ -21,6 +21,9 @@ def _run(*argv: str) -> subprocess.CompletedProcess:
 @pytest.mark.parametrize("argv, expected", [
     (("reconstruct_realistic.py", "--first-seed", "-1"), "--first-seed: expected a number >= 0, got -1"),
     (("reconstruct_realistic.py", "--seeds", "0"), "--seeds: expected a number of captures >= 1, got 0"),
+    (("reconstruct_realistic.py", "--mask-transmittance", "grey"), "argument --mask-transmittance: invalid choice: 'grey'"),
+    (("refit_stage.py", "dump", "x", "/tmp/x.pkl", "--mask-transmittance", "grey"),
+     "argument --mask-transmittance: invalid choice: 'grey'"),
     (("train_patch_model.py", "--components", "4", "--orientations", "3"),
      "--orientations: expected 0 .. --components - 2 = 2, got 3"),
     (("train_patch_model.py", "--orientations", "-1"), "--orientations: expected 0 .. --components - 2 = 2, got -1"),

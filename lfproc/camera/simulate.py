@@ -62,9 +62,9 @@ binary codes lack: small transmittances, through which a light a few pixels wide
 at high ISO. Measured (``benchmarks/reconstruct_realistic.py --method gmm --mask-transmittance ...``, 2 random
 shots, medium noise, seed 0; ``docs/benchmarks.md``, stop 30), uniform / binary / mixed: tune scenes at the Lytro
 size 37.95 / 38.46 / 38.73 dB; test scenes 41.89 / 42.94 / 42.72 dB; binary codes lose city-interior's lamp with
-one shot (53.07 -> 50.76 dB) and with block ISO (0.47 of the brightest 1 %'s energy). The default stays the paper's: the
-lights refit's known answers (``tests/recon/test_lights.py``) were measured with uniform codes and several fail
-with the others; the other captures were not all measured with mixed codes.
+one shot (53.07 -> 50.76 dB) and with block ISO (0.47 of the brightest 1 %'s energy), mixed codes with one shot
+too (41.77 dB). The default stays the paper's: the lights refit's known answers (``tests/recon/test_lights.py``)
+were measured with uniform codes and several fail with the others.
 
 Baselines (the paper's section III-B and Table IV): ``baseline="individual-iso"`` takes one shot per ISO of the
 set, each with one global ISO; ``baseline="bracketing"`` takes 2, 3 or 4 shots at the lowest
