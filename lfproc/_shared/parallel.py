@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+import ast
 import contextlib
+import functools
 import os
+import sys
 
 import numpy as np
 
 from ..errors import InputError
 from .deps import require
 
-__all__ = ["available_cpus", "max_workers", "realign", "dask_client"]
+__all__ = ["available_cpus", "max_workers", "realign", "dask_client", "can_start_processes"]
 
 
 def available_cpus() -> int:
@@ -37,6 +40,8 @@ def realign(value):
         return value.copy() if value.ctypes.data % 16 else value
     if isinstance(value, dict):
         return {k: realign(v) for k, v in value.items()}
+    if isinstance(value, tuple) and hasattr(value, "_make"):  # a named tuple
+        return value._make(realign(v) for v in value)
     if isinstance(value, (list, tuple)):
         return type(value)(realign(v) for v in value)
     return value
@@ -71,3 +76,41 @@ def dask_client(*, scheduler: str | None, workers: int | None, jobs: int):
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def can_start_processes() -> bool:
+    """Whether worker processes (``forkserver`` or ``spawn``) can start without running the caller's script again.
+
+    Such a worker imports the main module (as ``__mp_main__``): a script runs again in every worker unless its code
+    sits under ``if __name__ == "__main__":``. True for an interactive session or a notebook (no main file),
+    ``python -m`` of a package's ``__main__`` (not imported), and a main script with that guard at its top level
+    (the ``lfproc`` command, pytest, the benchmarks); False for a script without it, a main file that cannot be read,
+    or a frozen executable, where lfproc keeps to threads.
+    """
+    main = sys.modules.get("__main__")
+    if getattr(sys, "frozen", False):
+        return False
+    name = getattr(getattr(main, "__spec__", None), "name", None)
+    if name is not None:
+        return name == "__main__" or name.endswith(".__main__")
+    path = getattr(main, "__file__", None)
+    return True if path is None else _guarded(os.path.abspath(path))
+
+
+@functools.lru_cache(maxsize=8)
+def _guarded(path: str) -> bool:
+    """Whether the Python file ``path`` has ``if __name__ == "__main__":`` at its top level."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            tree = ast.parse(f.read())
+    except (OSError, SyntaxError, UnicodeDecodeError, ValueError):
+        return False
+    for node in tree.body:
+        test = node.test if isinstance(node, ast.If) else None
+        if isinstance(test, ast.Compare) and len(test.ops) == 1 and isinstance(test.ops[0], ast.Eq):
+            sides = [test.left, test.comparators[0]]
+            names = {s.id for s in sides if isinstance(s, ast.Name)}
+            values = {s.value for s in sides if isinstance(s, ast.Constant)}
+            if names == {"__name__"} and values == {"__main__"}:
+                return True
+    return False

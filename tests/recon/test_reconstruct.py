@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import dataclasses
 import json
 import re
@@ -283,6 +285,40 @@ def test_arrays_a_worker_receives_at_any_offset_are_realigned():
     moved, (same, three) = out["task"][0], out["task"][1]
     assert moved.ctypes.data % 16 == 0 and moved.flags.aligned and np.array_equal(moved, odd)
     assert same is ok and three == 3 and out["x"] == "keep"
+    Pair = namedtuple("Pair", "a b")  # a named tuple (the lights refit's windows) keeps its type
+    pair = realign(Pair(odd, 2))
+    assert isinstance(pair, Pair) and pair.a.ctypes.data % 16 == 0 and np.array_equal(pair.a, odd) and pair.b == 2
+
+
+@pytest.mark.parametrize("source, expected", [
+    ('import lfproc\n\nif __name__ == "__main__":\n    lfproc.main()\n', True),
+    ("if '__main__' == __name__:\n    pass\n", True),
+    ("import lfproc\nlfproc.reconstruct_gmm(None)\n", False),  # a script without the guard
+    ("def f():\n    if __name__ == '__main__':\n        pass\n", False),  # not at the top level
+    ("if __name__ == '__mp_main__':\n    pass\n", False),
+    ("this is not python\n", False),
+])
+def test_worker_processes_start_only_where_the_callers_script_is_guarded(tmp_path, monkeypatch, source, expected):
+    """A forkserver or spawn worker imports the main module: lfproc starts processes only where that does not run
+    the caller's script again (a top-level ``if __name__ == "__main__":``), or where there is no main file (a
+    notebook, ``python -c``) or the main module is a package's ``__main__`` (``python -m``, not imported)."""
+    import sys
+    import types
+
+    from lfproc._shared import parallel
+
+    script = tmp_path / f"script_{abs(hash(source))}.py"
+    script.write_text(source, encoding="utf-8")
+    main = types.ModuleType("__main__")
+    main.__file__, main.__spec__ = str(script), None
+    monkeypatch.setitem(sys.modules, "__main__", main)
+    assert parallel.can_start_processes() is expected
+    del main.__file__  # an interactive session
+    assert parallel.can_start_processes() is True
+    main.__spec__ = types.SimpleNamespace(name="pytest.__main__")  # python -m pytest
+    assert parallel.can_start_processes() is True
+    main.__spec__ = types.SimpleNamespace(name="myscript")  # python -m myscript: imported again as __mp_main__
+    assert parallel.can_start_processes() is False
 
 
 @pytest.mark.slow  # a Dask cluster
