@@ -143,6 +143,7 @@ import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from functools import partial
 from typing import NamedTuple
 from pathlib import Path
 
@@ -510,7 +511,7 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
     chunk : int, default 256
         Patches solved at once (memory: about ``chunk * m^2 * 16`` bytes per thread).
     threads : int, optional
-        Chunks solved at once, one BLAS thread each (default: the CPUs); the output is the same.
+        Chunks (and the lights refit's windows, :mod:`._lights`) solved at once (default: the CPUs); the same output.
     progress_bar : bool, optional
         Show progress (None: when stderr is a terminal).
 
@@ -590,8 +591,8 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
                               data.saturated.any(axis=0)) + lights
             refit = {"windows": 0, "refitted": 0}
             if LIGHTS_REFIT:  # small lights against the measurements themselves (lfproc.recon._lights)
-                shears = [lambda q, d=d: shear_matrix((nv, nu), q, model.margin, d) for d in disparities]
-                acc, refit = refit_lights(acc, *data.raw, capture, shears, model.margin, pool)
+                shears = [partial(shear_matrix, (nv, nu), margin=model.margin, disparity=d) for d in disparities]
+                acc, refit = refit_lights(acc, *data.raw, capture, shears, model.margin, pool, opt["threads"])
     finally:
         bar.close()
     record = {"lfproc_version": __version__, "method": "gmm", "model": repr(model), "model_attrs": model.attrs,

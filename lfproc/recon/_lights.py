@@ -303,17 +303,36 @@ an orange light half a stop over, its neighbours' colour error 1.44 -> 0.91). Th
 41.17, 2 block 41.05 -> 41.06; but 1 random 37.47 -> 37.01 (city-interior 53.07 -> 51.81, night-studio 38.75 ->
 38.30; not traced: one shot sees each pixel's colours through half the measurements, and its windows are ranked
 otherwise, above). Hence from ``RANK_SHOTS`` shots only (with one the refit is as before, to the bit).
+
+Why processes (``refit_lights(..., processes=N)``, stop 31). The windows were solved on the reconstruction's thread
+pool, but a window's fit is many small steps that hold Python's global interpreter lock (scipy's NNLS, 37 % of a
+window's time in a profile of courtyard-candle's first pass, does not release it; Cholesky factors, 15 %, do): two
+threads ran the 27 windows of that pass in 25.1 s against 28.6 s on one (CPU 32.7 s). A pass of at least
+``PROCESS_JOBS`` windows is therefore solved on worker processes (``forkserver``: no fork of a process with live
+threads), each sent only its window's slices (:class:`_Window`), the mask and the shears once per refit, and the
+caller's settings of this module (a benchmark's or a test's overrides reach the workers); the results are added in
+the windows' order as before. Only where workers can start without running the caller's script again
+(:func:`lfproc._shared.parallel.can_start_processes`: the ``lfproc`` command, a notebook, a script whose code sits
+under ``if __name__ == "__main__":``); elsewhere the threads as before. The output is the same to the bit
+(``tests/recon/test_lights.py``; courtyard-candle's dump, ``benchmarks/refit_stage.py``: identical arrays).
+Measured (``refit_stage.py run``, courtyard-candle, 2 random, Lytro size, 94 windows in three passes, back to back):
+126 s on two threads, 74-75 s on two processes, each worker 0.26 GiB at its peak (sampled with ``ps``); the whole
+reconstruction: ``docs/benchmarks.md`` (stop 31). A window costs about a second; fewer than ``PROCESS_JOBS`` stay on the
+thread pool, since starting two workers and stopping them costs 0.7 s (the default path's one-shot lamp has 3).
 """
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg as sl
 from scipy import ndimage, sparse
 from scipy.optimize import nnls
+from threadpoolctl import threadpool_limits
 
+from .._shared.parallel import can_start_processes, realign
 from ..camera.projection import ProjectionOperator, build_operator, patch_operators, transmittance_map
 
 #: A light: the centre view above RATIO times the median of a BG x BG square around it ...
@@ -607,137 +626,166 @@ def _chi2(pred, y, w, w_bound):
     return float(e[ww > 0].mean()) if (ww > 0).any() else np.inf
 
 
-def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None):
+def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None, processes=0):
     """The light field ``first`` ``(V, U, H, W, 3)`` with its small lights refitted (module notes).
 
     ``T, W, W_bound``: the measurements ``(S, H, W)``, their weights (0 where saturated) and the saturated
     ones' weights as bounds; ``capture``: their :class:`~lfproc.camera.capture.Capture` (mask, CFA);
     ``shears``: per disparity, ``callable(p) -> S_d`` ``(V U P P, E E)``; ``margin``: ``R``. Windows are solved
-    on ``pool`` (a ``concurrent.futures`` executor) and added in a fixed order (feathered; averaged where windows
-    overlap): the output does not depend on it. ``PASSES`` times, each on the last one's result (its lights found
-    again), until a pass refits nothing. Returns the new light field (``first`` is not modified) and
-    ``{"windows": n, "refitted": k, "passes": [[n, k], ...]}`` (``n, k``: the first pass's; then each pass's).
+    on ``pool`` (a ``concurrent.futures`` executor), or with ``processes`` > 1 on that many worker processes when a
+    pass has at least ``PROCESS_JOBS`` windows (``shears`` must then pickle: ``functools.partial`` of
+    :func:`._gmm.shear_matrix`, not a lambda; module notes "Why processes"), and added in a fixed order
+    (feathered; averaged where windows overlap): the output does not depend on either. ``PASSES`` times, each on
+    the last one's result (its lights found again), until a pass refits nothing. Returns the new light field
+    (``first`` is not modified) and ``{"windows": n, "refitted": k, "passes": [[n, k], ...]}`` (``n, k``: the
+    first pass's; then each pass's).
     """
     rowsum = float(transmittance_map(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern,
                                      size=capture.size).mean())
     usable = W[W > 0]
     noise = float(np.median(1.0 / usable)) / max(rowsum, 1e-300) if usable.size else np.inf
-    out, passes, cache = first, [], {}
+    out, passes = first, []
+    runner = _Runner(_Context(capture.mask, capture.views, capture.cfa_pattern, capture.size, shears, margin,
+                              T.shape[0], {}), pool, processes)
     op = build_operator(capture.mask, views=capture.views, size=capture.size, cfa_pattern=capture.cfa_pattern,
                         dtype=np.float64) if MISFIT else None
-    for i in range(max(PASSES, 1)):
-        misfit = misfit_map(out, T, W, W_bound, op) if op is not None else None
-        # the first estimate of the first pass blurs its lights; later passes fit a correction, whose colour is not a
-        # light's
-        settings = (ACCEPT_FIRST, RECOLOUR) if i == 0 else (ACCEPT, 0)
-        out, n, k = _refit_once(out, T, W, W_bound, capture, shears, margin, pool, noise, cache, settings, misfit)
-        passes.append([n, k])
-        if not k:  # nothing changed: another pass would find the same
-            break
+    try:
+        for i in range(max(PASSES, 1)):
+            misfit = misfit_map(out, T, W, W_bound, op) if op is not None else None
+            # the first estimate of the first pass blurs its lights; later passes fit a correction, whose colour is
+            # not a light's
+            settings = (ACCEPT_FIRST, RECOLOUR) if i == 0 else (ACCEPT, 0)
+            out, n, k = _refit_once(out, T, W, W_bound, margin, runner, noise, settings, misfit)
+            passes.append([n, k])
+            if not k:  # nothing changed: another pass would find the same
+                break
+    finally:
+        runner.close()
     out = first.copy() if out is first else out
     return out, {"windows": passes[0][0], "refitted": passes[0][1], "passes": passes}
 
 
-def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cache, settings, misfit=None):
+#: With ``refit_lights(..., processes=N)``, N > 1: a pass of at least PROCESS_JOBS windows is solved on N worker
+#: processes (module notes "Why processes"); fewer are solved on the caller's pool.
+PROCESS_JOBS = 8
+
+
+class _Context(NamedTuple):
+    """What every window of a refit shares: the capture's mask, views, CFA pattern and sensor size, the shears,
+    ``R``, the shots and the sparse shears made so far by ``(disparity index, p)`` (kept between passes)."""
+
+    mask: object
+    views: tuple
+    cfa_pattern: str
+    size: tuple
+    shears: list
+    margin: int
+    shots: int
+    cache: dict
+
+
+class _Window(NamedTuple):
+    """One window's fit, all it needs (sliced from the whole arrays: small enough to send to a worker process)."""
+
+    top: int
+    left: int
+    p: int
+    y: np.ndarray  #: the window's measurements ``(S P P,)``
+    w: np.ndarray  #: their weights
+    wb: np.ndarray  #: the saturated ones' weights as bounds
+    first: np.ndarray  #: the first estimate on the window ``(V, U, P, P, 3)``
+    centre: np.ndarray  #: the centre view on the extended window ``(E, E, 3)``
+    floor: np.ndarray  #: the smaller of it and its neighbourhood's level (:func:`_floor`)
+    supports: tuple  #: per prior, ``(mean from the floor on the support?, support (E, E) bool)``
+    accept: float  #: the chi-square a fit must leave, times the first estimate's
+    recolour: int  #: rounds of :func:`_recoloured`
+
+
+class _Runner:
+    """Solves windows serially, on the caller's pool, or on worker processes started on first need (module notes
+    "Why processes"); the results come back in the windows' order."""
+
+    def __init__(self, ctx: _Context, pool, processes: int):
+        self.ctx, self.pool, self.processes, self.workers = ctx, pool, int(processes or 0), None
+
+    def map(self, jobs: list) -> list:
+        if self.processes > 1 and len(jobs) >= PROCESS_JOBS and can_start_processes():
+            if self.workers is None:
+                import multiprocessing
+                from concurrent.futures import ProcessPoolExecutor
+
+                method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+                settings = {k: v for k, v in globals().items() if k.isupper()}  # a caller's overrides too
+                ctx = self.ctx._replace(cache={})
+                self.workers = ProcessPoolExecutor(self.processes, mp_context=multiprocessing.get_context(method),
+                                                   initializer=_init_worker, initargs=(ctx, settings))
+            return list(self.workers.map(_solve_in_worker, jobs))
+        solve = functools.partial(_solve_window, ctx=self.ctx)
+        return list(self.pool.map(solve, jobs)) if self.pool is not None else [solve(j) for j in jobs]
+
+    def close(self) -> None:
+        if self.workers is not None:
+            self.workers.shutdown()
+            self.workers = None
+
+
+_WORKER: dict = {}  # a worker process's context (:func:`_init_worker`)
+
+
+def _init_worker(ctx: _Context, settings: dict) -> None:
+    """A worker process: the caller's settings of this module, one BLAS thread (as the caller's pool runs), the
+    shared context."""
+    globals().update(settings)
+    _WORKER["limits"] = threadpool_limits(1)
+    _WORKER["ctx"] = realign(ctx)
+
+
+def _solve_in_worker(job: _Window):
+    # arrays a worker unpickles may sit off a 16-byte boundary, where numpy sums in another order (realign)
+    return _solve_window(realign(job), _WORKER["ctx"])
+
+
+def _refit_once(first, T, W, W_bound, margin, runner, noise, settings, misfit=None):
     """One pass of :func:`refit_lights`: the new light field, the number of windows and of windows refitted.
-    ``cache``: the sparse shears by ``(disparity index, p)``, kept between passes; ``settings``: ``(accept,
-    recolour)``, a fit is accepted below ``accept`` times the first estimate's chi-square (and ``CHI2_MAX``), after
-    ``recolour`` rounds of :func:`_recoloured` on each window's chosen fit (0: none)."""
+    ``runner``: a :class:`_Runner`; ``settings``: ``(accept, recolour)``, a fit is accepted below ``accept`` times
+    the first estimate's chi-square (and ``CHI2_MAX``), after ``recolour`` rounds of :func:`_recoloured` on each
+    window's chosen fit (0: none)."""
     accept, recolour = settings
     nv, nu, h, w_ = first.shape[:4]
     centre = first[nv // 2, nu // 2]
     boxes, light = candidates(centre, noise, misfit)
     r = margin
-    jobs = []
+    corners = []
     for by, bx in boxes:
         p = max(by.stop - by.start, bx.stop - bx.start) + 2 * PAD
         if p > MAX_WINDOW:  # a long light: windows of MAX_WINDOW along it, their unfeathered cores adjacent
             p = MAX_WINDOW
-            corners = [(y0, x0) for y0 in _starts(by, p) for x0 in _starts(bx, p)
-                       if light[max(y0, 0):y0 + p, max(x0, 0):x0 + p].any()]
+            starts = [(y0, x0) for y0 in _starts(by, p) for x0 in _starts(bx, p)
+                      if light[max(y0, 0):y0 + p, max(x0, 0):x0 + p].any()]
         else:
-            corners = [((by.start + by.stop) // 2 - p // 2, (bx.start + bx.stop) // 2 - p // 2)]
+            starts = [((by.start + by.stop) // 2 - p // 2, (bx.start + bx.stop) // 2 - p // 2)]
         if p + 2 * r > min(h, w_):
             continue
-        for y0, x0 in corners:
-            jobs.append((min(max(y0, r), h - r - p), min(max(x0, r), w_ - r - p), p))
+        for y0, x0 in starts:
+            corners.append((min(max(y0, r), h - r - p), min(max(x0, r), w_ - r - p), p))
 
-    if not jobs:
+    if not corners:
         return first, 0, 0
     priors = [(False, ndimage.binary_dilation(light))]  # (mean from the floor on the support?, support)
     if HALO:
         priors.append((True, ndimage.binary_dilation(light, iterations=HALO)))
 
-    def _shear(i, p):  # S_d of disparity i for windows of p pixels, sparse, made once per refit (all passes)
-        if (i, p) not in cache:
-            cache[i, p] = sparse.csr_array(shears[i](p))
-        return cache[i, p]
-
-    tinted_rank = T.shape[0] >= RANK_SHOTS  # (module notes)
-
-    def solve(job):
-        top, left, p = job
-        e = p + 2 * r
+    def window(top, left, p):
         win = (slice(None), slice(top, top + p), slice(left, left + p))
-        y, w, wb = T[win].reshape(-1), W[win].reshape(-1), W_bound[win].reshape(-1)
         ext = (slice(top - r, top + p + r), slice(left - r, left + p + r))
-        ops = patch_operators(capture.mask, views=capture.views, cfa_pattern=capture.cfa_pattern, tops=[top],
-                              lefts=[left], size=p, sensor_size=capture.size)
-        pcols, pvals = ops.cols[0].astype(np.intp), ops.vals[0].astype(np.float64)  # (m, V U)
-        pred = (pvals * first[:, :, top:top + p, left:left + p].reshape(-1)[pcols]).sum(axis=1)  # Phi x
-        bound = min(accept * _chi2(pred, y, w, wb), CHI2_MAX)  # what a fit must leave to be accepted
-        fits = [(shear, _window_matrix(pcols, pvals, shear)) for shear in (_shear(i, p) for i in range(len(shears)))]
-        best = None
-        floor = _floor(centre, ext)  # where a fit is not positive: the neighbourhood's level, not the blur
-        for low, support in priors:
-            x0 = (np.where(support[ext][..., None], floor, centre[ext]) if low else centre[ext]).reshape(-1)
-            near = np.repeat(support[ext].reshape(-1), 3)  # the light layer's samples: TAU there only (module notes)
-            cols = np.flatnonzero(near)
-            if not len(cols):
-                continue
-            picks = []  # the disparity: from RANK_SHOTS shots the tinted fit with the bounds of best evidence ...
-            for shear, m in fits:
-                prior = _prior_cov(m, x0, near)
-                if tinted_rank:
-                    out = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
-                    out = None if out is None else _tinted(out, m, y, w, wb, x0, cols, prior)
-                    prior.factors.clear()  # kept in picks: its factors are not needed again (memory)
-                else:  # ... with fewer of the free fit's first pass, before the bounds join
-                    out = _fit(m, y, w, wb, x0, cols, 1, prior=prior)
-                if out is not None:
-                    score = out[2] if tinted_rank and RANK_EVIDENCE else out[1]  # -2 log evidence, or chi-square
-                    picks.append((score, m, shear, prior, out if tinted_rank else None))
-            picks.sort(key=lambda pick: pick[0])  # stable: ties keep the search's order
-            # ... then the first of the CANDIDATES best whose tinted fit would be accepted; ranked by that fit already,
-            # the best alone (by chi-square the next has no smaller one against the same bound; by evidence it may, and
-            # is not tried: a fit of lower evidence is not taken for its chi-square)
-            chosen = None
-            for _, m, shear, prior, out in picks[:1 if tinted_rank else CANDIDATES]:
-                if out is None:  # ranked by the first pass: now with the bounds, tinted
-                    free = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
-                    out = None if free is None else _tinted(free, m, y, w, wb, x0, cols, prior)
-                if out is not None and (chosen is None or out[1] < bound):
-                    chosen = (out, shear, m, prior, x0, cols)
-                    if out[1] < bound:
-                        break
-            if chosen is not None and (best is None or chosen[0][2] < best[0][2]):  # the higher evidence
-                best = chosen
-        if best is not None and recolour:  # its colour fitted, before the bound: a fit can pass it once its colour fits
-            out, shear, m, prior, x0, cols = best
-            best = (_recoloured(out, m, y, w, wb, x0, cols, prior, recolour), shear)
-        if best is None or not best[0][1] < bound:
-            return None
-        x, shear = best[0][0], best[1]
-        fit = (shear @ x.reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
-        keep = first[:, :, top:top + p, left:left + p]  # radiance is positive: a non-positive fit keeps this
-        if FLOOR:
-            keep = np.minimum(keep, (shear @ floor.reshape(e * e, 3)).reshape(nv, nu, p, p, 3))
-        fit = np.where(fit > 0, fit, keep)
-        return _median_colours(fit) if MEDIAN_COLOURS and tinted_rank else fit  # from RANK_SHOTS shots (notes)
+        return _Window(top, left, p, T[win].reshape(-1), W[win].reshape(-1), W_bound[win].reshape(-1),
+                       first[:, :, top:top + p, left:left + p], centre[ext], _floor(centre, ext),
+                       tuple((low, support[ext]) for low, support in priors), accept, recolour)
 
-    results = list(pool.map(solve, jobs)) if pool is not None else [solve(j) for j in jobs]
+    jobs = [window(*c) for c in corners]
+    results = runner.map(jobs)
     # feathered windows, averaged where they overlap (a long light): first + sum f_k (fit_k - first) / max(sum f_k, 1)
-    kept = [(job, fit) for job, fit in zip(jobs, results) if fit is not None]
+    kept = [(c, fit) for c, fit in zip(corners, results) if fit is not None]
     den = np.zeros((h, w_))
     for (top, left, p), _ in kept:
         den[top:top + p, left:left + p] += _feather(p)
@@ -746,7 +794,77 @@ def _refit_once(first, T, W, W_bound, capture, shears, margin, pool, noise, cach
         at = (slice(None), slice(None), slice(top, top + p), slice(left, left + p))
         gain = _feather(p) / np.maximum(den[top:top + p, left:left + p], 1.0)
         out[at] += gain[:, :, None] * (fit - first[at])
-    return out, len(jobs), len(kept)
+    return out, len(corners), len(kept)
+
+
+def _solve_window(job: _Window, ctx: _Context):
+    """One window of :func:`_refit_once`: the refitted light field on it ``(V, U, P, P, 3)``, or None when no fit is
+    accepted."""
+    r = ctx.margin
+    top, left, p = job.top, job.left, job.p
+    nv, nu = job.first.shape[:2]
+    e = p + 2 * r
+    y, w, wb = job.y, job.w, job.wb
+    ops = patch_operators(ctx.mask, views=ctx.views, cfa_pattern=ctx.cfa_pattern, tops=[top], lefts=[left], size=p,
+                          sensor_size=ctx.size)
+    pcols, pvals = ops.cols[0].astype(np.intp), ops.vals[0].astype(np.float64)  # (m, V U)
+    pred = (pvals * job.first.reshape(-1)[pcols]).sum(axis=1)  # Phi x
+    bound = min(job.accept * _chi2(pred, y, w, wb), CHI2_MAX)  # what a fit must leave to be accepted
+
+    def shear_of(i):  # S_d of disparity i for windows of p pixels, sparse, made once per refit (all passes)
+        if (i, p) not in ctx.cache:
+            ctx.cache[i, p] = sparse.csr_array(ctx.shears[i](p))
+        return ctx.cache[i, p]
+
+    fits = [(shear, _window_matrix(pcols, pvals, shear)) for shear in (shear_of(i) for i in range(len(ctx.shears)))]
+    tinted_rank = ctx.shots >= RANK_SHOTS  # (module notes)
+    best = None
+    floor = job.floor  # where a fit is not positive: the neighbourhood's level, not the blur
+    for low, support in job.supports:
+        x0 = (np.where(support[..., None], floor, job.centre) if low else job.centre).reshape(-1)
+        near = np.repeat(support.reshape(-1), 3)  # the light layer's samples: TAU there only (module notes)
+        cols = np.flatnonzero(near)
+        if not len(cols):
+            continue
+        picks = []  # the disparity: from RANK_SHOTS shots the tinted fit with the bounds of best evidence ...
+        for shear, m in fits:
+            prior = _prior_cov(m, x0, near)
+            if tinted_rank:
+                out = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
+                out = None if out is None else _tinted(out, m, y, w, wb, x0, cols, prior)
+                prior.factors.clear()  # kept in picks: its factors are not needed again (memory)
+            else:  # ... with fewer of the free fit's first pass, before the bounds join
+                out = _fit(m, y, w, wb, x0, cols, 1, prior=prior)
+            if out is not None:
+                score = out[2] if tinted_rank and RANK_EVIDENCE else out[1]  # -2 log evidence, or chi-square
+                picks.append((score, m, shear, prior, out if tinted_rank else None))
+        picks.sort(key=lambda pick: pick[0])  # stable: ties keep the search's order
+        # ... then the first of the CANDIDATES best whose tinted fit would be accepted; ranked by that fit already,
+        # the best alone (by chi-square the next has no smaller one against the same bound; by evidence it may, and
+        # is not tried: a fit of lower evidence is not taken for its chi-square)
+        chosen = None
+        for _, m, shear, prior, out in picks[:1 if tinted_rank else CANDIDATES]:
+            if out is None:  # ranked by the first pass: now with the bounds, tinted
+                free = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
+                out = None if free is None else _tinted(free, m, y, w, wb, x0, cols, prior)
+            if out is not None and (chosen is None or out[1] < bound):
+                chosen = (out, shear, m, prior, x0, cols)
+                if out[1] < bound:
+                    break
+        if chosen is not None and (best is None or chosen[0][2] < best[0][2]):  # the higher evidence
+            best = chosen
+    if best is not None and job.recolour:  # its colour fitted, before the bound: a fit can pass it once its colour fits
+        out, shear, m, prior, x0, cols = best
+        best = (_recoloured(out, m, y, w, wb, x0, cols, prior, job.recolour), shear)
+    if best is None or not best[0][1] < bound:
+        return None
+    x, shear = best[0][0], best[1]
+    fit = (shear @ x.reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
+    keep = job.first  # radiance is positive: a non-positive fit keeps this
+    if FLOOR:
+        keep = np.minimum(keep, (shear @ floor.reshape(e * e, 3)).reshape(nv, nu, p, p, 3))
+    fit = np.where(fit > 0, fit, keep)
+    return _median_colours(fit) if MEDIAN_COLOURS and tinted_rank else fit  # from RANK_SHOTS shots (notes)
 
 
 def _median_colours(fit: np.ndarray) -> np.ndarray:

@@ -7,9 +7,12 @@ first estimate is the truth with the light blurred, as the patch prior leaves it
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
+from threadpoolctl import threadpool_limits
 
 import lfproc.recon._gmm as gmm
 import lfproc.recon._lights as lights
@@ -85,6 +88,30 @@ def test_a_blurred_light_comes_back_sharp_with_its_energy():
     far[rows.min() - 10:rows.max() + 11, cols.min() - 10:cols.max() + 11] = False  # beyond any window around it
     np.testing.assert_allclose(out[:, :, far], first[:, :, far], rtol=1e-12)
     assert (out[:, :, ~far] != first[:, :, ~far]).any()
+
+
+def test_windows_on_worker_processes_give_the_serial_result_with_the_callers_settings(monkeypatch):
+    """``processes=2``: the windows are solved on two worker processes (forkserver), which pickle the shears
+    (``functools.partial`` of ``shear_matrix``) and receive their arrays at any byte offset. Reference: the serial
+    refit of the same first estimate, to the bit. The workers run with this module's settings as the caller set
+    them: ``ACCEPT_FIRST`` 0 there accepts nothing (with the module's own 0.85 the window is refitted)."""
+    lf = _scene()
+    cap = _capture(lf)
+    rs = float(cap.radiance_scale)
+    first = _blurred(lf) * rs
+    raw = _measurements(cap, "bound").raw
+    shears = [partial(shear_matrix, cap.views, margin=2, disparity=d) for d in DEFAULT_DISPARITIES]
+    monkeypatch.setattr(lights, "PROCESS_JOBS", 1)  # the planted light's one window goes to the workers
+    with threadpool_limits(1):  # one BLAS thread, as reconstruct_gmm runs the refit and the workers run (sums' order)
+        serial, info = refit_lights(first, *raw, cap, shears, 2)
+    assert _counts(info) == {"windows": 1, "refitted": 1}
+    spread, info_p = refit_lights(first, *raw, cap, shears, 2, None, 2)
+    np.testing.assert_array_equal(spread, serial)
+    assert info_p == info
+    monkeypatch.setattr(lights, "ACCEPT_FIRST", 0.0)
+    none, info_0 = refit_lights(first, *raw, cap, shears, 2, None, 2)
+    assert _counts(info_0) == {"windows": 1, "refitted": 0}
+    np.testing.assert_array_equal(none, first)
 
 
 def _neighbour_errors(monkeypatch, setting, values, profile="paper-none", sigma=1.0, gain=1.0):
