@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/refit_stage.py dump SCENE OUT.pkl [--size H W] [--capture "2 random"] [--seed-index I]
-    python benchmarks/refit_stage.py run OUT.pkl [NAME=VALUE ...] [--save DIR]
+    python benchmarks/refit_stage.py run OUT.pkl [NAME=VALUE ...] [--save DIR] [--threads]
     python benchmarks/refit_stage.py bound OUT.pkl TOP LEFT SIZE
 
 ``dump`` captures a scene of :mod:`quality_scenes` as :mod:`reconstruct_realistic` does (mask period 4, the
@@ -24,6 +24,9 @@ more of the refit's cost than the reconstruction pays (back to back, quiet machi
 night-studio 46 -> 22 s, the same figures); times measured before then are upper bounds. The
 dump is a scratch file (Python's pickle: it loads only with the same lfproc version, and only files you made).
 Figures measured this way are of the refit stage alone; confirm a change with :mod:`reconstruct_realistic`.
+Since stop 31 ``run`` solves a pass of many windows on worker processes as ``reconstruct_gmm`` does
+(``lfproc.recon._lights``, "Why processes"); ``--threads`` keeps every window on the thread pool (the same figures,
+for timing the two).
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ import sys
 import time
 import warnings
 from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -115,7 +119,7 @@ def _load(path: Path) -> dict:
     return d
 
 
-def run(path: Path, settings: list[str], save: Path | None = None) -> None:
+def run(path: Path, settings: list[str], save: Path | None = None, threads: bool = False) -> None:
     import lfproc.recon._lights as lights
     from lfproc import LightField
     from lfproc._shared.parallel import available_cpus
@@ -137,10 +141,11 @@ def run(path: Path, settings: list[str], save: Path | None = None) -> None:
     d = _load(path)
     cap, first = d["capture"], d["first"]
     nv, nu = first.shape[:2]
-    shears = [lambda q, dd=dd: shear_matrix((nv, nu), q, d["margin"], dd) for dd in d["disparities"]]
+    shears = [partial(shear_matrix, (nv, nu), margin=d["margin"], disparity=dd) for dd in d["disparities"]]
     t = time.perf_counter()
     with threadpool_limits(1), ThreadPoolExecutor(max_workers=available_cpus()) as pool:  # as reconstruct_gmm
-        out, info = lights.refit_lights(first, d["T"], d["W"], d["W_bound"], cap, shears, d["margin"], pool)
+        out, info = lights.refit_lights(first, d["T"], d["W"], d["W_bound"], cap, shears, d["margin"], pool,
+                                        0 if threads else available_cpus())
     seconds = time.perf_counter() - t
     truth = LightField(d["truth"], units="relative")
     for name, x in (("first", first), ("refit", out)):
@@ -222,6 +227,8 @@ def main() -> None:
     p = sub.add_parser("run", help="refit a saved first estimate, with settings overridden")
     p.add_argument("path", type=Path)
     p.add_argument("settings", nargs="*")
+    p.add_argument("--threads", action="store_true",
+                   help="solve every window on the thread pool, as before stop 31 (default: worker processes)")
     p.add_argument("--save", type=Path, default=None,
                    help="a directory: write <dump>__truth.npy, __first.npy and __refit.npy there (light-field units)")
     p = sub.add_parser("bound", help="how well the capture fixes each pixel's light in a window (a lower bound)")
@@ -239,7 +246,7 @@ def main() -> None:
     elif args.command == "bound":
         bound(args.path, args.top, args.left, args.size)
     else:
-        run(args.path, args.settings, args.save)
+        run(args.path, args.settings, args.save, args.threads)
 
 
 if __name__ == "__main__":
