@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 import contextlib
 import functools
+import multiprocessing
 import os
 import sys
 
@@ -85,10 +86,11 @@ def can_start_processes() -> bool:
     sits under ``if __name__ == "__main__":``. True for an interactive session or a notebook (no main file),
     ``python -m`` of a package's ``__main__`` (not imported), and a main script with that guard at its top level
     (the ``lfproc`` command, pytest, the benchmarks); False for a script without it, a main file that cannot be read,
-    or a frozen executable, where lfproc keeps to threads.
+    a frozen executable, or a daemonic process (a Dask worker: it may not have children), where lfproc keeps to
+    threads.
     """
     main = sys.modules.get("__main__")
-    if getattr(sys, "frozen", False):
+    if getattr(sys, "frozen", False) or multiprocessing.current_process().daemon:
         return False
     name = getattr(getattr(main, "__spec__", None), "name", None)
     if name is not None:

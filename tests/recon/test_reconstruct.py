@@ -301,7 +301,8 @@ def test_arrays_a_worker_receives_at_any_offset_are_realigned():
 def test_worker_processes_start_only_where_the_callers_script_is_guarded(tmp_path, monkeypatch, source, expected):
     """A forkserver or spawn worker imports the main module: lfproc starts processes only where that does not run
     the caller's script again (a top-level ``if __name__ == "__main__":``), or where there is no main file (a
-    notebook, ``python -c``) or the main module is a package's ``__main__`` (``python -m``, not imported)."""
+    notebook, ``python -c``) or the main module is a package's ``__main__`` (``python -m``, not imported); never in a
+    daemonic process (a Dask worker may not start children)."""
     import sys
     import types
 
@@ -318,6 +319,9 @@ def test_worker_processes_start_only_where_the_callers_script_is_guarded(tmp_pat
     main.__spec__ = types.SimpleNamespace(name="pytest.__main__")  # python -m pytest
     assert parallel.can_start_processes() is True
     main.__spec__ = types.SimpleNamespace(name="myscript")  # python -m myscript: imported again as __mp_main__
+    assert parallel.can_start_processes() is False
+    main.__spec__ = None  # an interactive session again, but in a daemonic process (a Dask worker): no children
+    monkeypatch.setattr(parallel.multiprocessing, "current_process", lambda: types.SimpleNamespace(daemon=True))
     assert parallel.can_start_processes() is False
 
 
