@@ -308,7 +308,7 @@ def test_worker_processes_start_only_where_the_callers_script_is_guarded(tmp_pat
 
     from lfproc._shared import parallel
 
-    script = tmp_path / f"script_{abs(hash(source))}.py"
+    script = tmp_path / "script.py"  # a directory of its own per case: _guarded caches by path
     script.write_text(source, encoding="utf-8")
     main = types.ModuleType("__main__")
     main.__file__, main.__spec__ = str(script), None
