@@ -38,7 +38,7 @@ TEST = {
     "city-interior": ("hdr_cc0/city.exr", "hdr_cc0/interior.exr", -1.0, 1.0, 0.0, 11),
     "courtyard-candle": ("hdr_cc0/courtyard.exr", "hdr/ScanLines_CandleGlass.exr", -1.0, 1.0, -1.0, 12),
     "night-studio": ("hdr_cc0/night.exr", "hdr_cc0/studio.exr", -1.0, 1.0, 1.0, 13),
-    "sunrise-desk": ("hdr_cc0/sunrise.exr", "hdr/ScanLines_Desk.exr", -0.4, 0.6, 0.0, 14),
+    "sunrise-interior": ("hdr_cc0/sunrise.exr", "hdr_cc0/interior.exr", -0.4, 0.6, 0.0, 14),
 }
 SETS = {"tune": TUNE, "test": TEST, "all": {**TUNE, **TEST}}
 

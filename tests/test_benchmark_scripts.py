@@ -150,3 +150,22 @@ def test_the_global_deconvolution_prefers_the_true_disparity_of_a_planted_scene(
     right = np.median(np.abs(pc.global_deconvolution(cap, 1, 1.0, 1.0)[inner] / centre[inner] - 1))
     wrong = np.median(np.abs(pc.global_deconvolution(cap, -1, 1.0, 1.0)[inner] / centre[inner] - 1))
     assert 0.1 < right < 0.3 and wrong > 1.2 * right
+
+
+def test_no_photograph_of_a_test_scene_is_tuned_on_or_trained_on():
+    """The held-out scenes share no photograph with the tune scenes nor with the shipped prior's training
+    photographs (reference: the scene tables and the photographs the shipped model file records; stop 31 found the
+    test scene sunrise-desk sharing ScanLines_Desk with the tune scene desk-cannon and the training set)."""
+    from lfproc.recon._gmm import load_patch_model
+
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        import quality_scenes
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    photos = {name: set(row[:2]) for name, row in quality_scenes.SETS["all"].items()}
+    tuned = set().union(*(photos[name] for name in quality_scenes.TUNE))
+    trained = set(load_patch_model().attrs["photographs"])
+    assert trained <= tuned
+    for name in quality_scenes.TEST:
+        assert not photos[name] & tuned, name
