@@ -38,7 +38,6 @@ import sys
 import time
 import warnings
 from concurrent.futures import ThreadPoolExecutor
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -71,10 +70,9 @@ def dump(scene: str, out: Path, size: tuple[int, int], capture: str, seed_index:
     cap = capture_cell(lf, scene, capture, seed_index, 4, transmittance)
     record = {}
 
-    def keep(first, T, W, W_bound, cap_, shears, margin, pool=None):  # refit_lights' arguments, then stop
-        # reconstruct_gmm is called with its defaults: its shears are those of DEFAULT_DISPARITIES
+    def keep(first, T, W, W_bound, cap_, disparities, margin, pool=None, processes=0):  # refit_lights' arguments
         record.update(first=first, T=T, W=W, W_bound=W_bound, capture=cap_, margin=margin, truth=lf.data,
-                      disparities=tuple(gmm.DEFAULT_DISPARITIES), scene=scene, capture_name=capture,
+                      disparities=tuple(disparities), scene=scene, capture_name=capture,
                       seed_index=seed_index)
         raise _Dumped
 
@@ -125,7 +123,6 @@ def run(path: Path, settings: list[str], save: Path | None = None, threads: bool
     from lfproc._shared.parallel import available_cpus
     from lfproc.camera.capture import noise_floor
     from lfproc.metrics import evaluate, pu21_psnr
-    from lfproc.recon._gmm import shear_matrix
 
     for item in settings:
         name, sep, value = item.partition("=")
@@ -140,11 +137,9 @@ def run(path: Path, settings: list[str], save: Path | None = None, threads: bool
         _fail(f"--save {save}: expected an existing directory")
     d = _load(path)
     cap, first = d["capture"], d["first"]
-    nv, nu = first.shape[:2]
-    shears = [partial(shear_matrix, (nv, nu), margin=d["margin"], disparity=dd) for dd in d["disparities"]]
     t = time.perf_counter()
     with threadpool_limits(1), ThreadPoolExecutor(max_workers=available_cpus()) as pool:  # as reconstruct_gmm
-        out, info = lights.refit_lights(first, d["T"], d["W"], d["W_bound"], cap, shears, d["margin"], pool,
+        out, info = lights.refit_lights(first, d["T"], d["W"], d["W_bound"], cap, d["disparities"], d["margin"], pool,
                                         0 if threads else available_cpus())
     seconds = time.perf_counter() - t
     truth = LightField(d["truth"], units="relative")

@@ -143,7 +143,6 @@ import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from functools import partial
 from typing import NamedTuple
 from pathlib import Path
 
@@ -158,6 +157,7 @@ from ..errors import FileFormatError, InputError, MissingFileError, ShapeError, 
 from ..lightfield import LightField
 from .._shared.parallel import available_cpus
 from ._lights import refit_lights
+from ._shear import shear_matrix
 from ._reconstruct import _gather, _int_option
 from .. import _untrusted as ut
 from .._shared.patches import patch_grid
@@ -181,35 +181,6 @@ REFINE_SIGMA = 1.0
 #: Bayer weights of the patch level ``s``: the mean of R, G, G, B over the patch's P x P pixels.
 _LEVEL_WEIGHTS = np.array([0.25, 0.5, 0.25])
 _DATA = Path(__file__).resolve().parent / "data"
-
-
-def shear_matrix(views: tuple[int, int], patch: int, margin: int, disparity: float) -> np.ndarray:
-    """``S_d``: ``(V U P P, E E)``, view pixel ``(v, u, y, x)`` from the extended centre patch (bilinear).
-
-    View ``(v, u)`` pixel ``(y, x)`` shows centre-view pixel ``(y - dv d, x - du d)`` (module notes),
-    i.e. extended-patch pixel ``(y + R - dv d, x + R - du d)``; a translation beyond the margin
-    raises :class:`~lfproc.errors.InputError`.
-    """
-    nv, nu = views
-    e = patch + 2 * margin
-    if abs(disparity) * max(nv // 2, nu // 2) > margin:
-        raise InputError(f"disparity {disparity:g}: translations of {abs(disparity) * max(nv // 2, nu // 2):g} pixels "
-                         f"exceed the model's margin of {margin} pixels")
-    out = np.zeros((nv, nu, patch, patch, e, e))
-    ii = np.arange(patch)
-    for v in range(nv):
-        for u in range(nu):
-            sy, sx = margin - (v - nv // 2) * disparity, margin - (u - nu // 2) * disparity
-            y0, x0 = math.floor(sy), math.floor(sx)
-            fy, fx = sy - y0, sx - x0
-            for oy, wy in ((0, 1.0 - fy), (1, fy)):
-                for ox, wx in ((0, 1.0 - fx), (1, fx)):
-                    if wy * wx < 1e-12:
-                        continue
-                    rows = (ii + y0 + oy)[:, None]
-                    cols = (ii + x0 + ox)[None, :]
-                    out[v, u, ii[:, None], ii[None, :], rows, cols] += wy * wx
-    return out.reshape(nv * nu * patch * patch, e * e)
 
 
 @dataclass(frozen=True, eq=False)
@@ -591,8 +562,7 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
                               data.saturated.any(axis=0)) + lights
             refit = {"windows": 0, "refitted": 0}
             if LIGHTS_REFIT:  # small lights against the measurements themselves (lfproc.recon._lights)
-                shears = [partial(shear_matrix, (nv, nu), margin=model.margin, disparity=d) for d in disparities]
-                acc, refit = refit_lights(acc, *data.raw, capture, shears, model.margin, pool, opt["threads"])
+                acc, refit = refit_lights(acc, *data.raw, capture, disparities, model.margin, pool, opt["threads"])
     finally:
         bar.close()
     record = {"lfproc_version": __version__, "method": "gmm", "model": repr(model), "model_attrs": model.attrs,

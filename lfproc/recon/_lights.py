@@ -16,7 +16,7 @@ the first light field does not explain the measurements (:func:`misfit_map`, the
 or a flame, gets windows of ``MAX_WINDOW`` along it, their unfeathered cores adjacent), the light field is
 refitted from the measurements of the window's ``P x P`` sensor pixels, which see the window only:
 the centre view's extended window ``x`` (``E = P + 2 R``, 3 colours) at one disparity ``d``
-(``L = S_d x``, :func:`._gmm.shear_matrix`), ``x = b + l`` with
+(``L = S_d x``, :func:`._shear.shear_matrix`), ``x = b + l`` with
 
 * a background ``b ~ N(x_0, Sb^2)`` around the first estimate ``x_0``, standard deviations ``KAPPA x_0`` plus
   ``TAU max x_0`` on the light layer's pixels, a pixel's three colours correlated by ``RHO``, pixels independent;
@@ -309,7 +309,7 @@ pool, but a window's fit is many small steps that hold Python's global interpret
 window's time in a profile of courtyard-candle's first pass, does not release it; Cholesky factors, 15 %, do): two
 threads ran the 27 windows of that pass in 25.1 s against 28.6 s on one (CPU 32.7 s). A pass of at least
 ``PROCESS_JOBS`` windows is therefore solved on worker processes (``forkserver``: no fork of a process with live
-threads), each sent only its window's slices (:class:`_Window`), the mask and the shears once per refit, and the
+threads), each sent only its window's slices (:class:`_Window`), the mask and the disparities once per refit, and the
 caller's settings of this module (a benchmark's or a test's overrides reach the workers); the results are added in
 the windows' order as before. Only where workers can start without running the caller's script again
 (:func:`lfproc._shared.parallel.can_start_processes`: the ``lfproc`` command, a notebook, a script whose code sits
@@ -319,6 +319,23 @@ Measured (``refit_stage.py run``, courtyard-candle, 2 random, Lytro size, 94 win
 126 s on two threads, 74-75 s on two processes, each worker 0.26 GiB at its peak (sampled with ``ps``); the whole
 reconstruction: ``docs/benchmarks.md`` (stop 31). A window costs about a second; fewer than ``PROCESS_JOBS`` stay on the
 thread pool, since starting two workers and stopping them costs 0.7 s (the default path's one-shot lamp has 3).
+
+Why the returned window is checked (``RETURNED``, stop 32). A fit was accepted on the chi-square of ``x = b + l``,
+but what a window returns is that fit with its non-positive samples replaced (``FLOOR``) and, from two shots, its
+colours smoothed (``MEDIAN_COLOURS``): a fit that explains the measurements with large negative samples beside a
+light loses them there and returns a light field that explains them far worse. The held-out test scene
+sunrise-interior (its lamp on a layer at disparity 0.6, between the grid's 0.5 and 0.75; ``benchmarks/refit_stage.py``
+on its 2-shot capture, seed 0): the lamp's window fitted at a chi-square per measurement under the bound, returned at
+15.7 without the median and 198 with it, against the first estimate's 7.5, the lamp 2.1 times the truth's energy
+(the first estimate: 0.72 of it); the refit took the scene from 49.97 to 45.90 dB and its brightest 1 % to 2.7
+times their energy. The returned window must now leave less than the first estimate's chi-square (first with the
+median, then without): that window is not refitted, 49.97 dB. The tune scenes (refit stage, 2 random, seed 0):
+desk-cannon 25.979 -> 25.984, sunset-carrots 52.960 both, forest-stilllife 34.908 -> 34.888. Tried and not kept: the next-ranked fits when the chosen one's window fails (up to
+three; sunrise-interior 51.08 dB, the tune scenes 25.973 / 52.960 / 34.876); the disparities half way between the best
+of the grid and its neighbours ranked too (sunrise-interior 48.54, forest-stilllife 34.82, 1.2 times the time); every
+eighth of a pixel (sunrise-interior 53.84, forest-stilllife 34.82 at 1.9 times the refit's time). The refit's evidence
+barely tells the lamp's disparities apart (0.25 / 0.375 / 0.5 within 2 % of each other), so a finer grid moves the
+result by chance more than it corrects it.
 """
 
 from __future__ import annotations
@@ -334,6 +351,7 @@ from threadpoolctl import threadpool_limits
 
 from .._shared.parallel import can_start_processes, realign
 from ..camera.projection import ProjectionOperator, build_operator, patch_operators, transmittance_map
+from ._shear import shear_matrix
 
 #: A light: the centre view above RATIO times the median of a BG x BG square around it ...
 RATIO = 8.0
@@ -410,6 +428,9 @@ MEASURED_ONLY = True
 #: brightest
 MEDIAN_COLOURS = True
 MEDIAN_KEEP = 0.1
+#: The light field a window returns must leave a chi-square below RETURNED times the first estimate's (module notes
+#: "Why the returned window is checked"); with MEDIAN_COLOURS, the window without the median when the median's does not.
+RETURNED = 1.0
 
 
 def misfit_map(lf: np.ndarray, T: np.ndarray, W: np.ndarray, W_bound: np.ndarray,
@@ -626,15 +647,14 @@ def _chi2(pred, y, w, w_bound):
     return float(e[ww > 0].mean()) if (ww > 0).any() else np.inf
 
 
-def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None, processes=0):
+def refit_lights(first, T, W, W_bound, capture, disparities, margin, pool=None, processes=0):
     """The light field ``first`` ``(V, U, H, W, 3)`` with its small lights refitted (module notes).
 
     ``T, W, W_bound``: the measurements ``(S, H, W)``, their weights (0 where saturated) and the saturated
     ones' weights as bounds; ``capture``: their :class:`~lfproc.camera.capture.Capture` (mask, CFA);
-    ``shears``: per disparity, ``callable(p) -> S_d`` ``(V U P P, E E)``; ``margin``: ``R``. Windows are solved
+    ``disparities``: the ones tried; ``margin``: ``R``. Windows are solved
     on ``pool`` (a ``concurrent.futures`` executor), or with ``processes`` > 1 on that many worker processes when a
-    pass has at least ``PROCESS_JOBS`` windows (``shears`` must then pickle: ``functools.partial`` of
-    :func:`._gmm.shear_matrix`, not a lambda; module notes "Why processes"), and added in a fixed order
+    pass has at least ``PROCESS_JOBS`` windows (module notes "Why processes"), and added in a fixed order
     (feathered; averaged where windows overlap): the output does not depend on either. ``PASSES`` times, each on
     the last one's result (its lights found again), until a pass refits nothing. Returns the new light field
     (``first`` is not modified) and ``{"windows": n, "refitted": k, "passes": [[n, k], ...]}`` (``n, k``: the
@@ -645,8 +665,8 @@ def refit_lights(first, T, W, W_bound, capture, shears, margin, pool=None, proce
     usable = W[W > 0]
     noise = float(np.median(1.0 / usable)) / max(rowsum, 1e-300) if usable.size else np.inf
     out, passes = first, []
-    runner = _Runner(_Context(capture.mask, capture.views, capture.cfa_pattern, capture.size, shears, margin,
-                              T.shape[0], {}), pool, processes)
+    runner = _Runner(_Context(capture.mask, capture.views, capture.cfa_pattern, capture.size,
+                              tuple(float(d) for d in disparities), margin, T.shape[0], {}), pool, processes)
     op = build_operator(capture.mask, views=capture.views, size=capture.size, cfa_pattern=capture.cfa_pattern,
                         dtype=np.float64) if MISFIT else None
     try:
@@ -671,14 +691,14 @@ PROCESS_JOBS = 8
 
 
 class _Context(NamedTuple):
-    """What every window of a refit shares: the capture's mask, views, CFA pattern and sensor size, the shears,
-    ``R``, the shots and the sparse shears made so far by ``(disparity index, p)`` (kept between passes)."""
+    """What every window of a refit shares: the capture's mask, views, CFA pattern and sensor size, the disparities,
+    ``R``, the shots and the sparse shears made so far by ``(disparity, p)`` (kept between passes)."""
 
     mask: object
     views: tuple
     cfa_pattern: str
     size: tuple
-    shears: list
+    disparities: tuple
     margin: int
     shots: int
     cache: dict
@@ -809,62 +829,94 @@ def _solve_window(job: _Window, ctx: _Context):
                           sensor_size=ctx.size)
     pcols, pvals = ops.cols[0].astype(np.intp), ops.vals[0].astype(np.float64)  # (m, V U)
     pred = (pvals * job.first.reshape(-1)[pcols]).sum(axis=1)  # Phi x
-    bound = min(job.accept * _chi2(pred, y, w, wb), CHI2_MAX)  # what a fit must leave to be accepted
+    before = _chi2(pred, y, w, wb)
+    bound = min(job.accept * before, CHI2_MAX)  # what a fit must leave to be accepted
 
-    def shear_of(i):  # S_d of disparity i for windows of p pixels, sparse, made once per refit (all passes)
-        if (i, p) not in ctx.cache:
-            ctx.cache[i, p] = sparse.csr_array(ctx.shears[i](p))
-        return ctx.cache[i, p]
+    matrices = {}
 
-    fits = [(shear, _window_matrix(pcols, pvals, shear)) for shear in (shear_of(i) for i in range(len(ctx.shears)))]
+    def matrix_at(d):  # S_d for windows of p pixels (sparse, made once per refit: all passes), the window's M (once)
+        if (d, p) not in ctx.cache:
+            ctx.cache[d, p] = sparse.csr_array(shear_matrix((nv, nu), p, r, d))
+        if d not in matrices:
+            matrices[d] = ctx.cache[d, p], _window_matrix(pcols, pvals, ctx.cache[d, p])
+        return matrices[d]
+
     tinted_rank = ctx.shots >= RANK_SHOTS  # (module notes)
+    best = _chosen(job, ctx.disparities, matrix_at, bound, tinted_rank)
+    if best is None:
+        return None
+    out, shear, m, prior, x0, cols = best
+    if job.recolour:  # its colour fitted, before the bound: a fit can pass it once its colour fits
+        out = _recoloured(out, m, y, w, wb, x0, cols, prior, job.recolour)
+    if not out[1] < bound:
+        return None
+    fit = (shear @ out[0].reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
+    keep = job.first  # radiance is positive: a non-positive fit keeps this
+    if FLOOR:
+        keep = np.minimum(keep, (shear @ job.floor.reshape(e * e, 3)).reshape(nv, nu, p, p, 3))
+    fit = np.where(fit > 0, fit, keep)
+    # the light field returned must itself explain the window better than the first estimate, not only the fit
+    # before its non-positive samples were replaced (and its colours smoothed): module notes "Why the returned window
+    # is checked"
+    for returned in [_median_colours(fit), fit] if MEDIAN_COLOURS and tinted_rank else [fit]:  # (module notes)
+        if _chi2((pvals * returned.reshape(-1)[pcols]).sum(axis=1), y, w, wb) < RETURNED * before:
+            return returned
+    return None
+
+
+def _chosen(job: _Window, disparities: tuple, matrix_at, bound: float, tinted_rank: bool):
+    """The fit of one window (:func:`_solve_window`) as ``(fit, shear, m, prior, x0, cols)``, or None. Per prior,
+    from RANK_SHOTS shots the disparities are ranked by the tinted fit with the bounds (its evidence), with fewer by
+    the free fit's first pass (its chi-square) and then solved with the bounds; the chosen one is the first of the
+    CANDIDATES best whose tinted fit leaves less than ``bound`` (ranked by that fit already, the best alone), of the
+    priors' the one of higher evidence. ``matrix_at(d)``: ``(S_d, M)`` of the window."""
+    y, w, wb = job.y, job.w, job.wb
     best = None
-    floor = job.floor  # where a fit is not positive: the neighbourhood's level, not the blur
     for low, support in job.supports:
-        x0 = (np.where(support[..., None], floor, job.centre) if low else job.centre).reshape(-1)
+        x0 = (np.where(support[..., None], job.floor, job.centre) if low else job.centre).reshape(-1)
         near = np.repeat(support.reshape(-1), 3)  # the light layer's samples: TAU there only (module notes)
         cols = np.flatnonzero(near)
         if not len(cols):
             continue
-        picks = []  # the disparity: from RANK_SHOTS shots the tinted fit with the bounds of best evidence ...
-        for shear, m in fits:
-            prior = _prior_cov(m, x0, near)
-            if tinted_rank:
-                out = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
-                out = None if out is None else _tinted(out, m, y, w, wb, x0, cols, prior)
-                prior.factors.clear()  # kept in picks: its factors are not needed again (memory)
-            else:  # ... with fewer of the free fit's first pass, before the bounds join
-                out = _fit(m, y, w, wb, x0, cols, 1, prior=prior)
-            if out is not None:
-                score = out[2] if tinted_rank and RANK_EVIDENCE else out[1]  # -2 log evidence, or chi-square
-                picks.append((score, m, shear, prior, out if tinted_rank else None))
+        picks = [q for q in (_pick(matrix_at(d), y, w, wb, x0, near, cols, tinted_rank) for d in disparities) if q]
         picks.sort(key=lambda pick: pick[0])  # stable: ties keep the search's order
-        # ... then the first of the CANDIDATES best whose tinted fit would be accepted; ranked by that fit already,
-        # the best alone (by chi-square the next has no smaller one against the same bound; by evidence it may, and
-        # is not tried: a fit of lower evidence is not taken for its chi-square)
         chosen = None
-        for _, m, shear, prior, out in picks[:1 if tinted_rank else CANDIDATES]:
-            if out is None:  # ranked by the first pass: now with the bounds, tinted
-                free = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
-                out = None if free is None else _tinted(free, m, y, w, wb, x0, cols, prior)
+        for pick in picks[:1 if tinted_rank else CANDIDATES]:
+            out = pick[4] = _bounded(pick, y, w, wb)
             if out is not None and (chosen is None or out[1] < bound):
-                chosen = (out, shear, m, prior, x0, cols)
+                chosen = pick
                 if out[1] < bound:
                     break
-        if chosen is not None and (best is None or chosen[0][2] < best[0][2]):  # the higher evidence
+        if chosen is not None and (best is None or chosen[4][2] < best[4][2]):  # the higher evidence
             best = chosen
-    if best is not None and job.recolour:  # its colour fitted, before the bound: a fit can pass it once its colour fits
-        out, shear, m, prior, x0, cols = best
-        best = (_recoloured(out, m, y, w, wb, x0, cols, prior, job.recolour), shear)
-    if best is None or not best[0][1] < bound:
+    return None if best is None else (best[4], best[2], best[1], best[3], best[5], best[6])
+
+
+def _pick(shear_m, y, w, wb, x0, near, cols, tinted_rank):
+    """One disparity's entry in :func:`_chosen`: ``[score, m, shear, prior, fit or None, x0, cols]``, or None
+    when the fit fails. From RANK_SHOTS shots the tinted fit with the bounds (score: its -2 log evidence, or with
+    ``RANK_EVIDENCE`` off its chi-square), with fewer the free fit's first pass (its chi-square; fit solved later)."""
+    shear, m = shear_m
+    prior = _prior_cov(m, x0, near)
+    if tinted_rank:
+        out = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
+        out = None if out is None else _tinted(out, m, y, w, wb, x0, cols, prior)
+        prior.factors.clear()  # kept in picks: its factors are not needed again (memory)
+    else:
+        out = _fit(m, y, w, wb, x0, cols, 1, prior=prior)
+    if out is None:
         return None
-    x, shear = best[0][0], best[1]
-    fit = (shear @ x.reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
-    keep = job.first  # radiance is positive: a non-positive fit keeps this
-    if FLOOR:
-        keep = np.minimum(keep, (shear @ floor.reshape(e * e, 3)).reshape(nv, nu, p, p, 3))
-    fit = np.where(fit > 0, fit, keep)
-    return _median_colours(fit) if MEDIAN_COLOURS and tinted_rank else fit  # from RANK_SHOTS shots (notes)
+    score = out[2] if tinted_rank and RANK_EVIDENCE else out[1]  # -2 log evidence, or chi-square
+    return [score, m, shear, prior, out if tinted_rank else None, x0, cols]
+
+
+def _bounded(pick: list, y, w, wb):
+    """A pick of :func:`_chosen`'s tinted fit with the bounds (solved now if it was ranked by its first pass)."""
+    if pick[4] is not None:
+        return pick[4]
+    _, m, _, prior, _, x0, cols = pick
+    free = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
+    return None if free is None else _tinted(free, m, y, w, wb, x0, cols, prior)
 
 
 def _median_colours(fit: np.ndarray) -> np.ndarray:
