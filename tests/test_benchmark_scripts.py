@@ -3,6 +3,7 @@ file, before any scene is made or any dump is read (reference: argparse's own co
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -169,3 +170,22 @@ def test_no_photograph_of_a_test_scene_is_tuned_on_or_trained_on():
     assert trained <= tuned
     for name in quality_scenes.TEST:
         assert not photos[name] & tuned, name
+
+
+def test_a_dump_of_a_small_scene_runs(tmp_path, shared_data):
+    """``refit_stage.py dump`` then ``run`` on city-interior at 48 x 64 (its lamp refitted): the dump follows
+    ``reconstruct_gmm``'s call of ``refit_lights`` (stop 31 changed that call and the dump failed with a TypeError
+    until stop 32); ``run`` prints the first estimate's and the refit's figures. Reference: the dump's own record."""
+    import pickle
+
+    dump = tmp_path / "d.pkl"
+    env = {"LFPROC_SHARED_DATA": str(shared_data)}
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "refit_stage.py"), "dump", "city-interior", str(dump),
+                           "--size", "48", "64"], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, **env})
+    assert done.returncode == 0, done.stderr
+    record = pickle.loads(dump.read_bytes())
+    assert record["first"].shape == (5, 5, 48, 64, 3) and record["disparities"][0] == -1.0
+    done = _run("refit_stage.py", "run", str(dump))
+    assert done.returncode == 0, done.stderr
+    assert "first: PU21-PSNR" in done.stdout and "refit: PU21-PSNR" in done.stdout
