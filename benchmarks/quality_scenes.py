@@ -14,8 +14,11 @@ Lytro size (434 x 625) they keep their own texture density and at 96 x 128 they 
 reduced ("dense" scenes). The foreground keeps its photograph's dynamic range and is scaled to
 ``2 ** gain_stops`` times the background's median luminance.
 
-Two disjoint sets: ``TUNE`` (choose settings on these) and ``TEST`` (report on these). Written
-as ``DIR/<name>.exr`` light fields (``lfproc.io``), so the CLI can use them.
+Two disjoint sets: ``TUNE`` (choose settings on these; their photographs train the shipped patch prior,
+``train_patch_model.py``) and ``TEST`` (report on these), which share no photograph (a test checks it). Until stop 32
+the fourth test scene was ``sunrise-desk``, whose ``ScanLines_Desk`` is also desk-cannon's (so tuned on and trained
+on); it is ``sunrise-interior`` since. Written as ``DIR/<name>.exr`` light fields (``lfproc.io``), so the CLI can use
+them.
 """
 
 from __future__ import annotations
