@@ -32,6 +32,7 @@ for timing the two).
 from __future__ import annotations
 
 import argparse
+import inspect
 import os
 import pickle
 import sys
@@ -70,10 +71,11 @@ def dump(scene: str, out: Path, size: tuple[int, int], capture: str, seed_index:
     cap = capture_cell(lf, scene, capture, seed_index, 4, transmittance)
     record = {}
 
-    def keep(first, T, W, W_bound, cap_, disparities, margin, pool=None, processes=0):  # refit_lights' arguments
-        record.update(first=first, T=T, W=W, W_bound=W_bound, capture=cap_, margin=margin, truth=lf.data,
-                      disparities=tuple(disparities), scene=scene, capture_name=capture,
-                      seed_index=seed_index)
+    def keep(*args, **kwargs):  # refit_lights' arguments by its own signature (a changed call cannot break this)
+        a = inspect.signature(original).bind(*args, **kwargs).arguments
+        record.update(first=a["first"], T=a["T"], W=a["W"], W_bound=a["W_bound"], capture=a["capture"],
+                      margin=a["margin"], truth=lf.data, disparities=tuple(a["disparities"]), scene=scene,
+                      capture_name=capture, seed_index=seed_index)
         raise _Dumped
 
     original = gmm.refit_lights

@@ -343,6 +343,7 @@ result by chance more than it corrects it.
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -830,8 +831,10 @@ def _solve_window(job: _Window, ctx: _Context):
     ops = patch_operators(ctx.mask, views=ctx.views, cfa_pattern=ctx.cfa_pattern, tops=[top], lefts=[left], size=p,
                           sensor_size=ctx.size)
     pcols, pvals = ops.cols[0].astype(np.intp), ops.vals[0].astype(np.float64)  # (m, V U)
-    pred = (pvals * job.first.reshape(-1)[pcols]).sum(axis=1)  # Phi x
-    before = _chi2(pred, y, w, wb)
+    def chi2_of(lf):  # of a light field on the window (V, U, P, P, 3): Phi x against the measurements
+        return _chi2((pvals * lf.reshape(-1)[pcols]).sum(axis=1), y, w, wb)
+
+    before = chi2_of(job.first)
     bound = min(job.accept * before, CHI2_MAX)  # what a fit must leave to be accepted
 
     matrices = {}
@@ -861,7 +864,7 @@ def _solve_window(job: _Window, ctx: _Context):
     # before its non-positive samples were replaced (and its colours smoothed): module notes "Why the returned window
     # is checked"
     for returned in [_median_colours(fit), fit] if MEDIAN_COLOURS and tinted_rank else [fit]:  # (module notes)
-        if _chi2((pvals * returned.reshape(-1)[pcols]).sum(axis=1), y, w, wb) < RETURNED * before:
+        if chi2_of(returned) < RETURNED * before:
             return returned
     return None
 
@@ -881,25 +884,38 @@ def _chosen(job: _Window, disparities: tuple, matrix_at, bound: float, tinted_ra
         if not len(cols):
             continue
         picks = [q for q in (_pick(matrix_at(d), y, w, wb, x0, near, cols, tinted_rank) for d in disparities) if q]
-        picks.sort(key=lambda pick: pick[0])  # stable: ties keep the search's order
+        picks.sort(key=lambda pick: pick.score)  # stable: ties keep the search's order
         # the first of the CANDIDATES best whose tinted fit would be accepted; ranked by that fit already, the best
         # alone (by chi-square the next has no smaller one against the same bound; by evidence it may, and is not
         # tried: a fit of lower evidence is not taken for its chi-square)
         chosen = None
         for pick in picks[:1 if tinted_rank else CANDIDATES]:
-            out = pick[4] = _bounded(pick, y, w, wb)
+            out = pick.fit = _bounded(pick, y, w, wb)
             if out is not None and (chosen is None or out[1] < bound):
                 chosen = pick
                 if out[1] < bound:
                     break
-        if chosen is not None and (best is None or chosen[4][2] < best[4][2]):  # the higher evidence
+        if chosen is not None and (best is None or chosen.fit[2] < best.fit[2]):  # the higher evidence
             best = chosen
-    return None if best is None else (best[4], best[2], best[1], best[3], best[5], best[6])
+    return None if best is None else (best.fit, best.shear, best.m, best.prior, best.x0, best.cols)
+
+
+@dataclass
+class _Pick:
+    """One disparity's entry in :func:`_chosen`: its score, window matrix, shear, prior, tinted fit with the bounds
+    (None until solved: :func:`_bounded`), prior mean and light-layer columns."""
+
+    score: float
+    m: object
+    shear: object
+    prior: _Prior
+    fit: tuple | None
+    x0: np.ndarray
+    cols: np.ndarray
 
 
 def _pick(shear_m, y, w, wb, x0, near, cols, tinted_rank):
-    """One disparity's entry in :func:`_chosen`: ``[score, m, shear, prior, fit or None, x0, cols]``, or None
-    when the fit fails. From RANK_SHOTS shots the tinted fit with the bounds (score: its -2 log evidence, or with
+    """One disparity's :class:`_Pick` for :func:`_chosen`, or None when the fit fails. From RANK_SHOTS shots the tinted fit with the bounds (score: its -2 log evidence, or with
     ``RANK_EVIDENCE`` off its chi-square), with fewer the free fit's first pass (its chi-square; fit solved later)."""
     shear, m = shear_m
     prior = _prior_cov(m, x0, near)
@@ -912,16 +928,15 @@ def _pick(shear_m, y, w, wb, x0, near, cols, tinted_rank):
     if out is None:
         return None
     score = out[2] if tinted_rank and RANK_EVIDENCE else out[1]  # -2 log evidence, or chi-square
-    return [score, m, shear, prior, out if tinted_rank else None, x0, cols]
+    return _Pick(score, m, shear, prior, out if tinted_rank else None, x0, cols)
 
 
-def _bounded(pick: list, y, w, wb):
-    """A pick of :func:`_chosen`'s tinted fit with the bounds (solved now if it was ranked by its first pass)."""
-    if pick[4] is not None:
-        return pick[4]
-    _, m, _, prior, _, x0, cols = pick
-    free = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
-    return None if free is None else _tinted(free, m, y, w, wb, x0, cols, prior)
+def _bounded(pick: _Pick, y, w, wb):
+    """A pick's tinted fit with the bounds (solved now if it was ranked by its first pass)."""
+    if pick.fit is not None:
+        return pick.fit
+    free = _fit(pick.m, y, w, wb, pick.x0, pick.cols, _BOUND_PASSES, prior=pick.prior)
+    return None if free is None else _tinted(free, pick.m, y, w, wb, pick.x0, pick.cols, pick.prior)
 
 
 def _median_colours(fit: np.ndarray) -> np.ndarray:
