@@ -24,7 +24,7 @@ from lfproc.recon._lights import candidates, refit_lights
 from lfproc.synth import Layer, render_layers
 
 
-def _scene(light_value=400.0, seed=11):
+def _scene(light_value=400.0, seed=11, disparity=1.0):
     rng = np.random.default_rng(seed)
     size, m = (32, 32), 6
     tex = gaussian_filter(rng.random((size[0] + 2 * m, size[1] + 2 * m, 3)), (1.0, 1.0, 0)).astype(np.float32) + 0.5
@@ -32,7 +32,7 @@ def _scene(light_value=400.0, seed=11):
     alpha = np.zeros(tex.shape[:2], np.float32)
     light[21:23, 21:23] = light_value
     alpha[21:23, 21:23] = 1.0
-    layers = [Layer(tex, np.ones_like(alpha), 0.0), Layer(light, alpha, 1.0)]
+    layers = [Layer(tex, np.ones_like(alpha), 0.0), Layer(light, alpha, disparity)]
     data, _ = render_layers(layers, size=size, views=5)
     return LightField(data, units="relative")
 
@@ -690,6 +690,26 @@ def test_near_the_noise_the_disparity_of_higher_evidence_is_the_true_one(monkeyp
         assert _counts(info) == {"windows": 1, "refitted": 1}
         kept[by_evidence] = out.mean(-1)[at].sum() / lum_t[at].sum()
     assert abs(kept[True] - 1.0) < 0.1 and kept[False] < 0.5, kept
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason="known limitation (stop 33): a light between the grid's disparities keeps "
+                   "0.67-0.83 of its energy on its pixels; a strict xfail, so a fix must remove this marker")
+@pytest.mark.parametrize("disparity", [0.6, 0.7])
+def test_a_light_between_the_grids_disparities_keeps_its_energy_on_its_pixels(disparity):
+    """A 2 x 2 light at disparity 0.6 or 0.7, between the grid's 0.5 and 0.75 (a lenslet camera's disparities are not
+    on a grid), noise-free, blurred first estimate: the target is its energy on its pixels within 5 %, as at
+    disparity 1 (:func:`test_a_blurred_light_comes_back_sharp_with_its_energy`). Measured at stop 33: 0.834 and
+    0.669 (0.5: 1.009); with the true disparity added to the grid 0.998 and 0.983. Tried and not kept (docs, design
+    history, stop 33): a finer grid where a window's fit is poor, and the best disparity refined by its evidence
+    (0.990 and 0.963 here, but worse on real scenes)."""
+    lf = _scene(disparity=disparity)
+    cap = _capture(lf)
+    truth = _scene(disparity=disparity).data.astype(np.float64)
+    out, info = _refit(_blurred(lf), cap)
+    assert info["refitted"] == 1
+    lum_t = truth.mean(-1)
+    at = lum_t >= 0.1 * lum_t.max()
+    np.testing.assert_allclose(out.mean(-1)[at].sum() / lum_t[at].sum(), 1.0, atol=0.05)
 
 
 def _orange(stops_below, shots=2):
