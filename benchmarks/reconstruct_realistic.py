@@ -97,7 +97,8 @@ def figures(result, truth, floor: float) -> dict:
 
     sc = evaluate(result, truth, scale_tolerance_stops=None, noise_floor=floor)
     return {k: sc[k] for k in ("pu21_psnr_db", "pu21_ssim", "max_decade_stops", "zeros_above_floor",
-                               "highlight_energy", "detail_ratio", "stops_by_decade", "emitters_dominate")}
+                               "highlight_energy", "detail_ratio", "stops_by_decade", "stops_below_floor",
+                               "emitters_dominate")}
 
 
 def combine(runs: list[dict]) -> dict:
@@ -181,6 +182,13 @@ def main() -> None:
             np.save(args.save / f"{scene}__truth.npy", lf.data)
         rows.append(row)
         print(f"| {scene} | {stops:.1f} | " + " | ".join(cells) + " |", flush=True)
+    for row in rows:  # left out of the worst decade, but a user sees them (first seed's run)
+        for name in names:
+            below = row[name].get("runs", [row[name]])[0]["stops_below_floor"]
+            total = sum(d["samples"] for d in row[name].get("runs", [row[name]])[0]["stops_by_decade"] + below)
+            print(f"below the noise floor, {row['scene']} {name}: " + (" ".join(
+                f"{d['decade'][0]:g}:{d['median_stops']:.2f} ({100 * d['samples'] / total:.0f}%)" for d in below)
+                or "none"))
     for name in names:
         vals = [r[name] for r in rows]
         print(f"mean {name}: PU21-PSNR {np.mean([v['pu21_psnr_db'] for v in vals]):.2f} dB, "

@@ -73,7 +73,8 @@ def register(sub, common) -> None:
                         "emitters; restricts every figure")
     p.add_argument("--noise-floor", type=float, default=None, metavar="VALUE",
                    help="reference luminance at or below which samples are left out of the error in stops and "
-                        "the zeros (default: every sample with a positive reference)")
+                        "the zeros, and reported on a line of their own (default: every sample with a positive "
+                        "reference)")
     p.add_argument("--noise-floor-from", type=Path, default=None, metavar="CAPTURE",
                    help="take --noise-floor from the capture the result was reconstructed from: the radiance at "
                         "which one measurement at its highest ISO has as much signal as read noise (at least one electron)")
@@ -120,6 +121,11 @@ def format_hdr_table(figures: dict) -> str:
              f"{'decade':<18}{'samples':>10}{'median |stops|':>16}"]
     for d in figures["stops_by_decade"]:
         lines.append(f"{_decade(d['decade'][0]):<18}{d['samples']:>10}{_cell('{:.3f}', d['median_stops']):>16}")
+    below = figures.get("stops_below_floor") or []
+    if below:  # left out of the worst decade, but a user sees them
+        lines.append("below the noise floor (not resolved by one measurement; not in the worst decade): "
+                     + ", ".join(f"{_decade(d['decade'][0])} {_cell('{:.3f}', d['median_stops'])} stops "
+                                 f"({d['samples']} samples)" for d in below))
     zeros = figures["zeros_above_floor"]
     lines.append(f"worst decade: {_cell('{:.3f}', figures['max_decade_stops'])} stops; returned as 0 (or 20 "
                  f"stops under) above the floor: {'n/a' if math.isnan(zeros) else f'{100 * zeros:.3g} %'}")

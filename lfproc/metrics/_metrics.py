@@ -826,6 +826,10 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
             infinite error (``inf`` stops), so a decade more than half zeros reads ``inf``.
         ``max_decade_stops``
             the largest ``median_stops`` (``nan`` when no sample is above the floor).
+        ``stops_below_floor``
+            as ``stops_by_decade``, over the samples of positive reference luminance at or below the
+            noise floor (empty without a floor): one measurement does not resolve them, but a
+            reconstruction pools many, and a user sees them (shadows lifted, or crushed).
         ``zeros_above_floor``
             share of the samples above the noise floor whose result luminance is ``<= 0`` or more
             than :data:`ZERO_STOPS` (20) stops below the reference's (``nan`` when there is none).
@@ -882,6 +886,8 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
     ref_k, res_k = (y_ref.ravel(), y_res.ravel()) if keep is None else (y_ref[keep], y_res[keep])
     by_decade, zeros, n_above = _stops_by_decade(res_k, ref_k, floor)
     max_stops = max((d["median_stops"] for d in by_decade), default=math.nan)
+    below = (ref_k > 0) & (ref_k <= floor)
+    by_decade_below = _stops_by_decade(res_k[below], ref_k[below], 0.0)[0] if below.any() else []
 
     top = _brightest(ref_k, _HIGHLIGHT_FRACTION)
     ref_energy = float(ref_k[top].sum())
@@ -899,6 +905,7 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
     return {
         "stops_by_decade": by_decade,
         "max_decade_stops": float(max_stops),
+        "stops_below_floor": by_decade_below,
         "zeros_above_floor": zeros,
         "highlight_energy": highlight,
         "detail_ratio": detail,

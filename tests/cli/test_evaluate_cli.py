@@ -289,6 +289,21 @@ def test_table_prints_hdr_figures_and_says_when_emitters_dominate(tmp_path, caps
     assert doc["samples"] == 40 * 48 - 2 and doc["zeros_above_floor"] == 0.0
 
 
+def test_the_samples_below_the_noise_floor_are_reported_apart(tmp_path, capsys):
+    """The dark corner (80 samples at 0.001, returned as 0) under ``--noise-floor 0.002``: out of the worst decade and
+    the zeros, in a line of its own (JSON: ``stops_below_floor``)."""
+    res, ref, _, _ = _lost_highlights(tmp_path)
+    args = ["evaluate", str(res), str(ref), "--scale-tolerance-stops", "10", "--noise-floor", "0.002"]
+    doc = _json(capsys, [*args, "--json"])
+    assert doc["zeros_above_floor"] == 0.0 and doc["samples_above_floor"] == 40 * 48 - 80
+    (below,) = doc["stops_below_floor"]
+    assert below["decade"] == pytest.approx([1e-3, 1e-2]) and below["samples"] == 80
+    assert below["median_stops"] == "inf"
+    assert main(args) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("below the noise floor"))
+    assert "1e-03 .. 1e-02" in line and "(80 samples)" in line
+
+
 def test_mask_files_restrict_every_figure(tmp_path, capsys):
     from PIL import Image
 

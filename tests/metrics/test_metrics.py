@@ -360,6 +360,24 @@ def test_hdr_figures_identity(hdr_lf):
     assert out["stops_by_decade"][-1]["decade"][1] == pytest.approx(10.0 ** (math.floor(math.log10(y.max())) + 1))
 
 
+def test_hdr_figures_report_the_samples_below_the_floor_apart(hdr_lf):
+    """Known answer: a result one stop too bright at and below the floor (the reference's median luminance), exact
+    above it: the decades above read 0 stops, those below 1 stop, and every positive sample is in one or the other;
+    without a floor there is nothing below it."""
+    from lfproc.metrics import hdr_figures
+
+    y = metric_luminance(hdr_lf.data.astype(np.float64))
+    floor = float(np.median(y))
+    res = np.where((y <= floor)[..., None], 2.0 * hdr_lf.data, hdr_lf.data)
+    out = hdr_figures(res, hdr_lf.data, noise_floor=floor)
+    assert out["max_decade_stops"] == 0.0
+    assert [d["median_stops"] for d in out["stops_below_floor"]] == pytest.approx([1.0] * len(out["stops_below_floor"]))
+    assert sum(d["samples"] for d in out["stops_below_floor"]) == np.count_nonzero(y <= floor)
+    assert out["samples_above_floor"] + np.count_nonzero(y <= floor) == y.size
+    assert out["stops_below_floor"][-1]["decade"][0] <= floor < out["stops_below_floor"][-1]["decade"][1]
+    assert hdr_figures(res, hdr_lf.data)["stops_below_floor"] == []
+
+
 def test_hdr_figures_twice_as_bright(hdr_lf):
     from lfproc.metrics import hdr_figures
 
