@@ -775,6 +775,23 @@ def _stops_by_decade(res_k: np.ndarray, ref_k: np.ndarray, floor: float) -> tupl
     return by_decade, zeros, n_above
 
 
+def _checked_floor(noise_floor) -> float:
+    """``noise_floor`` of :func:`hdr_figures` as a float (None: 0), or InputError."""
+    if noise_floor is None:
+        return 0.0
+    floor = float(noise_floor)
+    if not (math.isfinite(floor) and floor >= 0):
+        raise InputError(f"noise_floor: expected a finite value >= 0, got {noise_floor!r}")
+    return floor
+
+
+def _stops_below_floor(res_k: np.ndarray, ref_k: np.ndarray, floor: float) -> list[dict]:
+    """``stops_below_floor`` of :func:`hdr_figures`: ``stops_by_decade`` of the samples of positive reference
+    luminance at or below ``floor``."""
+    below = (ref_k > 0) & (ref_k <= floor)
+    return _stops_by_decade(res_k[below], ref_k[below], 0.0)[0] if below.any() else []
+
+
 def _detail_ratio(err: np.ndarray, p_ref: np.ndarray, keep: np.ndarray | None) -> float:
     """``detail_ratio`` of :func:`hdr_figures`: the Laplacian energy of the PU21 error over the reference's,
     per view, over the kept samples (``nan`` for a reference without detail)."""
@@ -827,9 +844,8 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
         ``max_decade_stops``
             the largest ``median_stops`` (``nan`` when no sample is above the floor).
         ``stops_below_floor``
-            as ``stops_by_decade``, over the samples of positive reference luminance at or below the
-            noise floor (empty without a floor): one measurement does not resolve them, but a
-            reconstruction pools many, and a user sees them (shadows lifted, or crushed).
+            as ``stops_by_decade``, over the samples of positive reference at or below the floor (empty
+            without one): one measurement does not resolve them, but a user sees them (shadows).
         ``zeros_above_floor``
             share of the samples above the noise floor whose result luminance is ``<= 0`` or more
             than :data:`ZERO_STOPS` (20) stops below the reference's (``nan`` when there is none).
@@ -873,12 +889,7 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
     if y_res.shape != y_ref.shape:
         raise ShapeError(f"result and reference: expected the same shape, got {y_res.shape} and {y_ref.shape} "
                          "(luminance)")
-    if noise_floor is None:
-        floor = 0.0
-    else:
-        floor = float(noise_floor)
-        if not (math.isfinite(floor) and floor >= 0):
-            raise InputError(f"noise_floor: expected a finite value >= 0, got {noise_floor!r}")
+    floor = _checked_floor(noise_floor)
     ref_data = reference.data if isinstance(reference, LightField) else np.asarray(reference)
     factor = _scale_factor(ref_data, peak_luminance)
     keep, n = _figure_mask(mask, y_ref.shape)
@@ -886,8 +897,6 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
     ref_k, res_k = (y_ref.ravel(), y_res.ravel()) if keep is None else (y_ref[keep], y_res[keep])
     by_decade, zeros, n_above = _stops_by_decade(res_k, ref_k, floor)
     max_stops = max((d["median_stops"] for d in by_decade), default=math.nan)
-    below = (ref_k > 0) & (ref_k <= floor)
-    by_decade_below = _stops_by_decade(res_k[below], ref_k[below], 0.0)[0] if below.any() else []
 
     top = _brightest(ref_k, _HIGHLIGHT_FRACTION)
     ref_energy = float(ref_k[top].sum())
@@ -905,7 +914,7 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
     return {
         "stops_by_decade": by_decade,
         "max_decade_stops": float(max_stops),
-        "stops_below_floor": by_decade_below,
+        "stops_below_floor": _stops_below_floor(res_k, ref_k, floor),
         "zeros_above_floor": zeros,
         "highlight_energy": highlight,
         "detail_ratio": detail,
