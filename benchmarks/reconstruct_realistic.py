@@ -23,6 +23,10 @@ Printed per scene and capture, beside PU21-PSNR / PU21-SSIM (:func:`lfproc.metri
   measured at the start and the end of the run as the reference for the machine's speed, and
   the run's peak memory.
 
+After the table, per scene and capture (the first seed's run): the same median error for each decade at or below the
+noise floor, with its share of the samples (``hdr_figures``' ``stops_below_floor``; since stop 33): one measurement
+does not resolve those samples, but they are the picture's shadows.
+
 The noise floor of a capture (:func:`lfproc.camera.capture.noise_floor`) is the light-field
 luminance at which one measurement at the highest ISO has as much signal as read noise:
 ``read_noise_e / (t * radiance_scale * r)`` with ``r`` the mean total mask transmittance of a
