@@ -77,7 +77,8 @@ def register(sub, common) -> None:
                         "reference)")
     p.add_argument("--noise-floor-from", type=Path, default=None, metavar="CAPTURE",
                    help="take --noise-floor from the capture the result was reconstructed from: the radiance at "
-                        "which one measurement at its highest ISO has as much signal as read noise (at least one electron)")
+                        "which one measurement at its highest ISO has as much signal as read noise (at least one "
+                        "electron)")
     p.add_argument("--error-map", type=Path, default=None, metavar="MAP.png",
                    help="write the centre view's error in stops (log2 result/reference luminance) with a "
                         "diverging colour map and a colour bar")

@@ -704,7 +704,7 @@ def test_a_light_between_the_grids_disparities_keeps_its_energy_on_its_pixels(di
     (0.990 and 0.963 here, but worse on real scenes)."""
     lf = _scene(disparity=disparity)
     cap = _capture(lf)
-    truth = _scene(disparity=disparity).data.astype(np.float64)
+    truth = lf.data.astype(np.float64)
     out, info = _refit(_blurred(lf), cap)
     assert info["refitted"] == 1
     lum_t = truth.mean(-1)
