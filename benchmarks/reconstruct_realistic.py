@@ -188,8 +188,9 @@ def main() -> None:
         print(f"| {scene} | {stops:.1f} | " + " | ".join(cells) + " |", flush=True)
     for row in rows:  # left out of the worst decade, but a user sees them (first seed's run)
         for name in names:
-            below = row[name].get("runs", [row[name]])[0]["stops_below_floor"]
-            total = sum(d["samples"] for d in row[name].get("runs", [row[name]])[0]["stops_by_decade"] + below)
+            first = row[name].get("runs", [row[name]])[0]
+            below = first["stops_below_floor"]
+            total = sum(d["samples"] for d in first["stops_by_decade"] + below)
             print(f"below the noise floor, {row['scene']} {name}: " + (" ".join(
                 f"{d['decade'][0]:g}:{d['median_stops']:.2f} ({100 * d['samples'] / total:.0f}%)" for d in below)
                 or "none"))

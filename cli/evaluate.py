@@ -122,7 +122,7 @@ def format_hdr_table(figures: dict) -> str:
              f"{'decade':<18}{'samples':>10}{'median |stops|':>16}"]
     for d in figures["stops_by_decade"]:
         lines.append(f"{_decade(d['decade'][0]):<18}{d['samples']:>10}{_cell('{:.3f}', d['median_stops']):>16}")
-    below = figures.get("stops_below_floor") or []
+    below = figures["stops_below_floor"]
     if below:  # left out of the worst decade, but a user sees them
         lines.append("below the noise floor (not resolved by one measurement; not in the worst decade): "
                      + ", ".join(f"{_decade(d['decade'][0])} {_cell('{:.3f}', d['median_stops'])} stops "

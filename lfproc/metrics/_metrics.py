@@ -1285,7 +1285,8 @@ def evaluate(result: LightField, reference: LightField, *, peak_luminance: float
         to score without the emitters (combined with ``mask``).
     noise_floor : float, optional
         Reference luminance at or below which samples are left out of the error in stops
-        and the zeros (see :func:`hdr_figures`; default: every positive sample).
+        and the zeros, and scored apart (``stops_below_floor``; see :func:`hdr_figures`;
+        default: every positive sample).
 
     Returns
     -------

@@ -835,6 +835,7 @@ def _solve_window(job: _Window, ctx: _Context):
     ops = patch_operators(ctx.mask, views=ctx.views, cfa_pattern=ctx.cfa_pattern, tops=[top], lefts=[left], size=p,
                           sensor_size=ctx.size)
     pcols, pvals = ops.cols[0].astype(np.intp), ops.vals[0].astype(np.float64)  # (m, V U)
+
     def chi2_of(lf):  # of a light field on the window (V, U, P, P, 3): Phi x against the measurements
         return _chi2((pvals * lf.reshape(-1)[pcols]).sum(axis=1), y, w, wb)
 
@@ -854,9 +855,9 @@ def _solve_window(job: _Window, ctx: _Context):
     best = _chosen(job, ctx.disparities, matrix_at, bound, tinted_rank)
     if best is None:
         return None
-    out, shear, m, prior, x0, cols = best
+    out, shear = best.fit, best.shear
     if job.recolour:  # its colour fitted, before the bound: a fit can pass it once its colour fits
-        out = _recoloured(out, m, y, w, wb, x0, cols, prior, job.recolour)
+        out = _recoloured(out, best.m, y, w, wb, best.x0, best.cols, best.prior, job.recolour)
     if not out[1] < bound:
         return None
     fit = (shear @ out[0].reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
@@ -874,7 +875,7 @@ def _solve_window(job: _Window, ctx: _Context):
 
 
 def _chosen(job: _Window, disparities: tuple, matrix_at, bound: float, tinted_rank: bool):
-    """The fit of one window (:func:`_solve_window`) as ``(fit, shear, m, prior, x0, cols)``, or None. Per prior,
+    """The chosen :class:`_Pick` of one window (:func:`_solve_window`; its ``fit`` solved), or None. Per prior,
     from RANK_SHOTS shots the disparities are ranked by the tinted fit with the bounds (its evidence), with fewer by
     the free fit's first pass (its chi-square) and then solved with the bounds; the chosen one is the first of the
     CANDIDATES best whose tinted fit leaves less than ``bound`` (ranked by that fit already, the best alone), of the
@@ -901,7 +902,7 @@ def _chosen(job: _Window, disparities: tuple, matrix_at, bound: float, tinted_ra
                     break
         if chosen is not None and (best is None or chosen.fit[2] < best.fit[2]):  # the higher evidence
             best = chosen
-    return None if best is None else (best.fit, best.shear, best.m, best.prior, best.x0, best.cols)
+    return best
 
 
 @dataclass
@@ -919,8 +920,9 @@ class _Pick:
 
 
 def _pick(shear_m, y, w, wb, x0, near, cols, tinted_rank):
-    """One disparity's :class:`_Pick` for :func:`_chosen`, or None when the fit fails. From RANK_SHOTS shots the tinted fit with the bounds (score: its -2 log evidence, or with
-    ``RANK_EVIDENCE`` off its chi-square), with fewer the free fit's first pass (its chi-square; fit solved later)."""
+    """One disparity's :class:`_Pick` for :func:`_chosen`, or None when the fit fails. From RANK_SHOTS shots the
+    tinted fit with the bounds (score: its -2 log evidence, or with ``RANK_EVIDENCE`` off its chi-square), with fewer
+    the free fit's first pass (its chi-square; fit solved later)."""
     shear, m = shear_m
     prior = _prior_cov(m, x0, near)
     if tinted_rank:
