@@ -352,7 +352,7 @@ from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg as sl
-from scipy import ndimage, sparse
+from scipy import ndimage, optimize, sparse
 from scipy.optimize import nnls
 from threadpoolctl import threadpool_limits
 
@@ -438,6 +438,12 @@ MEDIAN_KEEP = 0.1
 #: The light field a window returns must leave a chi-square below RETURNED times the first estimate's (module notes
 #: "Why the returned window is checked"); with MEDIAN_COLOURS, the window without the median when the median's does not.
 RETURNED = 1.0
+#: the light at a disparity of its own (module notes): on; the evidence it must gain per pixel of the light layer; the
+#: chi-square per measurement it may leave; the tolerance of its disparity
+BETWEEN = True
+BETWEEN_GAIN = 3.0
+BETWEEN_CHI2 = 1.0
+BETWEEN_TOL = 0.01
 
 
 def misfit_map(lf: np.ndarray, T: np.ndarray, W: np.ndarray, W_bound: np.ndarray,
@@ -528,7 +534,7 @@ def _prior_cov(m, x0, near=None) -> _Prior:
     return _Prior(sb2, cov.toarray(), {})
 
 
-def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None, pattern=None):
+def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None, pattern=None, light=None):
     """``x = b + l`` (module notes) on one window: ``(x, chi-square, -2 log evidence, l)``, or None when there is
     nothing to fit or the solver fails (the window then keeps the first estimate). The evidence is the Gaussian
     density of the residual after ``l`` with the background integrated out, without its ``2 pi`` term. With
@@ -545,8 +551,11 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None, pattern=No
     sb2, cov, kept = _prior_cov(m, x0) if prior is None else prior  # kept: prior.factors
     r0 = y - m @ x0
     ww = w
-    light_cols = m[:, cols]  # the light layer's columns, dense, sliced once for every pass
-    light_cols = light_cols.toarray() if sparse.issparse(light_cols) else np.asarray(light_cols)
+    if light is None:  # the light layer's columns, dense, sliced once for every pass
+        light_cols = m[:, cols]
+        light_cols = light_cols.toarray() if sparse.issparse(light_cols) else np.asarray(light_cols)
+    else:  # its own columns: the light between two disparities (:func:`_between`)
+        light_cols = light
     ridge = None  # rows of the prior on the unknowns only saturated measurements see (module notes "Why a ridge")
     only = _bound_only(light_cols, w, w_bound, colour, pattern) if BOUND_RIDGE else None
     if only is not None and only.any():
@@ -578,15 +587,16 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None, pattern=No
             return None
         l = np.zeros_like(x0)
         l[cols] = _layer(lc, colour, pattern)
-        x = x0 + sb2 @ (mk.T @ sl.cho_solve((chol, True), rk - mk @ l)) + l
-        pred = m @ x
+        lk = mk @ l if light is None else light_cols[k] @ l[cols]  # the light's share of the usable measurements
+        x = x0 + sb2 @ (mk.T @ sl.cho_solve((chol, True), rk - lk)) + l
+        pred = m @ x if light is None else m @ (x - l) + light_cols @ l[cols]
         below = (w_bound > 0) & (pred < y)  # bounds the fit does not meet join the data at their level
         new = np.where(below, w_bound, w)
         if (new == ww).all():
             break
         ww = new
     e = ((pred - y) * ww) ** 2
-    rw = sl.solve_triangular(chol, rk - mk @ l, lower=True)
+    rw = sl.solve_triangular(chol, rk - lk, lower=True)
     return x, float(e[ww > 0].mean()), float(rw @ rw + 2 * np.log(np.diag(chol)).sum()), l
 
 
@@ -858,9 +868,15 @@ def _solve_window(job: _Window, ctx: _Context):
     out, shear = best.fit, best.shear
     if job.recolour:  # its colour fitted, before the bound: a fit can pass it once its colour fits
         out = _recoloured(out, best.m, y, w, wb, best.x0, best.cols, best.prior, job.recolour)
+    light = None
+    if BETWEEN:  # the light at a disparity of its own (module notes)
+        out, light = _between(best, out, job, ctx.disparities, matrix_at)
     if not out[1] < bound:
         return None
-    fit = (shear @ out[0].reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
+    if light is None:
+        fit = (shear @ out[0].reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
+    else:  # the background at its disparity, the light at its own
+        fit = (shear @ (out[0] - out[3]).reshape(e * e, 3) + light @ out[3].reshape(e * e, 3)).reshape(nv, nu, p, p, 3)
     keep = job.first  # radiance is positive: a non-positive fit keeps this
     if FLOOR:
         keep = np.minimum(keep, (shear @ job.floor.reshape(e * e, 3)).reshape(nv, nu, p, p, 3))
@@ -935,6 +951,49 @@ def _pick(shear_m, y, w, wb, x0, near, cols, tinted_rank):
         return None
     score = out[2] if tinted_rank and RANK_EVIDENCE else out[1]  # -2 log evidence, or chi-square
     return _Pick(score, m, shear, prior, out if tinted_rank else None, x0, cols)
+
+
+def _between(pick: _Pick, out, job: _Window, disparities: tuple, matrix_at):
+    """The tinted fit ``out`` of ``pick`` with its light layer at a disparity of its own, between the grid's, the
+    background at ``pick``'s (module notes "Why the light has a disparity of its own"): the layer's columns
+    ``(1 - t) M_i + t M_i+1`` for a disparity ``d_i + t (d_i+1 - d_i)``, chosen by the evidence over the grid and its
+    midpoints, then refined (:func:`scipy.optimize.minimize_scalar`) within half a step. ``(fit, light shear)``, or
+    ``(out, None)`` unless it raises the evidence by ``BETWEEN_GAIN`` per pixel of the layer and leaves a chi-square
+    of at most ``BETWEEN_CHI2``."""
+    cols, y, w, wb = pick.cols, job.y, job.w, job.wb
+    tint = out[3][cols].reshape(-1, 3).sum(axis=0)
+    if not tint.sum() > 0:
+        return out, None
+    colour, grid = tint / tint.sum(), sorted(disparities)
+    dense, fits = {}, {}
+
+    def columns(d):  # the light layer's columns at a disparity of the grid (dense)
+        if d not in dense:
+            c = matrix_at(d)[1][:, cols]
+            dense[d] = c.toarray() if sparse.issparse(c) else np.asarray(c)
+        return dense[d]
+
+    def cell(d):  # (d_i, d_i+1, t) of a disparity within the grid
+        i = min(max(int(np.searchsorted(grid, d, side="right")) - 1, 0), len(grid) - 2)
+        return grid[i], grid[i + 1], (d - grid[i]) / (grid[i + 1] - grid[i])
+
+    def evidence(d):
+        d = float(np.clip(d, grid[0], grid[-1]))
+        if d not in fits:
+            lo, hi, t = cell(d)
+            fits[d] = _fit(pick.m, y, w, wb, pick.x0, cols, _BOUND_PASSES, colour, pick.prior,
+                           light=(1.0 - t) * columns(lo) + t * columns(hi))
+        return np.inf if fits[d] is None else fits[d][2]
+
+    coarse = min(grid + [(a + b) / 2 for a, b in zip(grid[:-1], grid[1:])], key=evidence)
+    half = min(b - a for a, b in zip(grid[:-1], grid[1:])) / 2
+    optimize.minimize_scalar(evidence, bounds=(max(coarse - half, grid[0]), min(coarse + half, grid[-1])),
+                             method="bounded", options={"xatol": BETWEEN_TOL})
+    d = min(fits, key=evidence)  # the best evaluated
+    if not (evidence(d) < out[2] - BETWEEN_GAIN * len(cols) / 3 and fits[d][1] <= BETWEEN_CHI2):
+        return out, None
+    lo, hi, t = cell(d)
+    return fits[d], (1.0 - t) * matrix_at(lo)[0] + t * matrix_at(hi)[0]
 
 
 def _bounded(pick: _Pick, y, w, wb):
