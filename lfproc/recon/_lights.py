@@ -894,7 +894,8 @@ def _solve_window(job: _Window, ctx: _Context):
         out = _recoloured(out, best.m, y, w, wb, best.x0, best.cols, best.prior, job.recolour)
     light = None
     if BETWEEN:  # the light at a disparity of its own (module notes)
-        out, light = _between(best, out, job, ctx.disparities, matrix_at)
+        out, light, back = _between(best, out, job, ctx.disparities, matrix_at)
+        shear = shear if back is None else back
     if not out[1] < bound:
         return None
     if light is None:
@@ -934,6 +935,8 @@ def _chosen(job: _Window, disparities: tuple, matrix_at, bound: float, tinted_ra
         # alone (by chi-square the next has no smaller one against the same bound; by evidence it may, and is not
         # tried: a fit of lower evidence is not taken for its chi-square)
         chosen = None
+        for pick in picks:  # the background's disparities for :func:`_between`
+            pick.siblings = picks
         for pick in picks[:1 if tinted_rank else CANDIDATES]:
             out = pick.fit = _bounded(pick, y, w, wb)
             if out is not None and (chosen is None or out[1] < bound):
@@ -957,6 +960,7 @@ class _Pick:
     fit: tuple | None
     x0: np.ndarray
     cols: np.ndarray
+    siblings: list | None = None  #: the prior's picks at every disparity (:func:`_between`)
 
 
 def _pick(shear_m, y, w, wb, x0, near, cols, tinted_rank):
@@ -981,13 +985,14 @@ def _between(pick: _Pick, out, job: _Window, disparities: tuple, matrix_at):
     """The tinted fit ``out`` of ``pick`` with its light layer at a disparity of its own, between the grid's, the
     background at ``pick``'s (module notes "Why the light has a disparity of its own"): the layer's columns
     ``(1 - t) M_i + t M_i+1`` for a disparity ``d_i + t (d_i+1 - d_i)``, chosen by the evidence over the grid and its
-    midpoints, then refined (:func:`scipy.optimize.minimize_scalar`) within half a step. ``(fit, light shear)``, or
-    ``(out, None)`` unless it raises the evidence by ``BETWEEN_GAIN`` per pixel of the layer and leaves a chi-square
-    of at most ``BETWEEN_CHI2``."""
+    midpoints, then refined (:func:`scipy.optimize.minimize_scalar`) within half a step; then the background's
+    disparity chosen again among ``pick.siblings`` for that light. ``(fit, light shear, background shear)``, or
+    ``(out, None, None)`` unless it raises the evidence by ``BETWEEN_GAIN`` per pixel of the layer and leaves a
+    chi-square of at most ``BETWEEN_CHI2``."""
     cols, y, w, wb = pick.cols, job.y, job.w, job.wb
     tint = out[3][cols].reshape(-1, 3).sum(axis=0)
     if not tint.sum() > 0:
-        return out, None
+        return out, None, None
     colour, grid = tint / tint.sum(), sorted(disparities)
     dense, fits = {}, {}
 
@@ -1014,10 +1019,17 @@ def _between(pick: _Pick, out, job: _Window, disparities: tuple, matrix_at):
     optimize.minimize_scalar(evidence, bounds=(max(coarse - half, grid[0]), min(coarse + half, grid[-1])),
                              method="bounded", options={"xatol": BETWEEN_TOL})
     d = min(fits, key=evidence)  # the best evaluated
-    if not (evidence(d) < out[2] - BETWEEN_GAIN * len(cols) / 3 and fits[d][1] <= BETWEEN_CHI2):
-        return out, None
     lo, hi, t = cell(d)
-    return fits[d], (1.0 - t) * matrix_at(lo)[0] + t * matrix_at(hi)[0]
+    light = (1.0 - t) * columns(lo) + t * columns(hi)
+    best, back = fits[d], pick
+    for other in pick.siblings or ():  # the background's disparity chosen again for this light (one round), not
+        if other is not pick:  # for evidence its prior's volume brings with a worse fit (module notes)
+            fit = _fit(other.m, y, w, wb, other.x0, cols, _BOUND_PASSES, colour, other.prior, light=light)
+            if fit is not None and (best is None or fit[2] < best[2] and fit[1] <= fits[d][1]):
+                best, back = fit, other
+    if best is None or not (best[2] < out[2] - BETWEEN_GAIN * len(cols) / 3 and best[1] <= BETWEEN_CHI2):
+        return out, None, None
+    return best, (1.0 - t) * matrix_at(lo)[0] + t * matrix_at(hi)[0], back.shear
 
 
 def _bounded(pick: _Pick, y, w, wb):
