@@ -265,6 +265,7 @@ def test_from_two_shots_the_disparities_are_ranked_by_the_tinted_fit(monkeypatch
 
     monkeypatch.setattr(lights, "_window_matrix", tagged)
     monkeypatch.setattr(lights, "PASSES", 1)
+    monkeypatch.setattr(lights, "BETWEEN", False)  # the ranking alone (the light's own disparity fits again)
     results = {}
     for name, patch in (("plain", fit), ("free", flattering(False)), ("tinted", flattering(True))):
         monkeypatch.setattr(lights, "_fit", patch)
@@ -292,6 +293,7 @@ def test_the_disparities_are_ranked_with_the_bounds_from_two_shots(monkeypatch):
 
     monkeypatch.setattr(lights, "_fit", counted)
     monkeypatch.setattr(lights, "PASSES", 1)
+    monkeypatch.setattr(lights, "BETWEEN", False)  # the ranking's fits alone (the light's own disparity fits again)
     n = len(DEFAULT_DISPARITIES) * 2  # two priors (HALO)
     for shots in (2, 1):
         cap = simulate_capture(lf, mask_period=4, shots=shots, random_state=2, profile="paper-none")
