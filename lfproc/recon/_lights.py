@@ -998,7 +998,7 @@ def _between(pick: _Pick, out, job: _Window, disparities: tuple, matrix_at):
     chi-square of at most ``BETWEEN_CHI2``."""
     cols, y, w, wb = pick.cols, job.y, job.w, job.wb
     tint = out[3][cols].reshape(-1, 3).sum(axis=0)
-    if not tint.sum() > 0:
+    if not tint.sum() > 0 or len(disparities) < 2:  # nothing to fit, or no disparities between the grid's
         return out, None, None
     colour, grid = tint / tint.sum(), sorted(disparities)
     dense, fits = {}, {}
