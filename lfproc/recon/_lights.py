@@ -582,11 +582,8 @@ def _fit(m, y, w, w_bound, x0, cols, passes, colour=None, prior=None, pattern=No
     sb2, cov, kept = _prior_cov(m, x0) if prior is None else prior  # kept: prior.factors
     r0 = y - m @ x0
     ww = w
-    if light is None:  # the light layer's columns, dense, sliced once for every pass
-        light_cols = m[:, cols]
-        light_cols = light_cols.toarray() if sparse.issparse(light_cols) else np.asarray(light_cols)
-    else:  # its own columns: the light between two disparities (:func:`_between`)
-        light_cols = light
+    # the light layer's columns, dense, sliced once for every pass, or its own: between two disparities (_between)
+    light_cols = _columns(m, cols) if light is None else light
     ridge = None  # rows of the prior on the unknowns only saturated measurements see (module notes "Why a ridge")
     only = _bound_only(light_cols, w, w_bound, colour, pattern) if BOUND_RIDGE else None
     if only is not None and only.any():
@@ -670,8 +667,7 @@ def _recoloured(out, m, y, w, w_bound, x0, cols, prior, rounds):
     while the evidence rises (module notes "Why the colour is fitted")."""
     lc = None
     if MEASURED_ONLY:  # the light layer's columns, dense, for _bound_only (the same every round)
-        lc = m[:, cols]
-        lc = lc.toarray() if sparse.issparse(lc) else np.asarray(lc)
+        lc = _columns(m, cols)
     for _ in range(rounds):
         s = out[3][cols].reshape(-1, 3).sum(axis=1)
         if not s.sum() > 0:
@@ -1005,20 +1001,19 @@ def _between(pick: _Pick, out, job: _Window, disparities: tuple, matrix_at):
 
     def columns(d):  # the light layer's columns at a disparity of the grid (dense)
         if d not in dense:
-            c = matrix_at(d)[1][:, cols]
-            dense[d] = c.toarray() if sparse.issparse(c) else np.asarray(c)
+            dense[d] = _columns(matrix_at(d)[1], cols)
         return dense[d]
 
-    def cell(d):  # (d_i, d_i+1, t) of a disparity within the grid
+    def blend(d, of):  # (1 - t) of(d_i) + t of(d_i+1) for d between the grid's d_i and d_i+1
         i = min(max(int(np.searchsorted(grid, d, side="right")) - 1, 0), len(grid) - 2)
-        return grid[i], grid[i + 1], (d - grid[i]) / (grid[i + 1] - grid[i])
+        t = (d - grid[i]) / (grid[i + 1] - grid[i])
+        return (1.0 - t) * of(grid[i]) + t * of(grid[i + 1])
 
     def evidence(d):
         d = float(np.clip(d, grid[0], grid[-1]))
         if d not in fits:
-            lo, hi, t = cell(d)
             fits[d] = _fit(pick.m, y, w, wb, pick.x0, cols, _BOUND_PASSES, colour, pick.prior,
-                           light=(1.0 - t) * columns(lo) + t * columns(hi))
+                           light=blend(d, columns))
         return np.inf if fits[d] is None else fits[d][2]
 
     coarse = min(grid + [(a + b) / 2 for a, b in zip(grid[:-1], grid[1:])], key=evidence)
@@ -1026,8 +1021,7 @@ def _between(pick: _Pick, out, job: _Window, disparities: tuple, matrix_at):
     optimize.minimize_scalar(evidence, bounds=(max(coarse - half, grid[0]), min(coarse + half, grid[-1])),
                              method="bounded", options={"xatol": BETWEEN_TOL})
     d = min(fits, key=evidence)  # the best evaluated
-    lo, hi, t = cell(d)
-    light = (1.0 - t) * columns(lo) + t * columns(hi)
+    light = blend(d, columns)
     best, back = fits[d], pick
     for other in pick.siblings or ():  # the background's disparity chosen again for this light (one round), not
         if other is not pick:  # for evidence its prior's volume brings with a worse fit (module notes)
@@ -1036,7 +1030,13 @@ def _between(pick: _Pick, out, job: _Window, disparities: tuple, matrix_at):
                 best, back = fit, other
     if best is None or not (best[2] < out[2] - BETWEEN_GAIN * len(cols) / 3 and best[1] <= BETWEEN_CHI2):
         return out, None, None
-    return best, (1.0 - t) * matrix_at(lo)[0] + t * matrix_at(hi)[0], back.shear
+    return best, blend(d, lambda g: matrix_at(g)[0]), back.shear
+
+
+def _columns(m, cols) -> np.ndarray:
+    """Columns ``cols`` of a window's matrix ``m`` (dense or sparse), dense."""
+    c = m[:, cols]
+    return c.toarray() if sparse.issparse(c) else np.asarray(c)
 
 
 def _bounded(pick: _Pick, y, w, wb):
