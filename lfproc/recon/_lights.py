@@ -475,6 +475,10 @@ BETWEEN = True
 BETWEEN_GAIN = 3.0
 BETWEEN_CHI2 = 1.0
 BETWEEN_TOL = 0.01
+#: From RANK_SHOTS shots the background's disparity is also tried half way between the best of the grid and its
+#: neighbours, and taken only for a score less by HALF_GAIN per pixel of the light layer (module notes "Why half steps")
+HALF_STEPS = True
+HALF_GAIN = 3.0
 
 
 def misfit_map(lf: np.ndarray, T: np.ndarray, W: np.ndarray, W_bound: np.ndarray,
@@ -923,7 +927,9 @@ def _chosen(job: _Window, disparities: tuple, matrix_at, bound: float, tinted_ra
     from RANK_SHOTS shots the disparities are ranked by the tinted fit with the bounds (its evidence), with fewer by
     the free fit's first pass (its chi-square) and then solved with the bounds; the chosen one is the first of the
     CANDIDATES best whose tinted fit leaves less than ``bound`` (ranked by that fit already, the best alone), of the
-    priors' the one of higher evidence. ``matrix_at(d)``: ``(S_d, M)`` of the window."""
+    priors' the one of higher evidence; from RANK_SHOTS shots the disparities half way to the best one's neighbours
+    are ranked too when their evidence is higher by HALF_GAIN per pixel (:func:`_half_steps`). ``matrix_at(d)``:
+    ``(S_d, M)`` of the window."""
     y, w, wb = job.y, job.w, job.wb
     best = None
     for low, support in job.supports:
@@ -932,7 +938,12 @@ def _chosen(job: _Window, disparities: tuple, matrix_at, bound: float, tinted_ra
         cols = np.flatnonzero(near)
         if not len(cols):
             continue
-        picks = [q for q in (_pick(matrix_at(d), y, w, wb, x0, near, cols, tinted_rank) for d in disparities) if q]
+        def pick_at(d):
+            return _pick(d, matrix_at(d), y, w, wb, x0, near, cols, tinted_rank)
+
+        picks = [q for q in map(pick_at, disparities) if q]
+        if HALF_STEPS and tinted_rank and RANK_EVIDENCE:  # half way to the best one's neighbours (module notes)
+            picks += _half_steps(picks, disparities, pick_at, len(cols) / 3)
         picks.sort(key=lambda pick: pick.score)  # stable: ties keep the search's order
         # the first of the CANDIDATES best whose tinted fit would be accepted; ranked by that fit already, the best
         # alone (by chi-square the next has no smaller one against the same bound; by evidence it may, and is not
@@ -954,7 +965,7 @@ def _chosen(job: _Window, disparities: tuple, matrix_at, bound: float, tinted_ra
 @dataclass
 class _Pick:
     """One disparity's entry in :func:`_chosen`: its score, window matrix, shear, prior, tinted fit with the bounds
-    (None until solved: :func:`_bounded`), prior mean and light-layer columns."""
+    (None until solved: :func:`_bounded`), prior mean, light-layer columns and disparity."""
 
     score: float
     m: object
@@ -963,11 +974,12 @@ class _Pick:
     fit: tuple | None
     x0: np.ndarray
     cols: np.ndarray
+    d: float  #: its disparity
     siblings: list | None = None  #: the prior's picks at every disparity (:func:`_between`)
 
 
-def _pick(shear_m, y, w, wb, x0, near, cols, tinted_rank):
-    """One disparity's :class:`_Pick` for :func:`_chosen`, or None when the fit fails. From RANK_SHOTS shots the
+def _pick(d, shear_m, y, w, wb, x0, near, cols, tinted_rank):
+    """Disparity ``d``'s :class:`_Pick` for :func:`_chosen`, or None when the fit fails. From RANK_SHOTS shots the
     tinted fit with the bounds (score: its -2 log evidence, or with ``RANK_EVIDENCE`` off its chi-square), with fewer
     the free fit's first pass (its chi-square; fit solved later)."""
     shear, m = shear_m
@@ -981,7 +993,19 @@ def _pick(shear_m, y, w, wb, x0, near, cols, tinted_rank):
     if out is None:
         return None
     score = out[2] if tinted_rank and RANK_EVIDENCE else out[1]  # -2 log evidence, or chi-square
-    return _Pick(score, m, shear, prior, out if tinted_rank else None, x0, cols)
+    return _Pick(score, m, shear, prior, out if tinted_rank else None, x0, cols, d)
+
+
+def _half_steps(picks: list, disparities: tuple, pick_at, pixels: float) -> list:
+    """The picks half way between the best of ``picks`` (least score) and its neighbours in ``disparities`` whose
+    score is less than the best one's by ``HALF_GAIN`` per pixel of the light layer (``pixels`` of them); ``pick_at(d)``
+    makes a pick at ``d`` (or None). Module notes "Why half steps"."""
+    if not picks:
+        return []
+    best, grid = min(picks, key=lambda pick: pick.score), sorted(disparities)
+    i = grid.index(best.d)
+    halves = [pick_at((grid[k] + best.d) / 2) for k in (i - 1, i + 1) if 0 <= k < len(grid)]
+    return [q for q in halves if q is not None and q.score <= best.score - HALF_GAIN * pixels]
 
 
 def _between(pick: _Pick, out, job: _Window, disparities: tuple, matrix_at):
