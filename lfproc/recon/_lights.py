@@ -373,6 +373,27 @@ chi-square) forest-stilllife lost 0.93 dB and desk-cannon 0.09. From ``RANK_SHOT
 ranking: with one shot the default path's capture (``benchmarks/cli_default.py --seed 11``, city-interior, paper-low)
 had its lamp's window taken at 4.1 per pixel (chi-square 0.61 -> 0.36) and lost the lamp, 52.96 -> 42.06 dB (with
 one shot a pixel's views are barely told apart, above).
+
+Why half steps (``HALF_STEPS``, stop 35). A light's own disparity does not help when the light sits on its wall and
+the wall is between the grid's disparities: the wall's texture around a bright light, misregistered by a tenth of a
+pixel per view, is what the window cannot explain, and the light layer absorbs it at a wrong disparity. The test scene
+sunrise-interior's lamp and its wall are at 0.6; on its row-ISO capture the window took the wall at 0.5 and the light
+at 0.00-0.09 (chi-square 1.38 -> 0.73 per measurement), 51.12 -> 49.38 dB; forced to the wall at 0.75 the light went to
+0.5 and the scene to 54.32 (``refit_stage.py``, scratch overrides). The wall's evidence is sharp in its disparity
+there (per pixel of the light layer, 35-47 higher at the grid's neighbours of the best one; the planted scenes and
+flat windows: under 1), so the grid's step, not the evidence, limits it. From RANK_SHOTS shots the disparities half
+way between the best of the grid and its two neighbours are ranked too (:func:`_half_steps`), and only when their
+evidence is higher than the best one's by ``HALF_GAIN`` (3) per pixel of the light layer, the threshold of
+``BETWEEN_GAIN`` for the same reason (a new geometry fits about one unit of ``-2 log`` evidence of noise per
+intensity). Measured on the refit stage's dumps (2 shots, medium noise, seed 0): the half steps' gains on the tune
+scenes were at most 1.76 per pixel on forest-stilllife (whose layers are on the grid, at -1 and +1; taken every time
+there it lost 0.06 dB, as a grid of eighths everywhere did, which also lost forest-carrots 0.32 dB and took 1.9 times
+the refit's time), 3.79 on forest-carrots, 9.08 on one window of desk-cannon; sunrise-interior's lamp gained 6.5-54.
+With the threshold: desk-cannon 25.984 -> 25.983, sunset-carrots 52.960, forest-stilllife 34.888, forest-carrots
+38.835, forest-desk 30.543 -> 30.557, sunset-desk 30.922 (the tune scenes); city-interior 54.466, night-studio 48.707,
+courtyard-candle 32.940 as before, sunrise-interior 53.489 -> 54.307 (2 random) and 49.384 -> 54.203 (2 row), its
+detail 0.76 / 2.99 -> 0.49 / 0.49. Planted (``tests/recon/test_lights.py``, noise-free): a light at 0.6 over a plane at
+0 keeps 0.834 -> 1.014 of its energy, at 0.7 0.957 -> 0.976; a light on its wall, both at 0.6, 0.855 -> 1.006.
 """
 
 from __future__ import annotations
@@ -938,6 +959,7 @@ def _chosen(job: _Window, disparities: tuple, matrix_at, bound: float, tinted_ra
         cols = np.flatnonzero(near)
         if not len(cols):
             continue
+
         def pick_at(d):
             return _pick(d, matrix_at(d), y, w, wb, x0, near, cols, tinted_rank)
 
