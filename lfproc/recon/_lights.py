@@ -496,10 +496,12 @@ BETWEEN = True
 BETWEEN_GAIN = 3.0
 BETWEEN_CHI2 = 1.0
 BETWEEN_TOL = 0.01
-#: From RANK_SHOTS shots the background's disparity is also tried half way between the best of the grid and its
-#: neighbours, and taken only for a score less by HALF_GAIN per pixel of the light layer (module notes "Why half steps")
+#: From RANK_SHOTS shots the background's disparity is also tried half way between each of the HALF_TOP best of the
+#: grid and its neighbours, and taken only for a score less than the best one's by HALF_GAIN per pixel of the light
+#: layer (module notes "Why half steps")
 HALF_STEPS = True
 HALF_GAIN = 3.0
+HALF_TOP = 2
 
 
 def misfit_map(lf: np.ndarray, T: np.ndarray, W: np.ndarray, W_bound: np.ndarray,
@@ -1019,14 +1021,17 @@ def _pick(d, shear_m, y, w, wb, x0, near, cols, tinted_rank):
 
 
 def _half_steps(picks: list, disparities: tuple, pick_at, pixels: float) -> list:
-    """The picks half way between the best of ``picks`` (least score) and its neighbours in ``disparities`` whose
-    score is less than the best one's by ``HALF_GAIN`` per pixel of the light layer (``pixels`` of them); ``pick_at(d)``
-    makes a pick at ``d`` (or None). Module notes "Why half steps"."""
+    """The picks half way between each of the ``HALF_TOP`` best of ``picks`` (least score) and its neighbours in
+    ``disparities`` whose score is less than the best one's by ``HALF_GAIN`` per pixel of the light layer (``pixels``
+    of them); ``pick_at(d)`` makes a pick at ``d`` (or None). Module notes "Why half steps"."""
     if not picks:
         return []
-    best, grid = min(picks, key=lambda pick: pick.score), sorted(disparities)
-    i = grid.index(best.d)
-    halves = [pick_at((grid[k] + best.d) / 2) for k in (i - 1, i + 1) if 0 <= k < len(grid)]
+    ranked, grid = sorted(picks, key=lambda pick: pick.score), sorted(disparities)
+    best, halves = ranked[0], []
+    for top in ranked[:HALF_TOP]:
+        i = grid.index(top.d)
+        halves += [(grid[k] + top.d) / 2 for k in (i - 1, i + 1) if 0 <= k < len(grid)]
+    halves = [pick_at(d) for d in dict.fromkeys(halves)]
     return [q for q in halves if q is not None and q.score <= best.score - HALF_GAIN * pixels]
 
 
