@@ -7,6 +7,7 @@ first estimate is the truth with the light blurred, as the patch prior leaves it
 
 from __future__ import annotations
 
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -902,3 +903,27 @@ def test_a_window_whose_returned_light_field_explains_less_is_not_returned(monke
     assert _counts(info) == {"windows": 1, "refitted": 0}
     np.testing.assert_allclose(none, first, rtol=1e-12)
 
+
+
+def test_the_half_steps_are_ranked_around_the_two_best_of_the_grid(monkeypatch):
+    """Known answer for :func:`lights._half_steps` with stand-in picks (score, disparity). The test scene
+    sunrise-interior's lamp, noise-free (stop 36; module notes "Why half steps"): the grid ranked its wall at 0.25 best
+    and 0.5 second (truth 0.6), and only the half step 0.625, beside the second best, is better by HALF_GAIN per pixel.
+    With HALF_TOP 2 the half steps of both are ranked (0.375 once) and 0.625 is returned; with 1 (stop 35) only those
+    of the best, and none passes the gate."""
+    grid = (0.0, 0.25, 0.5, 0.75, 1.0)
+    scores = {0.0: 200.0, 0.25: 100.0, 0.5: 110.0, 0.75: 200.0, 1.0: 200.0}
+    halves = {0.125: 99.0, 0.375: 99.0, 0.625: 100.0 - 3.0 * 10 - 1}  # 10 pixels: the gate is 100 - 30
+    picks = [SimpleNamespace(score=s, d=d) for d, s in scores.items()]
+    for top, ranked, taken in ((2, [0.125, 0.375, 0.625], [0.625]), (1, [0.125, 0.375], [])):
+        monkeypatch.setattr(lights, "HALF_TOP", top)
+        asked = []
+
+        def pick_at(d):
+            asked.append(d)
+            return SimpleNamespace(score=halves[d], d=d)
+
+        out = lights._half_steps(picks, grid, pick_at, 10.0)
+        assert sorted(asked) == ranked
+        assert [q.d for q in out] == taken
+    assert lights._half_steps([], grid, pick_at, 10.0) == []
