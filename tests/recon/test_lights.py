@@ -927,3 +927,27 @@ def test_the_half_steps_are_ranked_around_the_two_best_of_the_grid(monkeypatch):
         assert sorted(asked) == ranked
         assert [q.d for q in out] == taken
     assert lights._half_steps([], grid, pick_at, 10.0) == []
+
+
+def test_a_taken_half_step_is_refined_to_the_least_score_within_half_a_step(monkeypatch):
+    """Known answer for :func:`lights._refined` with stand-in picks: a score of least value at 0.6 (the test scene
+    sunrise-interior's wall and lamp, stop 36: half step 0.625 taken, refined to 0.599-0.603 on its dumps) is found
+    to HALF_TOL from the half step 0.625, within its half grid step (0.5 to 0.75); a pick that fails (None) is passed
+    over; with the least score at the half step itself it is returned as it is (the same object)."""
+    grid = (0.0, 0.25, 0.5, 0.75, 1.0)
+    monkeypatch.setattr(lights, "HALF_TOL", 0.005)
+    asked = []
+
+    def pick_at(d, at=0.6):
+        asked.append(d)
+        return None if abs(d - 0.55) < 0.01 else SimpleNamespace(score=(d - at) ** 2, d=d)
+
+    start = SimpleNamespace(score=(0.625 - 0.6) ** 2, d=0.625)
+    out = lights._refined(start, grid, pick_at)
+    assert abs(out.d - 0.6) < 0.005 and out.score < start.score
+    assert all(0.5 <= d <= 0.75 for d in asked) and len(asked) <= 20
+    far = SimpleNamespace(score=(0.625 - 0.9) ** 2, d=0.625)
+    beyond = lights._refined(far, grid, lambda d: pick_at(d, at=0.9))  # the least beyond the bracket: its edge
+    assert abs(beyond.d - 0.75) < 0.01
+    here = SimpleNamespace(score=0.0, d=0.625)
+    assert lights._refined(here, grid, lambda d: pick_at(d, at=0.625)) is here
