@@ -406,8 +406,8 @@ HALF_TOP (2) best grid disparities, with the same gate against the best one's ev
 grid neighbour: 0.46 dB less), the 10-100 decade's median error 0.95 / 0.76 / 0.54 / 0.71 -> 0.46 / 0.74 / 0.59 / 0.56
 stops; the refit's time the same (medium noise, alternated twice: 30 / 28 s against 30 / 27 s). The tune scenes'
 dumps did not move (HALF_TOP 1 and 2 alike, measured on 2026-12-01 dumps: desk-cannon 25.983, sunset-carrots
-52.960, forest-stilllife 34.870). This repair was found on a
-test scene's trace, so its figure on that scene is not a held-out one.
+52.960, forest-stilllife 34.870). This repair was found on a test scene's trace, so its figure on that scene is not
+a held-out one.
 
 Why a taken half step is refined (``HALF_TOL``, stop 36). The half steps put the lamp's wall of sunrise-interior at
 0.625 (truth 0.6); beside a light 10^4 times brighter than its wall, 0.025 pixel per view misplaces the light's rim
@@ -1067,12 +1067,17 @@ def _half_steps(picks: list, disparities: tuple, pick_at, pixels: float) -> list
     return [q for q in halves if q is not None and q.score <= best.score - HALF_GAIN * pixels]
 
 
+def _half_grid_step(grid: list) -> float:
+    """Half the least step of the sorted disparities ``grid`` (the bracket of :func:`_refined` and :func:`_between`)."""
+    return min(b - a for a, b in zip(grid[:-1], grid[1:])) / 2
+
+
 def _refined(pick: _Pick, disparities: tuple, pick_at) -> _Pick:
     """The pick of least score within half a step of ``disparities``' grid around ``pick`` (a half step taken by
     :func:`_half_steps`), its disparity found to ``HALF_TOL`` (:func:`scipy.optimize.minimize_scalar`, bounded);
     ``pick`` itself when none scores less. Module notes "Why a taken half step is refined"."""
     grid = sorted(disparities)
-    half = min(b - a for a, b in zip(grid[:-1], grid[1:])) / 2
+    half = _half_grid_step(grid)
     seen = {pick.d: pick}
 
     def score(d):
@@ -1119,7 +1124,7 @@ def _between(pick: _Pick, out, job: _Window, disparities: tuple, matrix_at):
         return np.inf if fits[d] is None else fits[d][2]
 
     coarse = min(grid + [(a + b) / 2 for a, b in zip(grid[:-1], grid[1:])], key=evidence)
-    half = min(b - a for a, b in zip(grid[:-1], grid[1:])) / 2
+    half = _half_grid_step(grid)
     optimize.minimize_scalar(evidence, bounds=(max(coarse - half, grid[0]), min(coarse + half, grid[-1])),
                              method="bounded", options={"xatol": BETWEEN_TOL})
     d = min(fits, key=evidence)  # the best evaluated
