@@ -779,6 +779,33 @@ def test_a_light_on_its_wall_between_the_grids_disparities_keeps_its_energy(monk
     assert wall[True] < wall[False], wall
 
 
+def test_the_light_has_a_disparity_of_its_own_in_the_first_pass_only(monkeypatch):
+    """``BETWEEN_PASSES`` (module notes "Why the light's own disparity in the first pass only"): later passes fit a
+    correction to a light already refitted, so :func:`_between` is tried on the windows of the first
+    ``BETWEEN_PASSES`` passes only. Planted: a light at 0.7 on a wall at 0.6, paper-medium, whose window is refitted
+    in both of two passes (measured); the windows reaching ``_between`` are counted: with ``BETWEEN_PASSES`` 1 the
+    first pass's alone, with 2 (the behaviour before stop 38) both passes'."""
+    monkeypatch.setattr(lights, "PASSES", 2)
+    lf = _scene(disparity=0.7, plane=0.6)
+    cap = _capture(lf, profile="paper-medium")
+    first = _blurred(lf, plane=0.6)
+    calls, between = [], lights._between
+
+    def counted(pick, out, job, *args):
+        calls.append((job.top, job.left))
+        return between(pick, out, job, *args)
+
+    monkeypatch.setattr(lights, "_between", counted)
+    seen = {}
+    for passes in (1, 2):
+        monkeypatch.setattr(lights, "BETWEEN_PASSES", passes)
+        calls.clear()
+        _, info = _refit(first, cap)
+        assert info["passes"] == [[1, 1], [1, 1]], info
+        seen[passes] = len(calls)
+    assert seen == {1: 1, 2: 2}, seen
+
+
 def _orange(stops_below, shots=2):
     """The planted light in orange (1 : 0.45 : 0.12), ``shots`` shots of paper-medium ``stops_below`` the usual
     exposure (negative: over), its first estimate blurred by a Gaussian of 1 pixel."""
