@@ -90,7 +90,16 @@ def test_enough_public_names_have_examples():
     assert len(names) >= MIN_EXAMPLES, f"{len(names)} public names with Examples (want {MIN_EXAMPLES}): {names}"
 
 
-@pytest.mark.parametrize("name", sorted(_examples()))
+#: Examples that take more than a few seconds, marked ``slow`` (tests/README.md), and why
+SLOW_EXAMPLES = {"lfproc.reconstruct_gmm": "a reconstruction with its lights refit: about 40 s on 2 cores"}
+
+
+def test_the_slow_examples_exist():
+    assert set(SLOW_EXAMPLES) <= set(_examples()), set(SLOW_EXAMPLES) - set(_examples())
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW_EXAMPLES else n
+                                  for n in sorted(_examples())])
 def test_docstring_examples_run(name, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # examples that write files write them here
     test = _examples()[name]

@@ -921,8 +921,11 @@ def _refit_once(first, T, W, W_bound, margin, runner, noise, settings, misfit=No
                        first[:, :, top:top + p, left:left + p], centre[ext], _floor(centre, ext),
                        tuple((low, support[ext]) for low, support in priors), accept, recolour, between)
 
-    jobs = [window(*c) for c in corners]
-    results = runner.map(jobs)
+    # boxes clamped at the image's edge can give the same window twice: each distinct window is solved once (its
+    # solve depends on nothing else), and counted as often as it was found, as before
+    distinct = list(dict.fromkeys(corners))
+    solved = dict(zip(distinct, runner.map([window(*c) for c in distinct])))
+    results = [solved[c] for c in corners]
     # feathered windows, averaged where they overlap (a long light): first + sum f_k (fit_k - first) / max(sum f_k, 1)
     kept = [(c, fit) for c, fit in zip(corners, results) if fit is not None]
     den = np.zeros((h, w_))

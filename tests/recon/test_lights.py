@@ -353,6 +353,7 @@ def _line(value, rows=slice(14, 44)):
     return LightField(data, units="relative")
 
 
+@pytest.mark.slow  # three 20-pixel windows solved in up to three passes: 90-150 s on 2 cores; fast variant below
 def test_a_long_light_gets_windows_along_it():
     """A planted orange line of 30 x 2 pixels (longer than one window), blurred by a Gaussian of 1 pixel as above:
     windows of MAX_WINDOW along it (3 here) bring its energy back within 7 % (the blur: 0.63 of it on the line),
@@ -372,6 +373,30 @@ def test_a_long_light_gets_windows_along_it():
         sel = at & np.isin(np.arange(at.shape[2]), part)[None, None, :, None]
         np.testing.assert_allclose(lum_o[sel].sum() / lum_t[sel].sum(), 1.0, atol=0.15)
     np.testing.assert_allclose(out[at].mean(0) / out[at].mean(), truth[at].mean(0) / truth[at].mean(), atol=0.1)
+
+
+def test_a_long_lights_windows_are_max_window_wide_and_cover_it(monkeypatch):
+    """The fast variant of the test above, its windows without their solves (each returns None: nothing refitted):
+    the planted 30 x 2 line gets windows of ``MAX_WINDOW`` along it, at most ``MAX_WINDOW - 2 PAD`` apart (their
+    unfeathered cores adjacent or overlapping), one column of them, covering the line in the centre view with
+    ``PAD`` to spare each side. Reference: that arithmetic, written out here."""
+    lf = _line(400.0)
+    truth = lf.data.astype(np.float64)
+    plane = _line(0.0).data.astype(np.float64)
+    first = plane + gaussian_filter(truth - plane, (0, 0, 1.0, 1.0, 0))
+    seen = []
+    monkeypatch.setattr(lights, "_solve_window", lambda job, ctx: seen.append((job.top, job.left, job.p)))
+    out, info = _refit(first, _capture(lf))
+    assert _counts(info) == {"windows": 3, "refitted": 0}, info
+    np.testing.assert_allclose(out, first, rtol=1e-12)
+    tops, lefts, sizes = zip(*seen)
+    assert set(sizes) == {lights.MAX_WINDOW} and len(set(lefts)) == 1, seen
+    # at most MAX_WINDOW - 2 PAD apart (closer where one was moved inside the image, margin 2 of _refit)
+    assert all(0 < d <= lights.MAX_WINDOW - 2 * lights.PAD for d in np.diff(tops)), seen
+    assert min(tops) >= 2 and max(tops) + lights.MAX_WINDOW <= truth.shape[2] - 2, seen
+    rows, cols = np.nonzero(truth[2, 2].mean(-1) - plane[2, 2].mean(-1) > 1.0)
+    assert min(tops) <= rows.min() - lights.PAD and max(tops) + lights.MAX_WINDOW >= rows.max() + 1 + lights.PAD
+    assert lefts[0] <= cols.min() - lights.PAD and lefts[0] + lights.MAX_WINDOW >= cols.max() + 1 + lights.PAD
 
 
 def test_a_thin_light_the_blur_hid_below_the_ratio_is_found_by_its_misfit(monkeypatch):
@@ -804,6 +829,40 @@ def test_the_light_has_a_disparity_of_its_own_in_the_first_pass_only(monkeypatch
         assert info["passes"] == [[1, 1], [1, 1]], info
         seen[passes] = len(calls)
     assert seen == {1: 1, 2: 2}, seen
+
+
+def test_a_window_found_twice_is_solved_once_and_counted_twice(monkeypatch):
+    """Boxes clamped at the image's edge can give the same window more than once (the 24 x 24 example of
+    ``reconstruct_gmm``'s docstring: four boxes, one window, each solved four times: 141 s, now 43 s). Each distinct
+    window is solved once and combined as often as it was found, as before. Planted: the light's box given twice by
+    ``candidates``, one pass. Known answer, the feathered average of two copies of one fit: ``first + 2 f /
+    max(2 f, 1) (fit - first)``, with ``f (fit - first)`` what the box given once adds (``f <= 1``, the feather)."""
+    monkeypatch.setattr(lights, "PASSES", 1)
+    lf = _scene()
+    cap = _capture(lf)
+    first = _blurred(lf)
+    found, solve, solved = lights.candidates, lights._solve_window, []
+
+    def counted(job, ctx):
+        solved.append((job.top, job.left, job.p))
+        return solve(job, ctx)
+
+    monkeypatch.setattr(lights, "_solve_window", counted)
+    once, info_once = _refit(first, cap)
+    assert _counts(info_once) == {"windows": 1, "refitted": 1} and len(solved) == 1, (info_once, solved)
+    (top, left, p), = solved
+    monkeypatch.setattr(lights, "candidates", lambda *a, **k: (lambda b, light: (b * 2, light))(*found(*a, **k)))
+    solved.clear()
+    twice, info_twice = _refit(first, cap)
+    assert _counts(info_twice) == {"windows": 2, "refitted": 2}, info_twice
+    assert solved == [(top, left, p)], solved
+    f = lights._feather(p)[:, :, None]
+    added = once - first
+    expected = first.copy()
+    at = (slice(None), slice(None), slice(top, top + p), slice(left, left + p))
+    expected[at] += added[at] * 2 / np.maximum(2 * f, 1.0)
+    assert np.abs(added[at]).max() > 1.0  # the fit changed the window
+    np.testing.assert_allclose(twice, expected, rtol=1e-9, atol=1e-9)
 
 
 def _orange(stops_below, shots=2):
