@@ -385,7 +385,7 @@ def stage_reconstruct(ctx: _Context) -> dict[str, Any]:
     shipped dictionary, ADMM) on the same capture for comparison."""
     c = ctx.config
     lf: LightField = ctx.state["scene"]
-    out = reconstruct_gmm(ctx.state["capture"], threads=1)
+    out = reconstruct_gmm(ctx.state["capture"])  # every CPU: the same output (measured: 50 -> 42 s on 2 cores)
     write_lightfield(out, ctx.path("reconstructed.exr"))
     for kind in ("centre", "epi"):
         write_preview(out, ctx.path(f"reconstructed_{kind}.png"), kind=kind)
