@@ -343,7 +343,7 @@ disparities (0.6, 0.7) the refit keeps 0.83 / 0.67 of its energy on its pixels (
 evidence, and the light's disparity from its centroids in the first estimate each repaired the planted light but not
 the tune scenes (up to -0.3 dB; the centroids of a real first estimate follow the patch prior's grid).
 
-Why the light has a disparity of its own (``BETWEEN``, stop 34). Those repairs moved the whole window (background and
+Why the light has a disparity of its own (stop 34). Those repairs moved the whole window (background and
 light) to another disparity. The window's background and its light need not share one: a lamp stands in front of
 its wall, and a light between the grid's disparities is seen through shears that do not match it. After the chosen
 fit (and its colour), :func:`_between` keeps the background at the chosen disparity and gives the one-colour light
@@ -531,14 +531,13 @@ MEDIAN_KEEP = 0.1
 #: The light field a window returns must leave a chi-square below RETURNED times the first estimate's (module notes
 #: "Why the returned window is checked"); with MEDIAN_COLOURS, the window without the median when the median's does not.
 RETURNED = 1.0
-#: the light at a disparity of its own (module notes): on; the evidence it must gain per pixel of the light layer; the
+#: the light at a disparity of its own (module notes): in the first BETWEEN_PASSES passes (0: never; module notes "Why
+#: the light's own disparity in the first pass only"); the evidence it must gain per pixel of the light layer; the
 #: chi-square per measurement it may leave; the tolerance of its disparity
-BETWEEN = True
+BETWEEN_PASSES = 1
 BETWEEN_GAIN = 3.0
 BETWEEN_CHI2 = 1.0
 BETWEEN_TOL = 0.01
-#: ... in the first BETWEEN_PASSES passes only (module notes "Why the light's own disparity in the first pass only")
-BETWEEN_PASSES = 1
 #: From RANK_SHOTS shots the background's disparity is also tried half way between each of the HALF_TOP best of the
 #: grid and its neighbours, and taken only for a score less than the best one's by HALF_GAIN per pixel of the light
 #: layer (module notes "Why half steps")
@@ -792,7 +791,7 @@ def refit_lights(first, T, W, W_bound, capture, disparities, margin, pool=None, 
             # the first estimate of the first pass blurs its lights; later passes fit a correction, whose colour is
             # not a light's
             settings = (ACCEPT_FIRST, RECOLOUR) if i == 0 else (ACCEPT, 0)
-            settings += (BETWEEN and i < BETWEEN_PASSES,)  # so is the light's own disparity (module notes)
+            settings += (i < BETWEEN_PASSES,)  # so is the light's own disparity (module notes)
             out, n, k = _refit_once(out, T, W, W_bound, margin, runner, noise, settings, misfit)
             passes.append([n, k])
             if not k:  # nothing changed: another pass would find the same

@@ -266,7 +266,7 @@ def test_from_two_shots_the_disparities_are_ranked_by_the_tinted_fit(monkeypatch
 
     monkeypatch.setattr(lights, "_window_matrix", tagged)
     monkeypatch.setattr(lights, "PASSES", 1)
-    monkeypatch.setattr(lights, "BETWEEN", False)  # the ranking alone (the light's own disparity fits again)
+    monkeypatch.setattr(lights, "BETWEEN_PASSES", 0)  # the ranking alone (the light's own disparity fits again)
     monkeypatch.setattr(lights, "HALF_STEPS", False)  # the grid's disparities alone (tagged in order)
     results = {}
     for name, patch in (("plain", fit), ("free", flattering(False)), ("tinted", flattering(True))):
@@ -295,7 +295,7 @@ def test_the_disparities_are_ranked_with_the_bounds_from_two_shots(monkeypatch):
 
     monkeypatch.setattr(lights, "_fit", counted)
     monkeypatch.setattr(lights, "PASSES", 1)
-    monkeypatch.setattr(lights, "BETWEEN", False)  # the ranking's fits alone (the light's own disparity fits again)
+    monkeypatch.setattr(lights, "BETWEEN_PASSES", 0)  # the ranking's fits alone (the light's own disparity fits again)
     monkeypatch.setattr(lights, "HALF_STEPS", False)  # the grid's fits alone (the half steps rank more)
     n = len(DEFAULT_DISPARITIES) * 2  # two priors (HALO)
     for shots in (2, 1):
@@ -744,7 +744,7 @@ def test_shears_between_two_of_the_grids_disparities_interpolate_nearly_linearly
 
 def test_a_light_at_a_disparity_of_its_own_keeps_its_energy(monkeypatch):
     """A 2 x 2 light at disparity 0.8, between the grid's 0.75 and 1.0, over a plane at 0 (noise-free, blurred first
-    estimate): the light layer at a disparity of its own (``BETWEEN``; measured: 0.802 chosen, a gain of 5.7 per
+    estimate): the light layer at a disparity of its own (``BETWEEN_PASSES``; measured: 0.802 chosen, a gain of 5.7 per
     pixel of the layer) keeps its energy on its pixels within 5 % (0.987); the control, the light at the
     background's disparity of the grid (0.75), 0.917."""
     lf = _scene(disparity=0.8)
@@ -753,7 +753,7 @@ def test_a_light_at_a_disparity_of_its_own_keeps_its_energy(monkeypatch):
     at = lum_t >= 0.1 * lum_t.max()
     kept = {}
     for between in (True, False):
-        monkeypatch.setattr(lights, "BETWEEN", between)
+        monkeypatch.setattr(lights, "BETWEEN_PASSES", int(between))
         out, info = _refit(_blurred(lf), cap)
         assert info["refitted"] == 1
         kept[between] = out.mean(-1)[at].sum() / lum_t[at].sum()
@@ -768,7 +768,7 @@ def test_a_light_between_the_grids_disparities_keeps_its_energy_on_its_pixels(di
     0.669 (0.5: 1.009); with the true disparity added to the grid 0.998 and 0.983. Tried and not kept (docs, design
     history, stop 33): a finer grid where a window's fit is poor, and the best disparity refined by its evidence
     (0.990 and 0.963 here, but worse on real scenes). Stop 34, the light layer at a disparity of its own
-    (``BETWEEN``, the background's disparity chosen again for the light's): 0.957 at 0.7, still 0.834 at 0.6 (a
+    (``BETWEEN_PASSES``, the background's disparity chosen again for the light's): 0.957 at 0.7, still 0.834 at 0.6 (a
     strict expected failure then). Stop 35, the half steps of the grid ranked too when their evidence is higher by
     ``HALF_GAIN`` per pixel (``HALF_STEPS``): 1.014 at 0.6, 0.976 at 0.7; at 0.8 0.987
     (:func:`test_a_light_at_a_disparity_of_its_own_keeps_its_energy`)."""
