@@ -353,7 +353,7 @@ def _line(value, rows=slice(14, 44)):
     return LightField(data, units="relative")
 
 
-@pytest.mark.slow  # three 20-pixel windows solved in up to three passes: 90-150 s on 2 cores; fast variant below
+@pytest.mark.slow  # three 20-pixel windows solved in up to three passes: 41 s on 2 cores (74 s before stop 39's LAPACK Cholesky); fast variant below
 def test_a_long_light_gets_windows_along_it():
     """A planted orange line of 30 x 2 pixels (longer than one window), blurred by a Gaussian of 1 pixel as above:
     windows of MAX_WINDOW along it (3 here) bring its energy back within 7 % (the blur: 0.63 of it on the line),
