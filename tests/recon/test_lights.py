@@ -353,7 +353,8 @@ def _line(value, rows=slice(14, 44)):
     return LightField(data, units="relative")
 
 
-@pytest.mark.slow  # three 20-pixel windows solved in up to three passes: 41 s on 2 cores (74 s before stop 39's LAPACK Cholesky); fast variant below
+# three 20-pixel windows solved in up to three passes: 41 s on 2 cores (74 s before stop 39); fast variant below
+@pytest.mark.slow
 def test_a_long_light_gets_windows_along_it():
     """A planted orange line of 30 x 2 pixels (longer than one window), blurred by a Gaussian of 1 pixel as above:
     windows of MAX_WINDOW along it (3 here) bring its energy back within 7 % (the blur: 0.63 of it on the line),
@@ -851,7 +852,11 @@ def test_a_window_found_twice_is_solved_once_and_counted_twice(monkeypatch):
     once, info_once = _refit(first, cap)
     assert _counts(info_once) == {"windows": 1, "refitted": 1} and len(solved) == 1, (info_once, solved)
     (top, left, p), = solved
-    monkeypatch.setattr(lights, "candidates", lambda *a, **k: (lambda b, light: (b * 2, light))(*found(*a, **k)))
+    def found_twice(*args, **kwargs):
+        boxes, light = found(*args, **kwargs)
+        return boxes * 2, light
+
+    monkeypatch.setattr(lights, "candidates", found_twice)
     solved.clear()
     twice, info_twice = _refit(first, cap)
     assert _counts(info_twice) == {"windows": 2, "refitted": 2}, info_twice
@@ -863,6 +868,26 @@ def test_a_window_found_twice_is_solved_once_and_counted_twice(monkeypatch):
     expected[at] += added[at] * 2 / np.maximum(2 * f, 1.0)
     assert np.abs(added[at]).max() > 1.0  # the fit changed the window
     np.testing.assert_allclose(twice, expected, rtol=1e-9, atol=1e-9)
+
+
+def test_the_windows_cholesky_factor_is_numpys():
+    """``_cholesky`` (LAPACK ``dpotrf`` on the transposed matrix, no copy) gives the lower factor
+    ``numpy.linalg.cholesky`` gives (the reference), C-contiguous with zeros above the diagonal, for a C-order and a
+    Fortran-order matrix; a matrix that is not positive definite raises ``LinAlgError``, as numpy does, which
+    ``_fit`` turns into "keep the first estimate"."""
+    rng = np.random.default_rng(0)
+    a = rng.standard_normal((60, 80))
+    c = a @ a.T + np.eye(60)
+    for order in ("C", "F"):
+        got = lights._cholesky(np.array(c, order=order))
+        assert got.flags.c_contiguous and not np.triu(got, 1).any()
+        np.testing.assert_allclose(got, np.linalg.cholesky(c), rtol=0, atol=1e-12)
+    bad = c.copy()
+    bad[30, 30] = -1.0
+    with pytest.raises(np.linalg.LinAlgError):
+        np.linalg.cholesky(bad)
+    with pytest.raises(np.linalg.LinAlgError):
+        lights._cholesky(bad.copy())
 
 
 def _orange(stops_below, shots=2):

@@ -520,8 +520,9 @@ def test_positive_is_the_mean_of_the_truncated_gaussian():
     np.testing.assert_array_equal(_positive(x, 0.0), np.maximum(x, 0.0))
 
 
-@pytest.mark.slow  # five reconstructions with their lights refit: 52 s on 2 cores (stop 39); the mechanism's fast check:
+# five reconstructions with their lights refit: 52 s on 2 cores (stop 39); the mechanism's fast check:
 # test_positive_is_the_mean_of_the_truncated_gaussian
+@pytest.mark.slow
 def test_a_dark_scene_has_no_zeros_above_the_noise_floor():
     """No sample comes back as exactly 0, in any colour (each patch's samples are the mean of their estimate
     truncated at 0, POSITIVE_STD of the patch's noise as its std), so none above the capture's noise floor either.
