@@ -4,7 +4,7 @@ Usage::
 
     python benchmarks/refit_stage.py dump SCENE OUT.pkl [--size H W] [--capture "2 random"] [--seed-index I]
     python benchmarks/refit_stage.py run OUT.pkl [NAME=VALUE ...] [--save DIR] [--threads]
-    python benchmarks/refit_stage.py bound OUT.pkl TOP LEFT SIZE
+    python benchmarks/refit_stage.py bound OUT.pkl TOP LEFT SIZE [--disparities D[,D...]]
 
 ``dump`` captures a scene of :mod:`quality_scenes` as :mod:`reconstruct_realistic` does (mask period 4, the
 scene's seed + 1000 ``I``) and runs ``reconstruct_gmm`` up to the refit, then saves what the refit receives (the
@@ -159,14 +159,14 @@ def run(path: Path, settings: list[str], save: Path | None = None, threads: bool
     print(f"{path.name} {' '.join(settings)}: {seconds:.0f} s, windows per pass {info['passes']}")
 
 
-def bound(path: Path, top: int, left: int, size: int) -> None:
+def bound(path: Path, top: int, left: int, size: int, disparities: tuple | None = None) -> None:
     """Per decade of the truth's luminance in the centre view of the window ``(top, left, size)``: how well the
     capture can fix a pixel's light at all. A lower bound on the standard deviation of a grey light on one pixel (the
     inverse square root of the diagonal of the Fisher information of its luminance, a grey light being that luminance
     in each colour: the squared weights of the usable measurements that see it, every other unknown known: "alone"),
     and the Cramér-Rao bound with every pixel of the window and its margin unknown and no prior (the diagonal of the
     Fisher information's pseudo-inverse: "jointly"), in stops above the truth (``log2(1 + bound / truth)``), at each
-    disparity."""
+    disparity of the dump's grid, or of ``disparities`` (a wall between the grid's: sunrise-interior's at 0.6)."""
     from scipy import sparse
 
     from lfproc.camera.projection import patch_operators
@@ -192,7 +192,7 @@ def bound(path: Path, top: int, left: int, size: int) -> None:
     counts = ", ".join(f"1e{k}: {int((decades == k).sum())}" for k in shown)
     print(f"{path.name}: window {top} {left} {size}; pixels per decade of the truth {counts}; median one-sigma bound "
           f"in stops at each disparity, each pixel alone and all jointly")
-    for disparity in d["disparities"]:
+    for disparity in d["disparities"] if disparities is None else disparities:
         m = _window_matrix(cols, vals, sparse.csr_array(shear_matrix((nv, nu), size, r, disparity)))
         m = m.toarray() if sparse.issparse(m) else np.asarray(m)
         grey = m.reshape(len(m), e * e, 3).sum(axis=2) * weights[:, None]  # a grey light of luminance 1 on a pixel
@@ -233,6 +233,8 @@ def main() -> None:
     p.add_argument("top", type=int)
     p.add_argument("left", type=int)
     p.add_argument("size", type=int)
+    p.add_argument("--disparities", default=None, metavar="D[,D...]",
+                   help="the disparities to bound at (default: the dump's grid)")
     args = parser.parse_args()
     os.environ.setdefault("LFPROC_PROGRESS", "0")
     warnings.simplefilter("ignore")  # saturation warnings of the brightest scenes: expected
@@ -241,7 +243,15 @@ def main() -> None:
             parser.error(f"--seed-index: expected a number >= 0, got {args.seed_index}")
         dump(args.scene, args.out, tuple(args.size), args.capture, args.seed_index, args.mask_transmittance)
     elif args.command == "bound":
-        bound(args.path, args.top, args.left, args.size)
+        disparities = None
+        if args.disparities is not None:
+            try:
+                disparities = tuple(float(v) for v in args.disparities.split(","))
+            except ValueError:
+                disparities = ()
+            if not disparities or not all(np.isfinite(disparities)):
+                parser.error(f"--disparities: expected numbers like 0.6 or -1,0.5, got {args.disparities!r}")
+        bound(args.path, args.top, args.left, args.size, disparities)
     else:
         run(args.path, args.settings, args.save, args.threads)
 

@@ -32,6 +32,10 @@ def _run(*argv: str) -> subprocess.CompletedProcess:
     (("refit_stage.py", "run", "/nonexistent/dump.pkl", "NOPE=1"), "'NOPE=1': expected NAME=VALUE"),
     (("refit_stage.py", "run", "/nonexistent/dump.pkl", "RATIO=abc"), "expected a number for RATIO, got 'abc'"),
     (("refit_stage.py", "bound", "/nonexistent/dump.pkl", "2", "2", "8"), "/nonexistent/dump.pkl: not found"),
+    (("refit_stage.py", "bound", "/nonexistent/dump.pkl", "2", "2", "8", "--disparities", "0.6,a"),
+     "--disparities: expected numbers like 0.6 or -1,0.5, got '0.6,a'"),
+    (("refit_stage.py", "bound", "/nonexistent/dump.pkl", "2", "2", "8", "--disparities", "nan"),
+     "--disparities: expected numbers like 0.6 or -1,0.5, got 'nan'"),
     (("prior_ceiling.py", "--crop", "0", "8", "0", "8"), "--crop: expected 0 <= Y0 < Y1 <= 434, 0 <= X0 < X1 <= 625, at"),
     (("prior_ceiling.py", "--crop", "a", "b", "c", "d"), "--crop: expected Y0 Y1 X0 X1 (integers) or 'none', got a b"),
     (("prior_ceiling.py", "--scenes", "nope"), "--scenes: unknown scene 'nope'; expected some of desk-cannon"),
@@ -112,6 +116,10 @@ def test_the_bound_of_a_window_outside_the_margin_is_one_line_and_exit_code_2(tm
     assert len(lines) == 3 and lines[1].strip().startswith("+0.00:") and lines[2].strip().startswith("+1.00:")
     assert "1e0: 64" in lines[0]  # 8 x 8 pixels of truth 1, seen by no usable measurement: no bound
     assert "alone 1e0: inf" in lines[1] and "jointly 1e0: inf" in lines[1]
+    done = _run("refit_stage.py", "bound", str(path), "2", "2", "8", "--disparities", "0.5")  # between the grid's
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.strip().splitlines()
+    assert len(lines) == 2 and lines[1].strip().startswith("+0.50:")
 
 
 def _prior_ceiling():
