@@ -170,6 +170,7 @@ def bound(path: Path, top: int, left: int, size: int, disparities: tuple | None 
     from scipy import sparse
 
     from lfproc.camera.projection import patch_operators
+    from lfproc.errors import InputError
     from lfproc.lightfield import luminance
     from lfproc.recon._gmm import shear_matrix
     from lfproc.recon._lights import _window_matrix
@@ -182,6 +183,12 @@ def bound(path: Path, top: int, left: int, size: int, disparities: tuple | None 
         _fail(f"window {top} {left} {size}: expected a window of size >= 1 inside the margin {r} of the "
               f"{h} x {w} views")
     e = size + 2 * r
+    shears = {}
+    for disparity in d["disparities"] if disparities is None else disparities:  # all checked before any output
+        try:
+            shears[disparity] = sparse.csr_array(shear_matrix((nv, nu), size, r, disparity))
+        except InputError as err:  # a disparity whose views leave the dump's margin: the library's own message
+            _fail(f"--disparities: {err}")
     weights = d["W"][:, top:top + size, left:left + size].reshape(-1)
     ops = patch_operators(cap.mask, views=cap.views, cfa_pattern=cap.cfa_pattern, tops=[top], lefts=[left],
                           size=size, sensor_size=cap.size)
@@ -192,8 +199,8 @@ def bound(path: Path, top: int, left: int, size: int, disparities: tuple | None 
     counts = ", ".join(f"1e{k}: {int((decades == k).sum())}" for k in shown)
     print(f"{path.name}: window {top} {left} {size}; pixels per decade of the truth {counts}; median one-sigma bound "
           f"in stops at each disparity, each pixel alone and all jointly")
-    for disparity in d["disparities"] if disparities is None else disparities:
-        m = _window_matrix(cols, vals, sparse.csr_array(shear_matrix((nv, nu), size, r, disparity)))
+    for disparity, shear in shears.items():
+        m = _window_matrix(cols, vals, shear)
         m = m.toarray() if sparse.issparse(m) else np.asarray(m)
         grey = m.reshape(len(m), e * e, 3).sum(axis=2) * weights[:, None]  # a grey light of luminance 1 on a pixel
         seen = np.abs(grey).sum(axis=0) > 0

@@ -116,10 +116,15 @@ def test_the_bound_of_a_window_outside_the_margin_is_one_line_and_exit_code_2(tm
     assert len(lines) == 3 and lines[1].strip().startswith("+0.00:") and lines[2].strip().startswith("+1.00:")
     assert "1e0: 64" in lines[0]  # 8 x 8 pixels of truth 1, seen by no usable measurement: no bound
     assert "alone 1e0: inf" in lines[1] and "jointly 1e0: inf" in lines[1]
-    done = _run("refit_stage.py", "bound", str(path), "2", "2", "8", "--disparities", "0.5")  # between the grid's
+    grid = lines
+    done = _run("refit_stage.py", "bound", str(path), "2", "2", "8", "--disparities", "1,0.5")  # one between the grid's
     assert done.returncode == 0, done.stderr
     lines = done.stdout.strip().splitlines()
-    assert len(lines) == 2 and lines[1].strip().startswith("+0.50:")
+    assert len(lines) == 3 and lines[1] == grid[2] and lines[2].strip().startswith("+0.50:")  # +1.00: the grid's own
+    done = _run("refit_stage.py", "bound", str(path), "2", "2", "8", "--disparities", "0.5,3")  # margin 2: |d| <= 1
+    assert done.returncode == 2 and done.stdout == ""
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--disparities: disparity 3: translations of 6 pixels exceed" in lines[0]
 
 
 def _prior_ceiling():
