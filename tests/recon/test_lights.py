@@ -39,9 +39,12 @@ def _scene(light_value=400.0, seed=11, disparity=1.0, plane=0.0):
 
 
 def _capture(lf, profile="paper-none", stops_below=3, shots=2):
-    cap = simulate_capture(lf, mask_period=4, shots=shots, random_state=2, profile=profile)
+    # the paper's uniform codes, with which this file's known answers were measured, whatever simulate's default
+    # (with mixed codes six of them fail: a repair no longer makes the difference asserted; docs/benchmarks.md)
+    cap = simulate_capture(lf, mask_period=4, shots=shots, random_state=2, profile=profile,
+                           mask_transmittance="uniform")
     return simulate_capture(lf, mask_period=4, shots=shots, random_state=2, profile=profile,
-                            radiance_scale=cap.radiance_scale / 2 ** stops_below)
+                            mask_transmittance="uniform", radiance_scale=cap.radiance_scale / 2 ** stops_below)
 
 
 def _blurred(lf, sigma=1.0, gain=1.0, plane=0.0):
@@ -299,7 +302,8 @@ def test_the_disparities_are_ranked_with_the_bounds_from_two_shots(monkeypatch):
     monkeypatch.setattr(lights, "HALF_STEPS", False)  # the grid's fits alone (the half steps rank more)
     n = len(DEFAULT_DISPARITIES) * 2  # two priors (HALO)
     for shots in (2, 1):
-        cap = simulate_capture(lf, mask_period=4, shots=shots, random_state=2, profile="paper-none")
+        cap = simulate_capture(lf, mask_period=4, shots=shots, random_state=2, profile="paper-none",
+                               mask_transmittance="uniform")
         calls.clear()
         _refit(first, cap)
         if shots == 2:

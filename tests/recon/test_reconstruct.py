@@ -548,8 +548,9 @@ def test_a_dark_floor_beside_a_bright_light_is_not_shrunk_away():
     data[:, :, 40:46, 40:46] = 2.0**12
     # the light saturates some high-ISO pixels, far fewer than 10 % of the ISO-100 ones: no warning
     # (warnings are errors in this suite)
+    # uniform codes, as measured (with mixed codes the older scale's floor comes back at 0.503, not below 0.5)
     capture = simulate_capture(lfproc.LightField(data, units="relative"), profile="paper-medium", shots=2,
-                               iso_pattern_kind="random", mask_period=4, random_state=3)
+                               iso_pattern_kind="random", mask_period=4, random_state=3, mask_transmittance="uniform")
     obs = observations(capture)
     assert 0 < obs.saturated_fraction < 0.1
     electrons = obs.radiance[:, :30, :30].mean() * capture.exposures_s[0]
@@ -616,7 +617,8 @@ def test_a_noise_free_sensor_on_a_mostly_black_scene_is_not_returned_black(small
 def test_view_mismatch_message_says_which_side_has_which():
     rng = np.random.default_rng(0)
     lf3 = np.broadcast_to(0.1 + rng.random((1, 1, 16, 16, 3), dtype=np.float32), (3, 3, 16, 16, 3)).copy()
-    capture = simulate_capture(lf3, profile="paper-low", random_state=0)
+    # uniform codes: with mixed codes this capture saturates 11.7 % at ISO 100 and warns (warnings are errors here)
+    capture = simulate_capture(lf3, profile="paper-low", random_state=0, mask_transmittance="uniform")
     with pytest.raises(ShapeError) as info:
         reconstruct(capture, "default")
     message = str(info.value)
