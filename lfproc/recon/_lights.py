@@ -1007,12 +1007,7 @@ def _solve_window(job: _Window, ctx: _Context):
         return matrices[d]
 
     tinted_rank = ctx.shots >= RANK_SHOTS  # (module notes)
-    bright = None if tinted_rank or not COMPACT_RATIO else _bright(y, w, wb, pvals)
-    if bright is not None:  # a light whose rays leave the window: its support is not the window's to say
-        lit = bright.reshape(-1, p, p).any(axis=0)
-        inner = np.zeros_like(lit)
-        inner[r:p - r, r:p - r] = True
-        bright = bright if lit.any() and not (lit & ~inner).any() else None
+    bright = None if tinted_rank or not COMPACT_RATIO else _bright(y, w, wb, pvals, p, r)
     best = _chosen(job, ctx.disparities, matrix_at, bound, tinted_rank, bright)
     if best is None:
         return None
@@ -1086,10 +1081,15 @@ def _chosen(job: _Window, disparities: tuple, matrix_at, bound: float, tinted_ra
             best = chosen
     if bright is not None:  # a compact light farther from 0 than the blob the first pass chose, when it explains
         # the measurements with fewer pixels (module notes "Why a compact light with one shot")
-        wider = [d for d in disparities if best is None or abs(d) > abs(best.d) and d * best.d >= 0]
-        compact = [q for low, support in job.supports for q in (
-            _compact_pick(d, matrix_at(d), y, w, wb, _prior_mean(job, low, support), bright) for d in wider) if q]
-        compact = min(compact, key=lambda pick: pick.score, default=None)
+        compact = []
+        for d in disparities:
+            if best is not None and not (abs(d) > abs(best.d) and d * best.d >= 0):
+                continue
+            light = _compact_support(matrix_at(d)[1], bright)  # the same for both priors
+            if light is not None:
+                compact += [_compact_pick(d, matrix_at(d), y, w, wb, _prior_mean(job, low, support), light)
+                            for low, support in job.supports]
+        compact = min((q for q in compact if q), key=lambda pick: pick.score, default=None)
         if compact is not None and (best is None or compact.score < _bic(best.fit[1], len(y), len(best.cols) // 3)):
             best = compact
     return best
@@ -1129,31 +1129,30 @@ def _pick(d, shear_m, y, w, wb, x0, near, cols, tinted_rank):
     return _Pick(score, m, shear, prior, out if tinted_rank else None, x0, cols, d)
 
 
-def _bright(y, w, wb, vals) -> np.ndarray:
+def _bright(y, w, wb, vals, p: int, r: int) -> np.ndarray | None:
     """The window's bright measurements (:func:`_chosen`, one shot): saturated, or above ``COMPACT_RATIO`` times the
     median over the usable ones of the measurement over its transmittance (``vals``: the patch matrix's weights
-    ``(m, V U)``; the radiance a pixel would have were every view to see the same)."""
+    ``(m, V U)``; the radiance a pixel would have were every view to see the same). None when there are none, or when
+    they come within ``r`` pixels of the ``p x p`` window's edge: the light's footprint is not in the window."""
     t = vals.sum(axis=1)
     rad = np.divide(y, t, out=np.zeros_like(y), where=t > 0)
     level = float(np.median(rad[w > 0])) if (w > 0).any() else 0.0
-    return ((w == 0) & (wb > 0)) | (rad > COMPACT_RATIO * max(level, 0.0))
+    bright = ((w == 0) & (wb > 0)) | (rad > COMPACT_RATIO * max(level, 0.0))
+    lit = bright.reshape(-1, p, p).any(axis=0)
+    inner = np.zeros_like(lit)
+    inner[r:p - r, r:p - r] = True
+    return bright if lit.any() and not (lit & ~inner).any() else None
 
 
-def _compact_pick(d, shear_m, y, w, wb, x0, bright):
+def _compact_pick(d, shear_m, y, w, wb, x0, support):
     """Disparity ``d``'s :class:`_Pick` from one shot (module notes "Why a compact light with one shot"), or None:
-    the light layer on :func:`_compact_support`, fitted with the bounds and one colour; its score :func:`_bic`."""
-    shear, m = shear_m
-    support = _compact_support(m, bright)
-    if support is None:
-        return None
+    :func:`_pick`'s tinted fit with the bounds, its light layer on ``support`` (:func:`_compact_support`), scored by
+    :func:`_bic`."""
     near = np.repeat(support, 3)
-    cols = np.flatnonzero(near)
-    prior = _prior_cov(m, x0, near)
-    out = _fit(m, y, w, wb, x0, cols, _BOUND_PASSES, prior=prior)
-    out = None if out is None else _tinted(out, m, y, w, wb, x0, cols, prior)
-    if out is None:
-        return None
-    return _Pick(_bic(out[1], len(y), int(support.sum())), m, shear, prior, out, x0, cols, d)
+    pick = _pick(d, shear_m, y, w, wb, x0, near, np.flatnonzero(near), True)
+    if pick is not None:
+        pick.score = _bic(pick.fit[1], len(y), int(support.sum()))
+    return pick
 
 
 def _compact_support(m, bright) -> np.ndarray | None:

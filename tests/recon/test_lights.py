@@ -25,12 +25,17 @@ from lfproc.recon._lights import candidates, refit_lights
 from lfproc.synth import Layer, render_layers
 
 
-def _scene(light_value=400.0, seed=11, disparity=1.0, plane=0.0):
+def _scene(light_value=400.0, seed=11, disparity=1.0, plane=0.0, ring=0.0):
+    """The planted light: 2 x 2 pixels of ``light_value`` (inside a 6 x 6 ring of ``ring``) at ``disparity`` over a
+    textured plane at ``plane``."""
     rng = np.random.default_rng(seed)
     size, m = (32, 32), 6
     tex = gaussian_filter(rng.random((size[0] + 2 * m, size[1] + 2 * m, 3)), (1.0, 1.0, 0)).astype(np.float32) + 0.5
     light = np.zeros_like(tex)
     alpha = np.zeros(tex.shape[:2], np.float32)
+    if ring:
+        light[19:25, 19:25] = ring
+        alpha[19:25, 19:25] = 1.0
     light[21:23, 21:23] = light_value
     alpha[21:23, 21:23] = 1.0
     layers = [Layer(tex, np.ones_like(alpha), plane), Layer(light, alpha, disparity)]
@@ -283,18 +288,9 @@ def test_from_two_shots_the_disparities_are_ranked_by_the_tinted_fit(monkeypatch
     assert abs(kept["plain"] - 1.0) < 0.05 and abs(kept["tinted"] - 1.0) > 0.2, kept
 
 
-def _lamp(core=4000.0, ring=100.0, disparity=1.0, seed=11):
-    """A lamp on its wall: a 2 x 2 core of ``core`` inside a 6 x 6 ring of ``ring``, at ``disparity``, over the
-    textured plane of :func:`_scene` at disparity 1 (city-interior's lamp in miniature)."""
-    rng = np.random.default_rng(seed)
-    size, m = (32, 32), 6
-    tex = gaussian_filter(rng.random((size[0] + 2 * m, size[1] + 2 * m, 3)), (1.0, 1.0, 0)).astype(np.float32) + 0.5
-    light, alpha = np.zeros_like(tex), np.zeros(tex.shape[:2], np.float32)
-    light[19:25, 19:25], light[21:23, 21:23] = ring, core
-    alpha[19:25, 19:25] = 1.0 if ring else 0.0
-    alpha[21:23, 21:23] = 1.0
-    layers = [Layer(tex, np.ones_like(alpha), 1.0), Layer(light, alpha, disparity)]
-    return render_layers(layers, size=size, views=5)[0].astype(np.float64)
+def _lamp(core=4000.0, ring=100.0, disparity=1.0):
+    """City-interior's lamp in miniature: :func:`_scene`'s light with a ring, on its wall (the plane at 1)."""
+    return _scene(light_value=core, disparity=disparity, plane=1.0, ring=ring).data.astype(np.float64)
 
 
 def test_with_one_shot_a_compact_light_is_found_where_a_blob_at_disparity_0_explains_as_much(monkeypatch):
