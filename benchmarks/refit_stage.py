@@ -5,6 +5,7 @@ Usage::
     python benchmarks/refit_stage.py dump SCENE OUT.pkl [--size H W] [--capture "2 random"] [--seed-index I]
     python benchmarks/refit_stage.py run OUT.pkl [NAME=VALUE ...] [--save DIR] [--threads]
     python benchmarks/refit_stage.py bound OUT.pkl TOP LEFT SIZE [--disparities D[,D...]]
+    python benchmarks/refit_stage.py misfit OUT.pkl RESULT.npy [--thresholds 20,8,4]
 
 ``dump`` captures a scene of :mod:`quality_scenes` as :mod:`reconstruct_realistic` does (mask period 4, the
 scene's seed + 1000 ``I``) and runs ``reconstruct_gmm`` up to the refit, then saves what the refit receives (the
@@ -24,6 +25,11 @@ more of the refit's cost than the reconstruction pays (back to back, quiet machi
 night-studio 46 -> 22 s, the same figures); times measured before then are upper bounds. The
 dump is a scratch file (Python's pickle: it loads only with the same lfproc version, and only files you made).
 Figures measured this way are of the refit stage alone; confirm a change with :mod:`reconstruct_realistic`.
+``misfit`` asks how much of a result's error lies where the result contradicts the measurements: where the local
+chi-square (``lfproc.recon._lights.misfit_map`` of the result, in light-field units as ``run --save`` writes it) is
+above each threshold, it prints the share of pixels, the share of those the result predicts too bright, and the
+figures of the result with the truth put there (all views, the pixels dilated by 3), for all of them and for the
+too-bright ones: what a solver that makes the result agree with the data there could gain at most (stop 43).
 Since stop 31 ``run`` solves a pass of many windows on worker processes as ``reconstruct_gmm`` does
 (``lfproc.recon._lights``, "Why processes"); ``--threads`` keeps every window on the thread pool (the same figures,
 for timing the two).
@@ -215,6 +221,52 @@ def bound(path: Path, top: int, left: int, size: int, disparities: tuple | None 
         print(f"  {disparity:+.2f}: " + "; ".join(cells))
 
 
+def misfit(path: Path, result: Path, thresholds: tuple[float, ...]) -> None:
+    """Where ``result`` (a light field in the dump's truth units, ``(V, U, H, W, 3)``) contradicts the dump's
+    measurements, and the figures with the truth there (module docstring)."""
+    from scipy import ndimage
+
+    from lfproc import LightField
+    from lfproc.camera.capture import noise_floor
+    from lfproc.camera.projection import build_operator
+    from lfproc.metrics import evaluate
+    from lfproc.recon._lights import MISFIT_SIZE, misfit_map
+
+    d = _load(path)
+    if not result.is_file():
+        _fail(f"{result}: not found (a light field saved by 'refit_stage.py run --save')")
+    try:
+        x = np.load(result, allow_pickle=False)
+    except (OSError, ValueError) as e:
+        _fail(f"{result}: not a .npy array ({type(e).__name__}: {e})")
+    if x.shape != d["truth"].shape or not np.issubdtype(x.dtype, np.floating) or not np.isfinite(x).all():
+        _fail(f"{result}: expected finite floats of the dump's shape {d['truth'].shape}, got {x.dtype} {x.shape}")
+    cap, truth = d["capture"], d["truth"]
+    op = build_operator(cap.mask, views=cap.views, size=cap.size, cfa_pattern=cap.cfa_pattern, dtype=np.float64)
+    scaled = x.astype(np.float64) * float(cap.radiance_scale)
+    chi2 = misfit_map(scaled, d["T"], d["W"], d["W_bound"], op)
+    residual = np.where(d["W"] > 0, (d["T"] - op.forward(scaled)) * d["W"], 0.0).sum(axis=0)
+    bright = ndimage.uniform_filter(residual, MISFIT_SIZE, mode="nearest") < 0  # predicted above measured
+
+    def figures(lf):
+        f = evaluate(LightField(lf.astype(np.float32), units="relative"), LightField(truth, units="relative"),
+                     scale_tolerance_stops=None, noise_floor=noise_floor(cap))
+        worst = max((s["median_stops"] for s in f["stops_by_decade"]), default=float("nan"))
+        return (f"PU21-PSNR {f['pu21_psnr_db']:.3f} dB, SSIM {f['pu21_ssim']:.4f}, detail {f['detail_ratio']:.3f}, "
+                f"worst decade {worst:.2f}")
+
+    print(f"{result.name} against {path.name}: {figures(x)}")
+    for level in thresholds:
+        over = chi2 > level
+        cells = []
+        for name, where in (("all", over), ("too bright", over & bright)):
+            put = ndimage.binary_dilation(where, iterations=3)
+            cells.append(f"{name} {put.mean():.4f} of pixels: "
+                         + figures(np.where(put[None, None, ..., None], truth, x)))
+        print(f"  chi-square > {level:g}: {over.mean():.4f} of pixels ({(over & bright).mean():.4f} too bright); "
+              f"truth there, " + "; ".join(cells))
+
+
 def main() -> None:
     from lfproc.camera import MASK_TRANSMITTANCES
 
@@ -242,6 +294,11 @@ def main() -> None:
     p.add_argument("size", type=int)
     p.add_argument("--disparities", default=None, metavar="D[,D...]",
                    help="the disparities to bound at (default: the dump's grid)")
+    p = sub.add_parser("misfit", help="how much of a result's error lies where it contradicts the measurements")
+    p.add_argument("path", type=Path)
+    p.add_argument("result", type=Path)
+    p.add_argument("--thresholds", default="20,8,4", metavar="C[,C...]",
+                   help="local chi-square levels (misfit_map) above which a pixel counts as a misfit")
     args = parser.parse_args()
     os.environ.setdefault("LFPROC_PROGRESS", "0")
     warnings.simplefilter("ignore")  # saturation warnings of the brightest scenes: expected
@@ -259,6 +316,14 @@ def main() -> None:
             if not disparities or not all(np.isfinite(disparities)):
                 parser.error(f"--disparities: expected numbers like 0.6 or -1,0.5, got {args.disparities!r}")
         bound(args.path, args.top, args.left, args.size, disparities)
+    elif args.command == "misfit":
+        try:
+            thresholds = tuple(float(v) for v in args.thresholds.split(","))
+        except ValueError:
+            thresholds = ()
+        if not thresholds or not all(np.isfinite(thresholds)) or min(thresholds) < 0:
+            parser.error(f"--thresholds: expected numbers >= 0 like 20 or 20,8,4, got {args.thresholds!r}")
+        misfit(args.path, args.result, thresholds)
     else:
         run(args.path, args.settings, args.save, args.threads)
 

@@ -36,6 +36,11 @@ def _run(*argv: str) -> subprocess.CompletedProcess:
      "--disparities: expected numbers like 0.6 or -1,0.5, got '0.6,a'"),
     (("refit_stage.py", "bound", "/nonexistent/dump.pkl", "2", "2", "8", "--disparities", "nan"),
      "--disparities: expected numbers like 0.6 or -1,0.5, got 'nan'"),
+    (("refit_stage.py", "misfit", "/nonexistent/dump.pkl", "/nonexistent/r.npy"), "/nonexistent/dump.pkl: not found"),
+    (("refit_stage.py", "misfit", "/nonexistent/dump.pkl", "/nonexistent/r.npy", "--thresholds", "20,a"),
+     "--thresholds: expected numbers >= 0 like 20 or 20,8,4, got '20,a'"),
+    (("refit_stage.py", "misfit", "/nonexistent/dump.pkl", "/nonexistent/r.npy", "--thresholds=20,-1"),
+     "--thresholds: expected numbers >= 0 like 20 or 20,8,4, got '20,-1'"),
     (("prior_ceiling.py", "--crop", "0", "8", "0", "8"), "--crop: expected 0 <= Y0 < Y1 <= 434, 0 <= X0 < X1 <= 625, at"),
     (("prior_ceiling.py", "--crop", "a", "b", "c", "d"), "--crop: expected Y0 Y1 X0 X1 (integers) or 'none', got a b"),
     (("prior_ceiling.py", "--scenes", "nope"), "--scenes: unknown scene 'nope'; expected some of desk-cannon"),
@@ -125,6 +130,51 @@ def test_the_bound_of_a_window_outside_the_margin_is_one_line_and_exit_code_2(tm
     assert done.returncode == 2 and done.stdout == ""
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "--disparities: disparity 3: translations of 6 pixels exceed" in lines[0]
+
+
+def test_misfit_finds_where_a_result_contradicts_the_measurements(tmp_path):
+    """refit_stage.py misfit on a noise-free dump made here (measurements Phi x of the truth, by the library's
+    operator; every weight 1 / 1 % of the mean measurement): the truth itself misfits nowhere; the truth with a 4 x 4
+    block 4 times too bright (every view) is flagged there, too bright, and the truth put back there gives the truth's
+    figures (PU21-PSNR inf). A result of the wrong shape is one line and exit code 2."""
+    import pickle
+
+    import numpy as np
+
+    from lfproc.camera.projection import build_operator
+    from lfproc.camera.simulate import simulate_capture
+    from lfproc.synth import synthesize
+
+    lf = synthesize("layers", size=(24, 24), random_state=0)
+    cap = simulate_capture(lf, shots=2, random_state=0)
+    truth = lf.data.astype(np.float64)
+    op = build_operator(cap.mask, views=cap.views, size=cap.size, cfa_pattern=cap.cfa_pattern, dtype=np.float64)
+    t = op.forward(truth * cap.radiance_scale)
+    w = np.full_like(t, 1.0 / (0.01 * t.mean()))
+    path = tmp_path / "small.pkl"
+    path.write_bytes(pickle.dumps({"T": t, "W": w, "W_bound": np.zeros_like(t), "capture": cap, "disparities": (0.0,),
+                                   "first": truth, "margin": 2, "truth": truth}))
+    np.save(tmp_path / "truth.npy", truth)
+    wrong = truth.copy()
+    wrong[:, :, 10:14, 10:14] *= 4.0
+    np.save(tmp_path / "wrong.npy", wrong)
+    np.save(tmp_path / "shape.npy", truth[:, :, :8])
+    done = _run("refit_stage.py", "misfit", str(path), str(tmp_path / "truth.npy"), "--thresholds", "20")
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.strip().splitlines()
+    assert "PU21-PSNR inf dB" in lines[0] and "chi-square > 20: 0.0000 of pixels (0.0000 too bright)" in lines[1]
+    done = _run("refit_stage.py", "misfit", str(path), str(tmp_path / "wrong.npy"), "--thresholds", "20")
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.strip().splitlines()
+    assert "PU21-PSNR inf dB" not in lines[0]
+    flagged, too_bright = (float(v) for v in lines[1].split(": ")[1].split(" of pixels (")[0:1]
+                           + [lines[1].split(" of pixels (")[1].split(" too bright")[0]])
+    assert 16 / 24 ** 2 <= flagged < 0.5 and too_bright >= 16 / 24 ** 2  # the block and its 5 x 5 neighbourhood
+    assert lines[1].count("PU21-PSNR inf dB") == 2  # the truth put back where it misfits: all, and the too bright
+    done = _run("refit_stage.py", "misfit", str(path), str(tmp_path / "shape.npy"))
+    assert done.returncode == 2 and done.stdout == ""
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "shape.npy: expected finite floats of the dump's shape (5, 5, 24, 24, 3)" in lines[0]
 
 
 def _prior_ceiling():
