@@ -237,8 +237,10 @@ def misfit(path: Path, result: Path, thresholds: tuple[float, ...]) -> None:
         _fail(f"{result}: not found (a light field saved by 'refit_stage.py run --save')")
     try:
         x = np.load(result, allow_pickle=False)
-    except (OSError, ValueError) as e:
+    except (OSError, ValueError, EOFError) as e:
         _fail(f"{result}: not a .npy array ({type(e).__name__}: {e})")
+    if not isinstance(x, np.ndarray):  # an .npz archive
+        _fail(f"{result}: not a .npy array (a {type(x).__name__})")
     if x.shape != d["truth"].shape or not np.issubdtype(x.dtype, np.floating) or not np.isfinite(x).all():
         _fail(f"{result}: expected finite floats of the dump's shape {d['truth'].shape}, got {x.dtype} {x.shape}")
     cap, truth = d["capture"], d["truth"]

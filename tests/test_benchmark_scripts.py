@@ -175,6 +175,13 @@ def test_misfit_finds_where_a_result_contradicts_the_measurements(tmp_path):
     assert done.returncode == 2 and done.stdout == ""
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "shape.npy: expected finite floats of the dump's shape (5, 5, 24, 24, 3)" in lines[0]
+    (tmp_path / "empty.npy").write_bytes(b"")
+    np.savez(tmp_path / "archive.npz", a=truth)
+    for name in ("empty.npy", "archive.npz"):  # numpy's EOFError and an NpzFile: one line each, no traceback
+        done = _run("refit_stage.py", "misfit", str(path), str(tmp_path / name))
+        assert done.returncode == 2 and done.stdout == "" and "Traceback" not in done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and f"{name}: not a .npy array" in lines[0]
 
 
 def _prior_ceiling():
