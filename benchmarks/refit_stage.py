@@ -269,6 +269,15 @@ def misfit(path: Path, result: Path, thresholds: tuple[float, ...]) -> None:
               f"truth there, " + "; ".join(cells))
 
 
+def _numbers(text: str) -> tuple[float, ...]:
+    """Comma-separated finite numbers (``--disparities``, ``--thresholds``), or ``()`` when ``text`` is not that."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        return ()
+    return values if all(np.isfinite(values)) else ()
+
+
 def main() -> None:
     from lfproc.camera import MASK_TRANSMITTANCES
 
@@ -311,19 +320,13 @@ def main() -> None:
     elif args.command == "bound":
         disparities = None
         if args.disparities is not None:
-            try:
-                disparities = tuple(float(v) for v in args.disparities.split(","))
-            except ValueError:
-                disparities = ()
-            if not disparities or not all(np.isfinite(disparities)):
+            disparities = _numbers(args.disparities)
+            if not disparities:
                 parser.error(f"--disparities: expected numbers like 0.6 or -1,0.5, got {args.disparities!r}")
         bound(args.path, args.top, args.left, args.size, disparities)
     elif args.command == "misfit":
-        try:
-            thresholds = tuple(float(v) for v in args.thresholds.split(","))
-        except ValueError:
-            thresholds = ()
-        if not thresholds or not all(np.isfinite(thresholds)) or min(thresholds) < 0:
+        thresholds = _numbers(args.thresholds)
+        if not thresholds or min(thresholds) < 0:
             parser.error(f"--thresholds: expected numbers >= 0 like 20 or 20,8,4, got {args.thresholds!r}")
         misfit(args.path, args.result, thresholds)
     else:

@@ -4,6 +4,7 @@ file, before any scene is made or any dump is read (reference: argparse's own co
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -167,8 +168,7 @@ def test_misfit_finds_where_a_result_contradicts_the_measurements(tmp_path):
     assert done.returncode == 0, done.stderr
     lines = done.stdout.strip().splitlines()
     assert "PU21-PSNR inf dB" not in lines[0]
-    flagged, too_bright = (float(v) for v in lines[1].split(": ")[1].split(" of pixels (")[0:1]
-                           + [lines[1].split(" of pixels (")[1].split(" too bright")[0]])
+    flagged, too_bright = map(float, re.search(r"> 20: ([\d.]+) of pixels \(([\d.]+) too bright\)", lines[1]).groups())
     assert 16 / 24 ** 2 <= flagged < 0.5 and too_bright >= 16 / 24 ** 2  # the block and its 5 x 5 neighbourhood
     assert lines[1].count("PU21-PSNR inf dB") == 2  # the truth put back where it misfits: all, and the too bright
     done = _run("refit_stage.py", "misfit", str(path), str(tmp_path / "shape.npy"))
