@@ -25,7 +25,9 @@ more of the refit's cost than the reconstruction pays (back to back, quiet machi
 night-studio 46 -> 22 s, the same figures); times measured before then are upper bounds. The
 dump is a scratch file (Python's pickle: it loads only with the same lfproc version, and only files you made).
 Figures measured this way are of the refit stage alone; confirm a change with :mod:`reconstruct_realistic`.
-``misfit`` asks how much of a result's error lies where the result contradicts the measurements: where the local
+Since stop 44 ``run`` also applies the reconstruction's last step, the gain where the result contradicts the
+measurements (``lfproc.recon._gain``, on the refit's output), and prints its figures as ``gain``; ``--save`` writes it
+as ``<dump>__gain.npy``. ``misfit`` asks how much of a result's error lies where the result contradicts the measurements: where the local
 chi-square (``lfproc.recon._lights.misfit_map`` of the result, in light-field units as ``run --save`` writes it) is
 above each threshold, it prints the share of pixels, the share of those the result predicts too bright, and the
 figures of the result with the truth put there (all views, the pixels dilated by 3), for all of them and for the
@@ -126,7 +128,9 @@ def _load(path: Path) -> dict:
 
 
 def run(path: Path, settings: list[str], save: Path | None = None, threads: bool = False) -> None:
+    import lfproc.recon._gmm as gmm
     import lfproc.recon._lights as lights
+    from lfproc.recon._gain import measured_gain
     from lfproc import LightField
     from lfproc._shared.parallel import available_cpus
     from lfproc.camera.capture import noise_floor
@@ -150,8 +154,13 @@ def run(path: Path, settings: list[str], save: Path | None = None, threads: bool
         out, info = lights.refit_lights(first, d["T"], d["W"], d["W_bound"], cap, d["disparities"], d["margin"], pool,
                                         0 if threads else available_cpus())
     seconds = time.perf_counter() - t
+    stages = [("first", first), ("refit", out)]
+    if gmm.MEASURED_GAIN:  # the reconstruction's last step (lfproc.recon._gain), on the refit's output
+        t = time.perf_counter()
+        stages.append(("gain", measured_gain(out, d["T"], d["W"], d["W_bound"], cap, d["disparities"])[0]))
+        gain_seconds = time.perf_counter() - t
     truth = LightField(d["truth"], units="relative")
-    for name, x in (("first", first), ("refit", out)):
+    for name, x in stages:
         x = x / cap.radiance_scale
         f = evaluate(LightField(x.astype(np.float32), units="relative"), truth, scale_tolerance_stops=None,
                      noise_floor=noise_floor(cap))  # as reconstruct_realistic scores a cell
@@ -162,7 +171,8 @@ def run(path: Path, settings: list[str], save: Path | None = None, threads: bool
             np.save(save / f"{path.stem}__{name}.npy", x.astype(np.float32))
     if save is not None:
         np.save(save / f"{path.stem}__truth.npy", d["truth"])
-    print(f"{path.name} {' '.join(settings)}: {seconds:.0f} s, windows per pass {info['passes']}")
+    print(f"{path.name} {' '.join(settings)}: {seconds:.0f} s, windows per pass {info['passes']}"
+          + (f"; gain {gain_seconds:.1f} s" if gmm.MEASURED_GAIN else ""))
 
 
 def bound(path: Path, top: int, left: int, size: int, disparities: tuple | None = None) -> None:

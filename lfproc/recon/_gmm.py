@@ -156,6 +156,7 @@ from .._version import __version__
 from ..errors import FileFormatError, InputError, MissingFileError, ShapeError, option_name
 from ..lightfield import LightField
 from .._shared.parallel import available_cpus
+from ._gain import measured_gain
 from ._lights import refit_lights
 from ._shear import shear_matrix
 from ._reconstruct import _gather, _int_option
@@ -560,17 +561,27 @@ def reconstruct_gmm(capture, model="default", *, stride: int = 2, search_stride:
             if REFINE_SIGMA:
                 acc = _refine(acc - lights, g.gt, g.gl, info, model, shears_sparse, scales, win, pool, opt["chunk"],
                               data.saturated.any(axis=0)) + lights
-            refit = {"windows": 0, "refitted": 0}
-            if LIGHTS_REFIT:  # small lights against the measurements themselves (lfproc.recon._lights)
-                acc, refit = refit_lights(acc, *data.raw, capture, disparities, model.margin, pool, opt["threads"])
+            acc, refit, gain = _against_measurements(acc, data, capture, disparities, model.margin, pool,
+                                                     opt["threads"])
     finally:
         bar.close()
     record = {"lfproc_version": __version__, "method": "gmm", "model": repr(model), "model_attrs": model.attrs,
               **{k: opt[k] for k in ("stride", "search_stride", "disparities", "scales", "pool_radius")},
               "search": search, "saturation": saturation, "refine_sigma": REFINE_SIGMA, "positive_std": POSITIVE_STD,
-              "lights": LIGHTS, "lights_refit": refit,
+              "lights": LIGHTS, "lights_refit": refit, "measured_gain": gain,
               "disparity_counts": np.bincount(chosen_d, minlength=len(disparities)).tolist(), "patches": int(len(g.gt))}
     return _result(acc, capture, record, started)
+
+
+def _against_measurements(acc, data, capture, disparities, margin, pool, threads):
+    """The small lights refitted against the measurements themselves (:mod:`lfproc.recon._lights`), then a gain where
+    the result still contradicts them (:mod:`lfproc.recon._gain`), each when on; the light field and their records."""
+    refit, gain = {"windows": 0, "refitted": 0}, {"iterations": 0, "pixels": []}
+    if LIGHTS_REFIT:
+        acc, refit = refit_lights(acc, *data.raw, capture, disparities, margin, pool, threads)
+    if MEASURED_GAIN:
+        acc, gain = measured_gain(acc, *data.raw, capture, disparities)
+    return acc, refit, gain
 
 
 def _combined(jobs, estimates, g, shape, bar):
@@ -997,6 +1008,8 @@ LIGHTS_TAU = 3.0
 LIGHTS_ACTIVE = 16
 #: Small lights refitted in windows against the measurements after the refinement (:mod:`lfproc.recon._lights`).
 LIGHTS_REFIT = True
+#: Then a gain per pixel and colour where the light field contradicts the measurements (:mod:`lfproc.recon._gain`).
+MEASURED_GAIN = True
 _LIGHT_COLOUR = np.linalg.cholesky(np.full((3, 3), 1.0) + 0.25 * np.eye(3)) / math.sqrt(3.25)
 
 

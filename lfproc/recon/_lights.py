@@ -583,7 +583,11 @@ def misfit_map(lf: np.ndarray, T: np.ndarray, W: np.ndarray, W_bound: np.ndarray
                op: ProjectionOperator) -> np.ndarray:
     """The mean squared whitened residual of the measurements ``(S, H, W)`` over ``MISFIT_SIZE`` squares, summed
     over the shots ``(H, W)`` (a saturated one counts where ``lf`` predicts it below its bound)."""
-    pred = op.forward(lf)
+    return local_chi2(op.forward(lf), T, W, W_bound)
+
+
+def local_chi2(pred: np.ndarray, T: np.ndarray, W: np.ndarray, W_bound: np.ndarray) -> np.ndarray:
+    """:func:`misfit_map` of the predicted measurements ``pred`` ``(S, H, W)``."""
     z = np.where(W > 0, (T - pred) * W, np.where((W_bound > 0) & (pred < T), (T - pred) * W_bound, 0.0))
     return ndimage.uniform_filter((z ** 2).sum(axis=0), MISFIT_SIZE, mode="nearest")
 
