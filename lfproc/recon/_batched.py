@@ -106,8 +106,9 @@ def _inverse_mills(a):  # pragma: no cover - compiled (tests compare truncated_m
 
 @numba.njit(nogil=True, cache=True)
 def _truncated(x, std, out):  # pragma: no cover - compiled (tests compare truncated_mean with scipy)
-    """``x``, ``out``: ``(R, C)``; ``std``: ``(R, C)`` or ``(R, 1)``. From 9 standard deviations above 0 the correction ``std phi(a) / Phi(a)`` is below 1.2e-19 of ``x``, under
-    half its last bit: ``x`` itself, not computed."""
+    """``x``, ``out``: ``(R, C)``; ``std``: ``(R, C)`` or ``(R, 1)``. From 9 standard deviations above 0 the
+    correction ``std phi(a) / Phi(a)`` is below 1.2e-19 of ``x``, under half its last bit: ``x`` itself, not
+    computed."""
     r_n, c_n = x.shape
     per_row = std.shape[1] == 1
     for i in range(r_n):

@@ -83,7 +83,7 @@ prior pulls lights down. Measured on 128 x 160 crops of the three tune scenes (P
 ratio / energy of the brightest 1 %, means): 29.00 dB / 0.92 / 0.951 without the pass, 29.33 / 0.78
 / 0.936 with it everywhere, 29.13 / 0.82 / 0.950 with the saturated pixels' larger estimate. Radiance
 is positive: the pass keeps each sample as the mean of its Gaussian estimate truncated at 0
-(:func:`_positive`), not the estimate clipped at 0, so no sample comes back as exactly 0
+(:func:`._batched.truncated_mean`), not the estimate clipped at 0, so no sample comes back as exactly 0
 (``POSITIVE_STD``).
 
 Small lights. A Gaussian patch prior cannot hold a light of a few pixels: it explains the coded
@@ -1072,7 +1072,8 @@ def _refine(first, tops, lefts, patch_info, model, shears_sparse, scales, win, p
     the first pass (same window and weights, in a fixed order). Pixels a shot saw saturated
     (``saturated``, ``(H, W)``) keep the larger of the two estimates: the prior pulls lights down.
     ``patch_info``: each patch's hypothesis, weight and noise (:func:`_estimate`); a sample is the mean of its
-    estimate truncated at 0 (:func:`_positive`, std ``POSITIVE_STD`` times the patch's noise), never exactly 0.
+    estimate truncated at 0 (:func:`._batched.truncated_mean`, std ``POSITIVE_STD`` times the patch's noise), never
+    exactly 0.
     """
     hyp, weight, noise = patch_info
     nv, nu = first.shape[:2]
@@ -1097,7 +1098,7 @@ def _refine(first, tops, lefts, patch_info, model, shears_sparse, scales, win, p
         m, offset = mats[(di, k, si)]
         c = np.asarray((shears_sparse[di].T @ (z.reshape(len(sel), -1) / level[:, None]).T).T) @ m + offset[None]
         x = np.asarray((shears_sparse[di] @ c.T).T) * level[:, None]
-        x = _positive(x, POSITIVE_STD * noise[sel, None])
+        x = truncated_mean(x, POSITIVE_STD * noise[sel, None])
         est = {"patches": x.reshape(len(sel), nv, nu, p, p, 3), "weight": weight[sel]}
         return _prepared(est, tops[sel], lefts[sel], win, first.shape[3])
 
@@ -1114,13 +1115,6 @@ def _refine(first, tops, lefts, patch_info, model, shears_sparse, scales, win, p
 #: (0.1, 0.25, 0.5, 1): 0.1 leaves PU21-PSNR, SSIM and the other figures as they were (128 x 160 crops: 29.12
 #: against 29.13 dB; 96 x 128: 25.47 dB both); the larger ones add energy near the floor (0.5: -0.8 dB on crops).
 POSITIVE_STD = 0.1
-
-
-def _positive(x: np.ndarray, std) -> np.ndarray:
-    """``E[X | X > 0]`` for ``X ~ N(x, std^2)`` (``max(x, 0)`` where ``std`` is 0): radiance is positive, and a
-    Gaussian estimate near 0 kept as its truncated mean never comes back as exactly 0 (compiled:
-    :func:`._batched.truncated_mean`)."""
-    return truncated_mean(x, std)
 
 
 def _median_noise(wn: np.ndarray, rowsum: np.ndarray) -> np.ndarray:

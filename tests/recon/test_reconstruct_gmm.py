@@ -505,19 +505,20 @@ def test_weights_assume_at_least_one_electron_of_read_noise(profile):
 
 
 def test_positive_is_the_mean_of_the_truncated_gaussian():
-    """_positive(x, s) = E[X | X > 0] for X ~ N(x, s^2); reference: scipy.stats.truncnorm's mean. Far below 0 it
-    stays positive (s^2 / |x|, where max(x, 0) gave 0), far above it is x; std 0 is max(x, 0)."""
+    """The refinement's samples, truncated_mean(x, s) = E[X | X > 0] for X ~ N(x, s^2); reference:
+    scipy.stats.truncnorm's mean. Far below 0 it stays positive (s^2 / |x|, where max(x, 0) gave 0), far above it is
+    x; std 0 is max(x, 0)."""
     from scipy.stats import truncnorm
 
-    from lfproc.recon._gmm import _positive
+    from lfproc.recon._batched import truncated_mean
 
     x = np.array([-40.0, -3.0, -0.5, 0.0, 0.7, 2.0, 50.0])
     s = np.array([1.0, 2.0, 0.5, 1.0, 0.1, 3.0, 1.0])
     ref = truncnorm.mean(-x / s, np.inf, loc=x, scale=s)
-    np.testing.assert_allclose(_positive(x, s), ref, rtol=1e-9)
-    assert (_positive(x, s) > 0).all()
-    np.testing.assert_allclose(_positive(np.array([-1e3]), 1.0), 1e-3, rtol=1e-5)  # s^2 / |x|
-    np.testing.assert_array_equal(_positive(x, 0.0), np.maximum(x, 0.0))
+    np.testing.assert_allclose(truncated_mean(x, s), ref, rtol=1e-9)
+    assert (truncated_mean(x, s) > 0).all()
+    np.testing.assert_allclose(truncated_mean(np.array([-1e3]), 1.0), 1e-3, rtol=1e-5)  # s^2 / |x|
+    np.testing.assert_array_equal(truncated_mean(x, 0.0), np.maximum(x, 0.0))
 
 
 # five reconstructions with their lights refit: 52 s on 2 cores (stop 39); the mechanism's fast check:
