@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/reconstruct_realistic.py [--set test|tune|all] [--size H W] [--captures "2 random,1 random"]
+    python benchmarks/reconstruct_realistic.py [--set test|tune|holdout|all] [--size H W] [--captures "2 random,1 random"]
                                                [--mask-period P|none] [--seeds N] [--first-seed I] [--json OUT.json]
                                                [--save DIR]
 
