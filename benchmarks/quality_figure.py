@@ -7,6 +7,8 @@ Usage::
     python benchmarks/quality_figure.py --before BEFORE --after AFTER --scenes city-interior,night-studio \\
         --capture "2 random" -o docs/figures/quality_before_after.png
 
+``--after-capture C`` takes the after column from capture ``C`` of ``--after`` (one run's medium-noise and noise-free
+results side by side: ``--before DIR --after DIR --capture "2 random" --after-capture "2 random none"``).
 ``--zoom N`` shows N x N pixels around the truth's brightest pixel, or around ``--at SCENE=Y,X``, white at its maximum
 or at ``--white-percentile P`` of the window (colours around a small light). The refit stage's
 outputs (``refit_stage.py run DUMP --save DIR``: ``<scene>__refit.npy``) serve with ``--capture refit``.
@@ -50,6 +52,8 @@ def main() -> None:
     parser.add_argument("--after", type=Path, required=True)
     parser.add_argument("--scenes", required=True)
     parser.add_argument("--capture", default="2 random")
+    parser.add_argument("--after-capture", default=None, metavar="CAPTURE",
+                        help="the after column's capture, when not --capture's (noise-free against medium noise)")
     parser.add_argument("--labels", default="before: dictionary (lfproc reconstruct),after: --method gmm")
     parser.add_argument("--zoom", type=int, default=0,
                         help="show N x N pixels around the truth's brightest centre-view pixel (white: its maximum)")
@@ -82,10 +86,15 @@ def main() -> None:
         parser.error(f"--at: expected a scene of --scenes ({args.scenes}), got {sorted(set(at) - set(scenes))[0]!r}")
     labels = args.labels.split(",")
     tag = args.capture.replace(" ", "_")
+    after_tag = (args.after_capture or args.capture).replace(" ", "_")
     fig, axes = plt.subplots(len(scenes), 5, figsize=(20, 3.6 * len(scenes)), constrained_layout=True, squeeze=False)
+    for path in [d / f"{scene}__{t}.npy" for scene in scenes
+                 for d, t in ((args.before, "truth"), (args.before, tag), (args.after, after_tag))]:
+        if not path.is_file():
+            parser.error(f"{path}: expected a result saved by reconstruct_realistic.py --save, got no such file")
     for row, scene in zip(axes, scenes):
         truth = np.load(args.before / f"{scene}__truth.npy")
-        results = [np.load(args.before / f"{scene}__{tag}.npy"), np.load(args.after / f"{scene}__{tag}.npy")]
+        results = [np.load(args.before / f"{scene}__{tag}.npy"), np.load(args.after / f"{scene}__{after_tag}.npy")]
         white = float(np.percentile(luminance(truth[2, 2]), 99))
         if args.zoom > min(truth.shape[2:4]):
             parser.error(f"--zoom: expected at most {min(truth.shape[2:4])} pixels ({scene}'s size), got {args.zoom}")

@@ -62,6 +62,8 @@ def _run(*argv: str) -> subprocess.CompletedProcess:
       "--white-percentile", "0", "-o", "/nonexistent/f.png"), "--white-percentile: expected a percentile in (0, 100]"),
     (("quality_figure.py", "--before", "/nonexistent", "--after", "/nonexistent", "--scenes", "a",
       "--white-percentile", "99", "-o", "/nonexistent/f.png"), "--white-percentile: expected with --zoom N"),
+    (("quality_figure.py", "--before", "/nonexistent", "--after", "/nonexistent", "--scenes", "a",
+      "-o", "/nonexistent/f.png"), "/nonexistent/a__truth.npy: expected a result saved by reconstruct_realistic.py"),
 ])
 def test_a_bad_option_or_file_is_one_line_and_exit_code_2(argv, expected):
     done = _run(*argv)
@@ -259,3 +261,24 @@ def test_a_dump_of_a_small_scene_runs(tmp_path, shared_data):
     done = _run("refit_stage.py", "run", str(dump))
     assert done.returncode == 0, done.stderr
     assert "first: PU21-PSNR" in done.stdout and "refit: PU21-PSNR" in done.stdout
+
+
+def test_quality_figure_takes_the_after_column_from_another_capture(tmp_path):
+    """``--after-capture`` (stop 46) reads the after column from its own capture's file: medium noise against
+    noise-free from one ``--save`` folder. Reference: the files written here; a missing one is one line, exit 2."""
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    truth = rng.uniform(0.1, 1.0, (5, 5, 12, 12, 3))
+    np.save(tmp_path / "s__truth.npy", truth)
+    np.save(tmp_path / "s__2_random.npy", truth * 1.1)
+    np.save(tmp_path / "s__2_random_none.npy", truth)
+    out = tmp_path / "f.png"
+    done = _run("quality_figure.py", "--before", str(tmp_path), "--after", str(tmp_path), "--scenes", "s",
+                "--after-capture", "2 random none", "-o", str(out))
+    assert done.returncode == 0, done.stderr
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    done = _run("quality_figure.py", "--before", str(tmp_path), "--after", str(tmp_path), "--scenes", "s",
+                "--after-capture", "2 random low", "-o", str(tmp_path / "g.png"))
+    assert done.returncode == 2 and "s__2_random_low.npy: expected a result" in done.stderr.strip().splitlines()[-1]
+    assert not (tmp_path / "g.png").exists()
