@@ -87,11 +87,11 @@ def main() -> None:
     labels = args.labels.split(",")
     tag = args.capture.replace(" ", "_")
     after_tag = (args.after_capture or args.capture).replace(" ", "_")
-    fig, axes = plt.subplots(len(scenes), 5, figsize=(20, 3.6 * len(scenes)), constrained_layout=True, squeeze=False)
     for path in [d / f"{scene}__{t}.npy" for scene in scenes
                  for d, t in ((args.before, "truth"), (args.before, tag), (args.after, after_tag))]:
         if not path.is_file():
             parser.error(f"{path}: expected a result saved by reconstruct_realistic.py --save, got no such file")
+    fig, axes = plt.subplots(len(scenes), 5, figsize=(20, 3.6 * len(scenes)), constrained_layout=True, squeeze=False)
     for row, scene in zip(axes, scenes):
         truth = np.load(args.before / f"{scene}__truth.npy")
         results = [np.load(args.before / f"{scene}__{tag}.npy"), np.load(args.after / f"{scene}__{after_tag}.npy")]
