@@ -323,7 +323,7 @@ def test_the_cli_uses_the_new_names(tmp_path, capsys):
 # -- known answers of split steps ---------------------------------------------------------------------
 
 def test_hdr_figure_steps_known_answers():
-    from lfproc.metrics._metrics import _detail_ratio, _figure_mask, _stops_by_decade
+    from lfproc.metrics._metrics import _detail, _figure_mask, _stops_by_decade
 
     ref = np.array([1.5, 2.0, 20.0, 300.0, 0.01])
     res = np.array([3.0, 2.0, 10.0, 0.0, 5.0])
@@ -336,8 +336,10 @@ def test_hdr_figure_steps_known_answers():
     assert n == 2 and keep.shape == (2, 1, 2)
     assert _figure_mask(None, (2, 3)) == (None, 6)
     p = np.random.default_rng(0).random((2, 6, 7))
-    assert _detail_ratio(np.zeros_like(p), p, None) == 0.0
-    assert _detail_ratio(-p, p, None) == pytest.approx(1.0)
+    top = np.array([0])  # the first sample of the first view: it and its cross of neighbours are "near"
+    assert _detail(np.zeros_like(p), p, None, top)[:2] == (0.0, 0.0)
+    ratio, off, share = _detail(-p, p, None, top)
+    assert ratio == pytest.approx(1.0) and off == pytest.approx(1.0) and 0 < share < 1
 
 
 def test_reconstruction_steps_known_answers():

@@ -275,8 +275,12 @@ def test_table_prints_hdr_figures_and_says_when_emitters_dominate(tmp_path, caps
     assert doc["highlight_energy"] < 0.5 and doc["emitters_dominate"] is True
     assert {"decade", "median_stops", "samples"} <= set(doc["stops_by_decade"][0])
     assert doc["stops_by_decade"][0]["median_stops"] == "inf"  # the dark decade: all zeros
+    # away from the emitters the error is the dark corner's; the table prints the JSON's figures
+    off, share = doc["detail_ratio_off_highlights"], doc["highlight_detail_share"]
+    assert 0 < off and 0 < share < 1
     assert main(["evaluate", str(res), str(ref), "--scale-tolerance-stops", "10"]) == 0
     out = capsys.readouterr().out
+    assert f"away from the brightest 1 % {off:.3f} (they hold {100 * share:.0f} % of the reference's detail)" in out
     assert "error by decade of the reference luminance" in out
     assert "1e+03 .. 1e+04" in out and "1e-03 .. 1e-02" in out
     assert f"returned as 0 (or 20 stops under) above the floor: {100 * 80 / 1920:.3g} %" in out

@@ -411,6 +411,44 @@ def test_hdr_figures_blurred_detail_ratio(hdr_lf):
     assert hdr_figures(flat, hdr_lf.data)["detail_ratio"] == pytest.approx(1.0, abs=0.05)
 
 
+def test_hdr_figures_detail_off_highlights():
+    """A light right and a grainy background: ``detail_ratio`` is small because the light holds most of the
+    reference's fine detail; away from it the grain is counted (known answer: the definition written out with the
+    published PU21 formula and a mask made by hand)."""
+    from scipy.ndimage import laplace
+
+    from lfproc.metrics import hdr_figures
+
+    rng = np.random.default_rng(3)
+    ref = np.broadcast_to(rng.uniform(0.5, 1.0, (1, 1, 20, 20, 1)), (1, 1, 20, 20, 3)).copy()
+    ref[0, 0, 9:11, 9:11] = 1e4  # a light: 4 samples, the brightest 1 % of 400
+    res = ref * rng.uniform(0.7, 1.3, (1, 1, 20, 20, 1))  # grain everywhere ...
+    res[0, 0, 9:11, 9:11] = 1e4  # ... but on the light
+    out = hdr_figures(res, ref)
+    factor = 1000.0 / 1e4
+    p_ref = reference_pu21(metric_luminance(ref)[0, 0] * factor, "banding_glare")
+    le = laplace(reference_pu21(metric_luminance(res)[0, 0] * factor, "banding_glare") - p_ref) ** 2
+    lr = laplace(p_ref) ** 2
+    near = np.zeros((20, 20), bool)
+    near[8:12, 9:11] = near[9:11, 8:12] = True  # the light and its cross of neighbours
+    assert out["detail_ratio"] == pytest.approx(le.sum() / lr.sum(), rel=1e-9)
+    assert out["detail_ratio_off_highlights"] == pytest.approx(le[~near].sum() / lr[~near].sum(), rel=1e-9)
+    assert out["highlight_detail_share"] == pytest.approx(lr[near].sum() / lr.sum(), rel=1e-9)
+    assert out["highlight_detail_share"] > 0.9 and out["detail_ratio"] < 0.1 < out["detail_ratio_off_highlights"]
+    # restricted by a mask (the left half, without the light): the brightest 1 % of the kept samples (2 of 160)
+    # and their neighbours are set aside
+    half = np.zeros((20, 20), bool)
+    half[:, :8] = True
+    y = metric_luminance(ref)[0, 0]
+    near = np.zeros((20, 20), bool)
+    for i, j in np.argwhere(y >= np.sort(y[half])[-2] - 1e-12):
+        if half[i, j]:
+            near[max(i - 1, 0):i + 2, j] = near[i, max(j - 1, 0):j + 2] = True
+    off = half & ~near
+    masked = hdr_figures(res, ref, mask=half)
+    assert masked["detail_ratio_off_highlights"] == pytest.approx(le[off].sum() / lr[off].sum(), rel=1e-9)
+
+
 def test_hdr_figures_zeros_in_the_dark(hdr_lf):
     from lfproc.metrics import hdr_figures
 
