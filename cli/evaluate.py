@@ -132,8 +132,9 @@ def format_hdr_table(figures: dict) -> str:
                  f"stops under) above the floor: {'n/a' if math.isnan(zeros) else f'{100 * zeros:.3g} %'}")
     lines.append(f"brightest 1 % keep {100 * figures['highlight_energy']:.1f} % of their energy; detail ratio "
                  f"{figures['detail_ratio']:.3f} (PU21 Laplacian energy of the error / of the reference: 0 all "
-                 f"detail, 1 none), away from the brightest 1 % {_cell('{:.3f}', figures['detail_ratio_off_highlights'])}"
-                 f" (they hold {_cell('{:.0f}', 100 * figures['highlight_detail_share'])} % of the reference's detail)")
+                 "detail, 1 none), away from the brightest 1 % "
+                 f"{_cell('{:.3f}', figures['detail_ratio_off_highlights'])} (they hold "
+                 f"{_cell('{:.0f}', 100 * figures['highlight_detail_share'])} % of the reference's detail)")
     if figures["emitters_dominate"]:
         lines.append(f"PU21 is dominated by a few emitters: the brightest 0.1 % of the reference hold "
                      f"{100 * figures['emitter_share']:.0f} % of its squared error (score without them: "
