@@ -337,9 +337,11 @@ def test_hdr_figure_steps_known_answers():
     assert _figure_mask(None, (2, 3)) == (None, 6)
     p = np.random.default_rng(0).random((2, 6, 7))
     top = np.array([0])  # the first sample of the first view: it and its cross of neighbours are "near"
-    assert _detail(np.zeros_like(p), p, None, top)[:2] == (0.0, 0.0)
-    ratio, off, share = _detail(-p, p, None, top)
-    assert ratio == pytest.approx(1.0) and off == pytest.approx(1.0) and 0 < share < 1
+    zero = _detail(np.zeros_like(p), p, None, top)
+    assert zero["detail_ratio"] == zero["detail_ratio_off_highlights"] == 0.0
+    flat = _detail(-p, p, None, top)  # the error cancels the reference: as much wrong detail as it has
+    assert flat["detail_ratio"] == pytest.approx(1.0) and flat["detail_ratio_off_highlights"] == pytest.approx(1.0)
+    assert 0 < flat["highlight_detail_share"] < 1
 
 
 def test_reconstruction_steps_known_answers():

@@ -792,7 +792,7 @@ def _stops_below_floor(res_k: np.ndarray, ref_k: np.ndarray, floor: float) -> li
     return _stops_by_decade(res_k[below], ref_k[below], 0.0)[0] if below.any() else []
 
 
-def _detail(err: np.ndarray, p_ref: np.ndarray, keep: np.ndarray | None, top: np.ndarray) -> tuple:
+def _detail(err: np.ndarray, p_ref: np.ndarray, keep: np.ndarray | None, top: np.ndarray) -> dict:
     """``detail_ratio``, ``detail_ratio_off_highlights`` and ``highlight_detail_share`` of :func:`hdr_figures`.
 
     The Laplacian energies of the PU21 error and of the reference, per view, summed over the kept samples; then
@@ -817,7 +817,18 @@ def _detail(err: np.ndarray, p_ref: np.ndarray, keep: np.ndarray | None, top: np
     ratio = err_all / ref_all if ref_all > 0 else math.nan
     off = (err_all - err_near) / (ref_all - ref_near) if ref_all - ref_near > 0 else math.nan
     share = ref_near / ref_all if ref_all > 0 else math.nan
-    return ratio, off, share
+    return {"detail_ratio": ratio, "detail_ratio_off_highlights": off, "highlight_detail_share": share}
+
+
+def _emitters(err: np.ndarray, keep: np.ndarray | None, ref_k: np.ndarray) -> dict:
+    """``emitter_share``, ``emitters_dominate`` and ``emitter_luminance`` of :func:`hdr_figures` from the PU21
+    error ``err`` and the kept reference samples ``ref_k``."""
+    sq = np.square(err.ravel() if keep is None else err[keep])
+    total = float(sq.sum())
+    emitters = _brightest(ref_k, _EMITTER_FRACTION)
+    share = float(sq[emitters].sum()) / total if total > 0 else 0.0
+    return {"emitter_share": share, "emitters_dominate": bool(share > EMITTER_SHARE_DOMINATES),
+            "emitter_luminance": float(ref_k[emitters].min())}
 
 
 def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None, mask: Any = None,
@@ -872,12 +883,9 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
             every detail right, 1.0 as much wrong detail as the reference has (a flat result
             scores about 1). ``nan`` for a reference without any detail.
         ``detail_ratio_off_highlights``, ``highlight_detail_share``
-            ``detail_ratio`` over the samples away from the brightest 1 % (neither among them nor
-            beside one in its view: the Laplacian's reach), and the share of the reference's
-            Laplacian energy that the brightest 1 % and their neighbours hold. Lights hold most of
-            a high-dynamic-range reference's fine detail in PU21 (the test scene city-interior: 98 %),
-            so ``detail_ratio`` can read 0.25 while the rest of the picture has 3.5 times the
-            reference's detail in error (``nan`` where the reference has no detail there).
+            ``detail_ratio`` away from the brightest 1 % (nor beside one in its view), and the share
+            of the reference's Laplacian energy those hold: lights hold most of an HDR reference's
+            detail (city-interior 98 %: 0.25 overall, 3.5 away from them; ``nan``: no detail there).
         ``emitter_share``, ``emitters_dominate``
             share of the PU21 squared error (the MSE of PU21-PSNR) that comes from the
             brightest 0.1 % of the reference samples (0.0 when there is no error), and
@@ -925,24 +933,14 @@ def hdr_figures(result: Any, reference: Any, *, noise_floor: float | None = None
     p_ref = pu21_encode(y_ref * factor)
     err = pu21_encode(y_res * factor)
     err -= p_ref
-    sq = np.square(err.ravel() if keep is None else err[keep])
-    total = float(sq.sum())
-    emitters = _brightest(ref_k, _EMITTER_FRACTION)
-    share = float(sq[emitters].sum()) / total if total > 0 else 0.0
-
-    detail, detail_off, detail_share = _detail(err, p_ref, keep, top)
     return {
         "stops_by_decade": by_decade,
         "max_decade_stops": float(max_stops),
         "stops_below_floor": _stops_below_floor(res_k, ref_k, floor),
         "zeros_above_floor": zeros,
         "highlight_energy": highlight,
-        "detail_ratio": detail,
-        "detail_ratio_off_highlights": detail_off,
-        "highlight_detail_share": detail_share,
-        "emitter_share": share,
-        "emitters_dominate": bool(share > EMITTER_SHARE_DOMINATES),
-        "emitter_luminance": float(ref_k[emitters].min()),
+        **_detail(err, p_ref, keep, top),
+        **_emitters(err, keep, ref_k),
         "noise_floor": floor,
         "samples": n,
         "samples_above_floor": n_above,
