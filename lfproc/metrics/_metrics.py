@@ -799,15 +799,13 @@ def _detail(err: np.ndarray, p_ref: np.ndarray, keep: np.ndarray | None, top: np
     over the kept samples neither among the brightest ``top`` (indices into the kept samples, as ``ref_k``) nor
     next to one (the Laplacian's cross of each view reaches them), and the reference's share there (``nan`` for a
     reference without detail)."""
-    from scipy.ndimage import binary_dilation, laplace
+    from scipy.ndimage import binary_dilation, generate_binary_structure, laplace
 
     h, w = p_ref.shape[-2:]
     shape = (-1, h, w)
     near = np.zeros(p_ref.size, bool)
     near[top if keep is None else np.flatnonzero(keep)[top]] = True
-    cross = np.zeros((1, 3, 3), bool)
-    cross[0, 1, :] = cross[0, :, 1] = True
-    near = binary_dilation(near.reshape(shape), structure=cross)
+    near = binary_dilation(near.reshape(shape), structure=generate_binary_structure(2, 1)[None])  # each view's cross
     flat_keep = np.ones(near.shape, bool) if keep is None else keep.reshape(shape)
     sums = np.zeros((2, 2))  # [error, reference] x [all kept, kept and near the highlights]
     for e, r, k, n in zip(err.reshape(shape), p_ref.reshape(shape), flat_keep, near):
