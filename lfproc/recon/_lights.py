@@ -830,19 +830,23 @@ def refit_lights(first, T, W, W_bound, capture, disparities, margin, pool=None, 
                               tuple(float(d) for d in disparities), margin, T.shape[0], {}), pool, processes)
     op = build_operator(capture.mask, views=capture.views, size=capture.size, cfa_pattern=capture.cfa_pattern,
                         dtype=np.float64) if MISFIT else None
-    try:
-        for i in range(max(PASSES, 1)):
-            misfit = misfit_map(out, T, W, W_bound, op) if op is not None else None
-            # the first estimate of the first pass blurs its lights; later passes fit a correction, whose colour is
-            # not a light's
-            settings = (ACCEPT_FIRST, RECOLOUR) if i == 0 else (ACCEPT, 0)
-            settings += (i < BETWEEN_PASSES,)  # so is the light's own disparity (module notes)
-            out, n, k = _refit_once(out, T, W, W_bound, margin, runner, noise, settings, misfit)
-            passes.append([n, k])
-            if not k:  # nothing changed: another pass would find the same
-                break
-    finally:
-        runner.close()
+    # one BLAS thread (as on reconstruct_gmm's pool): a window's matrices are small, on which LAPACK's threads cost
+    # more than they give, and on a loaded machine far more (800 x 800 dpotrf: 6 ms on one thread, 10-580 ms on two
+    # beside another job; stop 48); the sums' order, so the output, no longer depends on the caller's threads
+    with threadpool_limits(1):
+        try:
+            for i in range(max(PASSES, 1)):
+                misfit = misfit_map(out, T, W, W_bound, op) if op is not None else None
+                # the first estimate of the first pass blurs its lights; later passes fit a correction, whose colour is
+                # not a light's
+                settings = (ACCEPT_FIRST, RECOLOUR) if i == 0 else (ACCEPT, 0)
+                settings += (i < BETWEEN_PASSES,)  # so is the light's own disparity (module notes)
+                out, n, k = _refit_once(out, T, W, W_bound, margin, runner, noise, settings, misfit)
+                passes.append([n, k])
+                if not k:  # nothing changed: another pass would find the same
+                    break
+        finally:
+            runner.close()
     out = first.copy() if out is first else out
     return out, {"windows": passes[0][0], "refitted": passes[0][1], "passes": passes}
 
