@@ -97,6 +97,31 @@ def test_a_blurred_light_comes_back_sharp_with_its_energy():
     assert (out[:, :, ~far] != first[:, :, ~far]).any()
 
 
+def test_the_refit_runs_on_one_blas_thread_whatever_the_callers(monkeypatch):
+    """``refit_lights`` solves its windows under one BLAS thread, as ``reconstruct_gmm``'s pool does, also when called
+    directly from a caller allowing two (small LAPACK calls: two threads cost more, far more on a loaded machine;
+    docs/benchmarks.md, stop 48). Reference: threadpoolctl's report of the BLAS libraries' threads inside a pass
+    (the pass itself replaced by a spy that refits nothing); the control: the caller's two outside it."""
+    from threadpoolctl import threadpool_info
+
+    def blas_threads():
+        return {p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"}
+
+    seen = []
+
+    def spy(out, *args, **kwargs):
+        seen.append(blas_threads())
+        return out, 0, 0
+
+    lf = _scene()
+    monkeypatch.setattr(lights, "_refit_once", spy)
+    with threadpool_limits(2):
+        outside = blas_threads()
+        _refit(_blurred(lf), _capture(lf))
+    assert outside == {2}, outside  # the control
+    assert seen == [{1}], seen
+
+
 def test_windows_on_worker_processes_give_the_serial_result_with_the_callers_settings(monkeypatch):
     """``processes=2``: the windows are solved on two worker processes (forkserver), which receive their arrays at
     any byte offset. Reference: the serial
