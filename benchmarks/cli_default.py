@@ -3,14 +3,15 @@
 Usage::
 
     python benchmarks/cli_default.py [--scene city-interior] [--size 434 625] [--mask-period default|none]
-                                     [--seed N]
+                                     [--seed N] [--mask-transmittance uniform|binary|mixed]
 
 The scene is one of :mod:`quality_scenes` (real HDR photographs as layers), written as an EXR
 light field; then ``lfproc simulate LF -o CAP`` and ``lfproc reconstruct CAP -o OUT`` run as
 separate processes with their defaults but ``--seed`` (the scene's seed of :mod:`quality_scenes` unless given:
 without one, simulate draws its own, and city-interior's PU21-PSNR went from 51.3 to 42.6 dB between two runs, as
 its lamp came back or did not) (``--mask-period none`` adds that option to simulate,
-the non-periodic mask: reconstruct then chooses the dictionary method). Printed per command:
+the non-periodic mask: reconstruct then chooses the dictionary method; ``--mask-transmittance`` adds that option,
+the codes' levels: the default path's time with other codes, stop 48). Printed per command:
 wall seconds and peak memory (the largest max RSS of the child processes so far,
 ``resource.getrusage(RUSAGE_CHILDREN)``),
 with a float32 GEMM rate measured before and after as the reference for how busy the machine
@@ -48,6 +49,7 @@ def _run(argv: list[str]) -> tuple[float, float, str]:
 
 
 def main() -> None:
+    from lfproc.camera.simulate import DEFAULT_MASK_TRANSMITTANCE, MASK_TRANSMITTANCES
     from lfproc.io import write_lightfield
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -55,6 +57,8 @@ def main() -> None:
     parser.add_argument("--size", type=int, nargs=2, default=[434, 625], metavar=("H", "W"))
     parser.add_argument("--mask-period", default="default")
     parser.add_argument("--seed", type=int, default=None, help="simulate's seed (default: the scene's)")
+    parser.add_argument("--mask-transmittance", choices=MASK_TRANSMITTANCES, default=None,
+                        help="simulate's --mask-transmittance (default: simulate's default)")
     args = parser.parse_args()
     seed = quality_scenes.SETS["all"][args.scene][-1] if args.seed is None else args.seed
     warnings.simplefilter("ignore")
@@ -66,12 +70,16 @@ def main() -> None:
         sim = ["simulate", str(tmp / "lf.exr"), "-o", str(tmp / "cap.npz"), "--seed", str(seed)]
         if args.mask_period != "default":
             sim += ["--mask-period", args.mask_period]
+        if args.mask_transmittance is not None:
+            sim += ["--mask-transmittance", args.mask_transmittance]
         s_sec, s_rss, _ = _run(sim)
         r_sec, r_rss, out = _run(["reconstruct", str(tmp / "cap.npz"), "-o", str(tmp / "out.exr"), "--json"])
         method = json.loads(out).get("method", "dictionary")
         _, _, ev = _run(["evaluate", str(tmp / "out.exr"), str(tmp / "lf.exr"), "--json"])
         ev = json.loads(ev)
-    print(f"scene {args.scene}, 5x5 x {args.size[0]}x{args.size[1]}, mask {args.mask_period}, seed {seed}")
+    codes = args.mask_transmittance or f"{DEFAULT_MASK_TRANSMITTANCE} (default)"
+    print(f"scene {args.scene}, 5x5 x {args.size[0]}x{args.size[1]}, mask {args.mask_period}, codes {codes}, "
+          f"seed {seed}")
     print(f"float32 GEMM rate at the start: {rate / 1e9:.1f} GFLOP/s")
     print(f"lfproc simulate: {s_sec:.1f} s, peak {s_rss:.2f} GiB")
     print(f"lfproc reconstruct (method {method}): {r_sec:.1f} s, peak {r_rss:.2f} GiB")
