@@ -464,6 +464,7 @@ the tune scenes' figures are in docs/benchmarks.md.
 from __future__ import annotations
 
 import functools
+from contextlib import closing
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -833,20 +834,17 @@ def refit_lights(first, T, W, W_bound, capture, disparities, margin, pool=None, 
     # one BLAS thread (as on reconstruct_gmm's pool): a window's matrices are small, on which LAPACK's threads cost
     # more than they give, and on a loaded machine far more (800 x 800 dpotrf: 6 ms on one thread, 10-580 ms on two
     # beside another job; stop 48); the sums' order, so the output, no longer depends on the caller's threads
-    with threadpool_limits(1):
-        try:
-            for i in range(max(PASSES, 1)):
-                misfit = misfit_map(out, T, W, W_bound, op) if op is not None else None
-                # the first estimate of the first pass blurs its lights; later passes fit a correction, whose colour is
-                # not a light's
-                settings = (ACCEPT_FIRST, RECOLOUR) if i == 0 else (ACCEPT, 0)
-                settings += (i < BETWEEN_PASSES,)  # so is the light's own disparity (module notes)
-                out, n, k = _refit_once(out, T, W, W_bound, margin, runner, noise, settings, misfit)
-                passes.append([n, k])
-                if not k:  # nothing changed: another pass would find the same
-                    break
-        finally:
-            runner.close()
+    with threadpool_limits(1), closing(runner):
+        for i in range(max(PASSES, 1)):
+            misfit = misfit_map(out, T, W, W_bound, op) if op is not None else None
+            # the first estimate of the first pass blurs its lights; later passes fit a correction, whose colour is
+            # not a light's
+            settings = (ACCEPT_FIRST, RECOLOUR) if i == 0 else (ACCEPT, 0)
+            settings += (i < BETWEEN_PASSES,)  # so is the light's own disparity (module notes)
+            out, n, k = _refit_once(out, T, W, W_bound, margin, runner, noise, settings, misfit)
+            passes.append([n, k])
+            if not k:  # nothing changed: another pass would find the same
+                break
     out = first.copy() if out is first else out
     return out, {"windows": passes[0][0], "refitted": passes[0][1], "passes": passes}
 
