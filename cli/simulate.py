@@ -54,7 +54,7 @@ def register(sub, common) -> None:
     p.add_argument("--mask-transmittance", choices=MASK_TRANSMITTANCES, default=DEFAULT_MASK_TRANSMITTANCE,
                    help=f"the mask's transmittances (default {DEFAULT_MASK_TRANSMITTANCE}): every level equally likely "
                         "(uniform, the paper's), 0/1 (binary: finer detail, small lights worse) or 1, 0 or a small "
-                        "level (mixed)")
+                        "level (mixed: finer detail, small lights kept)")
     p.add_argument("--mask-period", type=_period, default="default", metavar="N|none",
                    help="tile the mask with this period in pixels (default 4 for a random mask, none for shifted: "
                         "patches share one operator; 'none': one code per pixel, minutes to reconstruct at the Lytro "

@@ -518,3 +518,34 @@ def test_mixed_masks_draw_open_closed_and_small_codes_in_their_shares():
     for share, got in zip(MIXED_SHARES, ((codes == 1).mean(), (codes == 0).mean(), small.mean())):
         assert abs(got - share) < 5 * np.sqrt(share * (1 - share) / n), (share, got)
     assert abs(codes.mean() - 0.5) < 0.01 and abs(codes.var() - 0.23) < 0.01
+
+
+def test_the_default_mask_is_mixed_from_the_library_and_the_command_line(tmp_path, capsys):
+    """Stop 49 made mixed codes the default (module notes "Mask transmittances"): a capture made without
+    ``mask_transmittance`` records "mixed" and its codes are those of ``make_mask(transmittance="mixed")`` from the
+    mask's stream of the same seed (known answer: the same codes, bit for bit), with 1, 0 and small levels among
+    them; ``lfproc simulate`` without the option records the same, and ``--mask-transmittance uniform`` still gives the
+    paper's codes."""
+    from lfproc.camera.simulate import DEFAULT_MASK_TRANSMITTANCE
+
+    assert DEFAULT_MASK_TRANSMITTANCE == "mixed"
+    lf = _lf(16, 16)
+    default = simulate_capture(lf, profile="paper-low", shots=2, random_state=4)
+    mixed = simulate_capture(lf, profile="paper-low", shots=2, random_state=4, mask_transmittance="mixed")
+    uniform = simulate_capture(lf, profile="paper-low", shots=2, random_state=4, mask_transmittance="uniform")
+    assert default.parameters["mask_transmittance"] == "mixed"
+    np.testing.assert_array_equal(default.mask.codes, mixed.mask.codes)
+    np.testing.assert_array_equal(default.dn, mixed.dn)
+    codes = default.mask.codes
+    assert (codes == 1).any() and (codes == 0).any() and ((codes > 0) & (codes <= 63 / 255 + 1e-6)).any()
+    assert not ((codes > 63 / 255 + 1e-6) & (codes < 1)).any()  # no mid levels: not uniform codes
+    assert ((uniform.mask.codes > 0.3) & (uniform.mask.codes < 0.7)).any()
+
+    path = tmp_path / "lf.exr"
+    write_lightfield(LightField(lf), path)
+    assert main(["simulate", str(path), "-o", str(tmp_path / "d.capture.npz"), "--seed", "1"]) == 0
+    assert main(["simulate", str(path), "-o", str(tmp_path / "u.capture.npz"), "--seed", "1",
+                 "--mask-transmittance", "uniform"]) == 0
+    capsys.readouterr()
+    assert load_capture(tmp_path / "d.capture.npz").parameters["mask_transmittance"] == "mixed"
+    assert load_capture(tmp_path / "u.capture.npz").parameters["mask_transmittance"] == "uniform"
