@@ -53,23 +53,24 @@ share one operator per phase; without tiling (``mask_period=None``: one code per
 quality is the same on the realistic bench (27.25 against 27.11 dB at 96 x 128), but every patch
 has its own operator: minutes instead of seconds at the Lytro size.
 
-Mask transmittances (``mask_transmittance``): ``"uniform"`` (the paper's model: every level of
-``[0, 1]`` equally likely), ``"binary"`` (0 or 1) or ``"mixed"`` (the default since stop 49: 1, 0 or a small level below 1/4:
-:data:`lfproc.camera.projection.MIXED_SHARES`). All pass half the light. At a disparity other than 0 a pixel's
-coded sum mixes ``V x U`` neighbouring pixels of the centre view; the mean code only blurs them, and what tells
-them apart is the code's deviation from its mean, of variance 1/12 for uniform codes, 1/4 binary, 0.23 mixed. What
-binary codes lack: small transmittances, through which a light a few pixels wide is seen unsaturated by the shots
-at high ISO. Measured (``benchmarks/reconstruct_realistic.py --method gmm --mask-transmittance ...``, 2 random
-shots, medium noise, seed 0; ``docs/benchmarks.md``, stop 30), uniform / binary / mixed: tune scenes at the Lytro
-size 37.95 / 38.46 / 38.73 dB; test scenes 41.89 / 42.94 / 42.72 dB; binary codes lose city-interior's lamp with
-one shot (53.07 -> 50.76 dB) and with block ISO (0.47 of the brightest 1 %'s energy), mixed codes with one shot
-too (41.77 dB), until the lights refit's compact light (stop 42). Stop 41 (``docs/benchmarks.md``) measured mixed codes on every
-two-shot row of the test scenes: 0.8-1.7 dB above uniform codes on each mean (noise none / low / medium / high 48.87 /
-48.82 / 48.65 / 48.45, row 48.64, block 48.00 dB), but city-interior's lamp keeps 0.78-0.80 of its energy with row
-and block ISO, and with one shot it is lost on three draws of three (uniform codes: two of three). Stop 48 measured them on
-compositions nobody tuned for (holdout 43.36 -> 44.76 dB, worst decade 0.85 -> 0.49 stops) and stop 49 made them the
-default, every README figure measured again (``docs/benchmarks.md``). The tests whose known answers were measured
-with uniform codes ask for them.
+Mask transmittances (``mask_transmittance``): ``"uniform"`` (the paper's model: every level of ``[0, 1]`` equally
+likely), ``"binary"`` (0 or 1) or ``"mixed"`` (the default since stop 49: 1, 0 or a small level below 1/4:
+:data:`lfproc.camera.projection.MIXED_SHARES`). All pass half the light. At a disparity other than 0 a pixel's coded
+sum mixes ``V x U`` neighbouring pixels of the centre view; the mean code only blurs them, and what tells them apart
+is the code's deviation from its mean, of variance 1/12 for uniform codes, 1/4 binary, 0.23 mixed. What binary codes
+lack: small transmittances, through which a light a few pixels wide is seen unsaturated by the shots at high ISO.
+Measured (``benchmarks/reconstruct_realistic.py --method gmm --mask-transmittance ...``, 2 random shots, medium noise,
+seed 0; ``docs/benchmarks.md``, stop 30), uniform / binary / mixed: tune scenes at the Lytro size 37.95 / 38.46 /
+38.73 dB; test scenes 41.89 / 42.94 / 42.72 dB; binary codes lose city-interior's lamp with one shot (53.07 -> 50.76
+dB) and with block ISO (0.47 of the brightest 1 %'s energy), mixed codes with one shot too (41.77 dB), until the
+lights refit's compact light (stop 42). Stop 41 (``docs/benchmarks.md``) measured mixed codes on every two-shot row of
+the test scenes: 0.8-1.7 dB above uniform codes on each mean (noise none / low / medium / high 48.87 / 48.82 / 48.65 /
+48.45, row 48.64, block 48.00 dB), but city-interior's lamp keeps 0.78-0.80 of its energy with row and block ISO, and
+with one shot it is lost on three draws of three (uniform codes: two of three). Stop 48 measured them on compositions
+nobody tuned for (holdout 43.36 -> 44.76 dB, worst decade 0.85 -> 0.49 stops) and stop 49 made them the default, every
+README figure measured again (``docs/benchmarks.md``): two shots 47.94 -> 48.86 dB on the test scenes, row 48.83,
+block 48.17; one shot 42.85 -> 41.99 and 4-shot bracketing 39.92 -> 37.78 (city-interior's lamp). The tests whose
+known answers were measured with uniform codes ask for them.
 
 Baselines (the paper's section III-B and Table IV): ``baseline="individual-iso"`` takes one shot per ISO of the
 set, each with one global ISO; ``baseline="bracketing"`` takes 2, 3 or 4 shots at the lowest
